@@ -1,0 +1,32 @@
+"""``python -m planner_service``: one subcommand per module in ``commands/``."""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+COMMANDS = ("serve", "demo", "plan", "experiment", "bench", "submit")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="python -m planner_service",
+        description="Flight-side MCTS path planner for UAV-aided wireless systems.",
+    )
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    for name in COMMANDS:
+        module = importlib.import_module(f"planner_service.commands.{name}")
+        cmd = sub.add_parser(name, help=module.HELP, description=module.__doc__)
+        module.configure(cmd)
+        cmd.set_defaults(_run=module.run)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    return int(args._run(args) or 0)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,1 @@
+"""Subcommands of ``python -m planner_service``: each module has HELP, configure, run."""

@@ -1,0 +1,37 @@
+"""Optional compilation of the model's kernels with numba.
+
+Every kernel is plain Python that numba can compile. When numba is missing, or when
+``UAV_PLANNER_NO_NUMBA=1`` is set, the decorator returns the function unchanged: the
+service still runs, slower. ``jit(f).py_func`` is always the uncompiled function, which
+the pure-Python reference planner uses so that both run the same model.
+"""
+
+from __future__ import annotations
+
+import os
+from typing import Any, Callable, TypeVar
+
+F = TypeVar("F", bound=Callable[..., Any])
+
+try:  # pragma: no cover - exercised by whichever environment runs the tests
+    if os.environ.get("UAV_PLANNER_NO_NUMBA") == "1":
+        raise ImportError("numba disabled by UAV_PLANNER_NO_NUMBA=1")
+    import numba as _numba
+
+    HAVE_NUMBA = True
+except ImportError:  # pragma: no cover
+    _numba = None
+    HAVE_NUMBA = False
+
+
+def jit(func: F) -> F:
+    """Compile ``func`` in nopython mode with an on-disk cache, or return it as is."""
+    if _numba is None:
+        func.py_func = func  # type: ignore[attr-defined]
+        return func
+    return _numba.njit(cache=True, nogil=True)(func)  # type: ignore[return-value]
+
+
+def py(func: Callable[..., Any]) -> Callable[..., Any]:
+    """The uncompiled Python function behind a kernel."""
+    return getattr(func, "py_func", func)

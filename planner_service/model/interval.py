@@ -1,0 +1,145 @@
+"""One interval of service: which user is served, what it costs, what it earns.
+
+These kernels compose the equations of the other modules; the environment, the greedy
+policy, the MCTS playouts and the learners all call them, so the physics exists once.
+Array shapes: hover points (K, 3), users (I, 3), tasks and service counts (I,) int64,
+positions (3,) in local metres (x east, y north, z up).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from . import params as P
+from ._jit import jit
+from .channel import channel_gain, distance_sq_m2, upload_rate_bps
+from .energy import computation_energy_j, flight_energy_j, hover_energy_j
+from .fairness import is_eligible
+from .mobility import draw_tasks, move_users
+from .reward import interval_reward
+
+NO_USER = -1
+"""Served-user sentinel: nobody eligible."""
+AT_BASE = -1
+"""Hovering-point sentinel: the UAV is at its base position."""
+
+
+@jit
+def served_user(
+    p: np.ndarray, hover_xyz: np.ndarray, users: np.ndarray, tasks: np.ndarray, served: np.ndarray
+) -> int:
+    """The nearest eligible user (4), (3); users within ``nearest_tie_m`` of the nearest
+    are tied and the larger task wins (Fig. 2), then the lower index. ``NO_USER`` if none."""
+    best_d = math.inf
+    for i in range(users.shape[0]):
+        if is_eligible(p, tasks[i], served[i]):
+            d = math.sqrt(distance_sq_m2(hover_xyz, users[i]))
+            if d < best_d:
+                best_d = d
+    if best_d == math.inf:
+        return NO_USER
+    chosen = NO_USER
+    for i in range(users.shape[0]):
+        if is_eligible(p, tasks[i], served[i]):
+            d = math.sqrt(distance_sq_m2(hover_xyz, users[i]))
+            if d <= best_d + p[P.TIE_M] and (chosen == NO_USER or tasks[i] > tasks[chosen]):
+                chosen = i
+    return chosen
+
+
+@jit
+def service_outcome(
+    p: np.ndarray,
+    from_xyz: np.ndarray,
+    hover_xyz: np.ndarray,
+    users: np.ndarray,
+    tasks: np.ndarray,
+    served: np.ndarray,
+) -> tuple[int, float, float, float, float, float]:
+    """Fly ``from_xyz`` -> ``hover_xyz`` and serve there.
+
+    Returns (user, bits, e_hover_j, e_comp_j, e_flight_j, q); user is ``NO_USER`` (and
+    the rest zero) when nobody is eligible.
+    """
+    user = served_user(p, hover_xyz, users, tasks, served)
+    if user == NO_USER:
+        return NO_USER, 0.0, 0.0, 0.0, 0.0, 0.0
+    bits = tasks[user] * p[P.BITS_PER_TASK]  # S(t) = u_i(t) B_t
+    rate = upload_rate_bps(p, channel_gain(p, hover_xyz, users[user]))
+    e_h = hover_energy_j(p, bits, rate)
+    e_c = computation_energy_j(p, bits)
+    e_f = flight_energy_j(p, math.sqrt(distance_sq_m2(from_xyz, hover_xyz)))
+    q = interval_reward(p, tasks[user], e_h + e_c + e_f)
+    return user, bits, e_h, e_c, e_f, q
+
+
+@jit
+def return_energy_j(p: np.ndarray, hover_xyz: np.ndarray) -> float:
+    """Energy to fly from ``hover_xyz`` back to base."""
+    base = np.array((p[P.BASE_X], p[P.BASE_Y], p[P.BASE_Z]))
+    return flight_energy_j(p, math.sqrt(distance_sq_m2(hover_xyz, base)))
+
+
+@jit
+def within_budget(p: np.ndarray, battery_j: float, energy_j: float, hover_xyz: np.ndarray) -> bool:
+    """The battery stays at or above theta E_0 after this interval (9b), keeping the way
+    home too when ``reserve_return_energy`` is set."""
+    left = battery_j - energy_j
+    if p[P.RESERVE_RETURN] > 0.5:
+        left -= return_energy_j(p, hover_xyz)
+    return left >= p[P.ENERGY_FLOOR]
+
+
+@jit
+def evaluate_actions(
+    p: np.ndarray,
+    hover_points: np.ndarray,
+    hover_index: int,
+    uav_xyz: np.ndarray,
+    users: np.ndarray,
+    tasks: np.ndarray,
+    served: np.ndarray,
+    battery_j: float,
+    out_q: np.ndarray,
+) -> int:
+    """Fill ``out_q`` (K,) with each hovering point's reward q, or -inf where the action
+    is not allowed (same point without ``allow_stay``, nobody eligible, over budget).
+    Returns the number of allowed actions."""
+    allowed = 0
+    for k in range(hover_points.shape[0]):
+        out_q[k] = -math.inf
+        if k == hover_index and p[P.ALLOW_STAY] < 0.5:
+            continue
+        user, bits, e_h, e_c, e_f, q = service_outcome(
+            p, uav_xyz, hover_points[k], users, tasks, served
+        )
+        if user == NO_USER or not within_budget(p, battery_j, e_h + e_c + e_f, hover_points[k]):
+            continue
+        out_q[k] = q
+        allowed += 1
+    return allowed
+
+
+@jit
+def advance_chance(
+    p: np.ndarray,
+    users: np.ndarray,
+    tasks: np.ndarray,
+    next_interval: int,
+    task_table: np.ndarray,
+    rng: np.random.Generator,
+) -> None:
+    """Between intervals: users move (1)-(2) and post new task counts.
+
+    Tasks come from row ``next_interval`` of ``task_table`` (T, I) when it has one (a
+    known schedule), else from the Gaussian draw. Moves are drawn first, then tasks, so a
+    seed fixes the whole future.
+    """
+    move_users(p, users, rng)
+    if next_interval < task_table.shape[0]:
+        for i in range(tasks.shape[0]):
+            tasks[i] = task_table[next_interval, i]
+    else:
+        draw_tasks(p, tasks, rng)

@@ -1,0 +1,39 @@
+"""The sortie's state: what the UAV knows at the start of an interval."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass
+class SortieState:
+    """Mutable state of one sortie. ``copy()`` is the cheap snapshot playouts use.
+
+    Shapes: ``uav_xyz`` (3,), ``users`` (I, 3), ``tasks`` and ``served`` (I,) int64,
+    ``task_table`` (T, I) int64 (T may be 0: tasks are drawn).
+    """
+
+    uav_xyz: np.ndarray
+    hover_index: int
+    users: np.ndarray
+    tasks: np.ndarray
+    served: np.ndarray
+    battery_j: float
+    interval: int
+    energy_used_j: float
+    task_table: np.ndarray
+
+    def copy(self) -> "SortieState":
+        return SortieState(
+            uav_xyz=self.uav_xyz.copy(),
+            hover_index=self.hover_index,
+            users=self.users.copy(),
+            tasks=self.tasks.copy(),
+            served=self.served.copy(),
+            battery_j=self.battery_j,
+            interval=self.interval,
+            energy_used_j=self.energy_used_j,
+            task_table=self.task_table,  # never written: shared
+        )

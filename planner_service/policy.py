@@ -1,0 +1,65 @@
+"""What every planner offers the sortie runner, and the registry of algorithms by name."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Callable, Protocol
+
+import numpy as np
+
+from .model import SortieEnv
+
+
+@dataclass(frozen=True)
+class Decision:
+    """A chosen hovering point, and the line the planner expects to fly after it."""
+
+    action: int
+    line: tuple[int, ...] = ()
+    iterations: int = 0
+    wall_s: float = 0.0
+    extra: dict = field(default_factory=dict)
+
+
+class Policy(Protocol):
+    """A planner. ``begin`` runs once per sortie after ``env.reset`` (learners train
+    there); ``decide`` picks the next hovering point among ``env.action_mask()`` and must
+    not change ``env``."""
+
+    name: str
+
+    def begin(self, env: SortieEnv) -> None: ...
+
+    def decide(self, env: SortieEnv) -> Decision: ...
+
+
+@dataclass(frozen=True)
+class PolicySpec:
+    """How the command line asks for a planner."""
+
+    iterations: int = 1000
+    budget_ms: float | None = None
+
+
+Factory = Callable[[PolicySpec, np.random.Generator], Policy]
+
+
+def _factories() -> dict[str, Factory]:
+    # Imported here so that `policy` stays importable from every layer without cycles.
+    from .baselines import BASELINES
+    from .mcts import PLANNERS
+
+    return {**BASELINES, **PLANNERS}
+
+
+def algorithms() -> list[str]:
+    """Every algorithm name ``make_policy`` accepts."""
+    return sorted(_factories())
+
+
+def make_policy(name: str, spec: PolicySpec, rng: np.random.Generator) -> Policy:
+    """The planner called ``name`` (see ``algorithms()``)."""
+    factories = _factories()
+    if name not in factories:
+        raise ValueError(f"unknown algorithm {name!r}; choose from {sorted(factories)}")
+    return factories[name](spec, rng)

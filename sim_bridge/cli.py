@@ -1,0 +1,37 @@
+"""``python -m sim_bridge``: the software vehicle, simulated users and a lossy link."""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+COMMANDS = {
+    "vehicle": "sim_bridge.commands.vehicle",
+    "users": "sim_bridge.commands.users",
+    "lossy-proxy": "sim_bridge.commands.lossy_proxy",
+}
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="python -m sim_bridge",
+        description="Simulated counterparts of the planner: a MAVLink vehicle (SITL-stub), "
+        "ground users over zenoh, and a lossy UDP link.",
+    )
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    for name, path in COMMANDS.items():
+        module = importlib.import_module(path)
+        cmd = sub.add_parser(name, help=module.HELP, description=module.__doc__)
+        module.configure(cmd)
+        cmd.set_defaults(_run=module.run)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    return int(args._run(args) or 0)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,1 @@
+"""Subcommands of ``python -m sim_bridge``: each module has HELP, configure, run."""

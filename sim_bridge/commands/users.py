@@ -1,0 +1,17 @@
+"""The `users` command (not yet built)."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+HELP = "users (not yet built)"
+
+
+def configure(parser: argparse.ArgumentParser) -> None:
+    pass
+
+
+def run(args: argparse.Namespace) -> int:
+    print("users: not yet built", file=sys.stderr)
+    return 2
