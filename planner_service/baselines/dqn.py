@@ -27,7 +27,9 @@ import numpy as np
 
 from ..model import SortieEnv
 from ..policy import Decision, PolicySpec
-from .learning import TrainingReport, TrainingWorld, epsilon_greedy, linear_schedule, masked_argmax, td_target
+from .learning import (
+    TrainingReport, TrainingWorld, epsilon_greedy, linear_schedule, masked_argmax, td_target, training_episodes,
+)
 from .mlp import MLP, Adam
 from .replay import ReplayBuffer
 
@@ -191,4 +193,4 @@ class DQNPolicy:
 
 def dqn(spec: PolicySpec, rng: np.random.Generator) -> DQNPolicy:
     """``dqn``: ``spec.iterations`` training episodes (the budget in ms does not apply)."""
-    return DQNPolicy(DQNConfig(), spec.iterations, rng)
+    return DQNPolicy(DQNConfig(), training_episodes(spec, "dqn"), rng)

@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..model import Snapshot, SortieEnv
+from ..policy import PolicySpec
 
 
 def td_target(
@@ -110,3 +111,13 @@ class TrainingReport:
             "return_first_tenth": float(np.mean(self.returns[:tenth])) if n else 0.0,
             "return_last_tenth": float(np.mean(self.returns[-tenth:])) if n else 0.0,
         }
+
+
+def training_episodes(spec: PolicySpec, algo: str) -> int:
+    """The training-episode count a learner takes from ``spec``. A wall-clock budget
+    alone is refused: training happens once, before the sortie, not per decision."""
+    if spec.iterations is None:
+        raise ValueError(f"{algo} needs a number of training episodes (--iterations); --budget-ms does not apply")
+    if spec.iterations < 0:
+        raise ValueError(f"{algo}: training episodes must not be negative, got {spec.iterations}")
+    return int(spec.iterations)

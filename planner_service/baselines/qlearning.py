@@ -20,7 +20,9 @@ import numpy as np
 
 from ..model import SortieEnv
 from ..policy import Decision, PolicySpec
-from .learning import TrainingReport, TrainingWorld, epsilon_greedy, linear_schedule, masked_argmax, td_target
+from .learning import (
+    TrainingReport, TrainingWorld, epsilon_greedy, linear_schedule, masked_argmax, td_target, training_episodes,
+)
 
 
 @dataclass(frozen=True)
@@ -133,4 +135,4 @@ class QLearningPolicy:
 
 def q_learning(spec: PolicySpec, rng: np.random.Generator) -> QLearningPolicy:
     """``ql``: ``spec.iterations`` training episodes (the budget in ms does not apply)."""
-    return QLearningPolicy(QLearningConfig(), spec.iterations, rng)
+    return QLearningPolicy(QLearningConfig(), training_episodes(spec, "ql"), rng)

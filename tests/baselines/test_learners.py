@@ -155,3 +155,9 @@ def test_bad_configs_raise():
         DQNConfig(batch_size=0)
     with pytest.raises(ValueError):
         DQNPolicy(DQNConfig(), -1, np.random.default_rng(0))
+
+
+@pytest.mark.parametrize("algo", ["ql", "dqn"])
+def test_a_time_budget_alone_is_refused(algo):
+    with pytest.raises(ValueError, match="training episodes"):
+        make_policy(algo, PolicySpec(iterations=None, budget_ms=50.0), np.random.default_rng(0))
