@@ -162,8 +162,8 @@ class DQNPolicy:
 
                 if global_step > cfg.learning_starts and global_step % cfg.train_frequency == 0:
                     data = rb.sample(cfg.batch_size, batch_rng)
-                    target_max = target_network.forward(data.next_obs)
-                    y = td_target(data.rewards, target_max, data.next_masks, data.dones, cfg.gamma)
+                    next_values = target_network.forward(data.next_obs)
+                    y = td_target(data.rewards, next_values, data.next_masks, data.dones, cfg.gamma)
                     _, grads = q_network.loss_and_grad(data.obs, data.actions, y)
                     optimizer.step(grads)
                     report.updates += 1
