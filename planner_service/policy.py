@@ -37,8 +37,11 @@ class Policy(Protocol):
 class PolicySpec:
     """How the command line asks for a planner."""
 
-    iterations: int = 1000
+    iterations: int | None = 1000
+    """Iterations per decision for MCTS, training episodes for the learners; None with a
+    ``budget_ms``: only the clock limits MCTS."""
     budget_ms: float | None = None
+    """Wall-clock budget per MCTS decision, in milliseconds."""
 
 
 Factory = Callable[[PolicySpec, np.random.Generator], Policy]

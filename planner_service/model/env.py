@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 
 from .errors import ScenarioError
-from .interval import AT_BASE, NO_USER, advance_chance, evaluate_actions, service_outcome
+from .interval import AT_BASE, NO_USER, advance_chance, evaluate_actions, take_interval
 from .mobility import draw_tasks
 from .layouts import base_position, hover_points, user_rows
 from .params import pack
@@ -103,8 +103,9 @@ class SortieEnv:
         if not mask[action]:
             raise ScenarioError("action", f"hovering point {action} is not allowed now")
         hp = self.hover_points[action]
-        user, bits, e_h, e_c, e_f, q = service_outcome(
-            self.params, st.uav_xyz, hp, st.users, st.tasks, st.served
+        user_xyz = st.users.tolist()
+        user, bits, e_h, e_c, e_f, q = take_interval(
+            self.params, self.hover_points, int(action), st.uav_xyz, st.users, st.tasks, st.served
         )
         energy = e_h + e_c + e_f
         info = {
@@ -112,7 +113,7 @@ class SortieEnv:
             "hover_point": int(action),
             "uav_xyz": hp.tolist(),
             "user": int(user),
-            "user_xyz": st.users[user].tolist(),
+            "user_xyz": user_xyz[user],
             "tasks": int(st.tasks[user]),
             "bits": float(bits),
             "e_hover_j": float(e_h),
@@ -120,10 +121,9 @@ class SortieEnv:
             "e_flight_j": float(e_f),
             "reward": float(q),
         }
-        st.served[user] += 1
         st.battery_j -= energy
         st.energy_used_j += energy
-        st.uav_xyz = hp.copy()
+        st.reward_sum += q
         st.hover_index = int(action)
         st.interval += 1
         advance_chance(self.params, st.users, st.tasks, st.interval, st.task_table, self.rng)

@@ -17,7 +17,7 @@ from ._jit import jit
 from .channel import channel_gain, distance_sq_m2, upload_rate_bps
 from .energy import computation_energy_j, flight_energy_j, hover_energy_j
 from .fairness import is_eligible
-from .mobility import draw_tasks, move_users
+from .mobility import apply_moves, draw_moves, draw_tasks
 from .reward import interval_reward
 
 NO_USER = -1
@@ -123,6 +123,38 @@ def evaluate_actions(
 
 
 @jit
+def draw_chance(
+    p: np.ndarray, moves: np.ndarray, new_tasks: np.ndarray, rng: np.random.Generator
+) -> None:
+    """Draw what happens between two intervals: every user's move, then every user's new
+    task count. ``moves`` (I, 3) and ``new_tasks`` (I,) are filled in place."""
+    draw_moves(p, moves, rng)
+    draw_tasks(p, new_tasks, rng)
+
+
+@jit
+def apply_chance(
+    p: np.ndarray,
+    users: np.ndarray,
+    tasks: np.ndarray,
+    next_interval: int,
+    task_table: np.ndarray,
+    moves: np.ndarray,
+    new_tasks: np.ndarray,
+) -> None:
+    """Between intervals: users move (1)-(2) and post new task counts.
+
+    Tasks come from row ``next_interval`` of ``task_table`` (T, I) when it has one (a known
+    schedule), else from ``new_tasks``."""
+    apply_moves(p, users, moves)
+    if next_interval < task_table.shape[0]:
+        for i in range(tasks.shape[0]):
+            tasks[i] = task_table[next_interval, i]
+    else:
+        tasks[:] = new_tasks
+
+
+@jit
 def advance_chance(
     p: np.ndarray,
     users: np.ndarray,
@@ -131,15 +163,39 @@ def advance_chance(
     task_table: np.ndarray,
     rng: np.random.Generator,
 ) -> None:
-    """Between intervals: users move (1)-(2) and post new task counts.
+    """Draw and apply one step of chance. The draws are made even where a task table
+    overrides them, so a seed fixes the whole future whatever the schedule."""
+    moves = np.empty_like(users)
+    new_tasks = np.empty_like(tasks)
+    draw_chance(p, moves, new_tasks, rng)
+    apply_chance(p, users, tasks, next_interval, task_table, moves, new_tasks)
 
-    Tasks come from row ``next_interval`` of ``task_table`` (T, I) when it has one (a
-    known schedule), else from the Gaussian draw. Moves are drawn first, then tasks, so a
-    seed fixes the whole future.
-    """
-    move_users(p, users, rng)
-    if next_interval < task_table.shape[0]:
-        for i in range(tasks.shape[0]):
-            tasks[i] = task_table[next_interval, i]
-    else:
-        draw_tasks(p, tasks, rng)
+
+@jit
+def take_interval(
+    p: np.ndarray,
+    hover_points: np.ndarray,
+    action: int,
+    uav_xyz: np.ndarray,
+    users: np.ndarray,
+    tasks: np.ndarray,
+    served: np.ndarray,
+) -> tuple[int, float, float, float, float, float]:
+    """Serve from hovering point ``action``: ``service_outcome``, then count the service
+    and move the UAV (``served`` and ``uav_xyz`` in place). The caller charges the battery
+    with e_hover + e_comp + e_flight and advances the chance."""
+    outcome = service_outcome(p, uav_xyz, hover_points[action], users, tasks, served)
+    user = outcome[0]
+    if user != NO_USER:
+        served[user] += 1
+        uav_xyz[:] = hover_points[action]
+    return outcome
+
+
+@jit
+def remaining_intervals(p: np.ndarray, num_users: int, interval: int) -> int:
+    """An upper bound on the intervals left: the length limit, else the fairness limit
+    (every interval serves one user, each at most ``max_services`` times)."""
+    if p[P.MAX_INTERVALS] > 0:
+        return max(int(p[P.MAX_INTERVALS]) - interval, 0)
+    return num_users * int(p[P.MAX_SERVICES])

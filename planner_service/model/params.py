@@ -54,7 +54,8 @@ ALLOW_STAY = 40
 BASE_X = 41
 BASE_Y = 42
 BASE_Z = 43
-SIZE = 44
+MAX_INTERVALS = 44
+SIZE = 45
 
 
 def pack(s: Scenario) -> np.ndarray:
@@ -104,4 +105,5 @@ def pack(s: Scenario) -> np.ndarray:
     p[BASE_X] = s.base_x_m
     p[BASE_Y] = s.base_y_m
     p[BASE_Z] = s.base_z_m
+    p[MAX_INTERVALS] = s.max_intervals
     return p

@@ -24,6 +24,8 @@ class SortieState:
     interval: int
     energy_used_j: float
     task_table: np.ndarray
+    reward_sum: float = 0.0
+    """Sum of q over the intervals flown so far (the sortie average's numerator)."""
 
     def copy(self) -> "SortieState":
         return SortieState(
@@ -36,4 +38,5 @@ class SortieState:
             interval=self.interval,
             energy_used_j=self.energy_used_j,
             task_table=self.task_table,  # never written: shared
+            reward_sum=self.reward_sum,
         )
