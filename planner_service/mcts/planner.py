@@ -1,0 +1,189 @@
+"""``mcts``: the planner the service flies. Sound where Algorithm 1 is not.
+
+- Each node's value is the return from its own step onward (not the mean of the steps
+  after the newly expanded node, which the paper backs up into every ancestor).
+- Open loop: chance is re-sampled on every iteration from the real root state, so values
+  average over futures instead of trusting one draw (``open_loop.py``).
+- Playouts epsilon-greedy on the immediate reward q by default (uniform as an option).
+- Tree reuse: when the UAV takes the planned action, the chosen child's subtree becomes the
+  root. Its statistics were averaged over all the futures the search sampled; the real
+  observation is one of them. They are kept as a prior (scaled by ``reuse_decay``) and the
+  new search runs from the observed state, where actions no longer allowed are never
+  selected. If the UAV did something else (another point, a skipped interval) the tree
+  starts afresh.
+- Anytime: an iteration budget, a wall-clock budget, or both; the decision is the most
+  visited allowed root child, and the principal line below it is the rest of the plan.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from ..model import Scenario, SortieState, pack
+from ..model.interval import evaluate_actions, remaining_intervals
+from ..policy import Decision
+from .open_loop import (
+    RETURN_MEAN,
+    RETURN_SORTIE,
+    RETURN_SUM,
+    ROLLOUT_EPSILON_GREEDY,
+    ROLLOUT_RANDOM,
+    draw_futures,
+    search,
+)
+from .tree import ROOT_INDEX, UNVISITED, Tree
+
+ROLLOUTS = {"random": ROLLOUT_RANDOM, "epsilon-greedy": ROLLOUT_EPSILON_GREEDY}
+RETURNS = {"mean": RETURN_MEAN, "sum": RETURN_SUM, "sortie": RETURN_SORTIE}
+
+
+@dataclass(frozen=True)
+class MctsConfig:
+    """Settings of the sound planner."""
+
+    iterations: int | None = 1000
+    """Iterations per decision (the paper's "training episodes"); None: only the clock."""
+    budget_ms: float | None = None
+    """Wall-clock budget per decision; None: only the iteration count."""
+    c: float = 0.35
+    """UCT exploration constant on min-max normalised values (see docs/PLANNER.md)."""
+    rollout: str = "epsilon-greedy"
+    """Playout policy: ``epsilon-greedy`` on the immediate q, or ``random``."""
+    rollout_epsilon: float = 0.2
+    """Probability of a uniform step in an epsilon-greedy playout."""
+    return_kind: str = "mean"
+    """A node's return: ``mean`` of q from its step on (the paper's average reward), or ``sum``."""
+    reuse_tree: bool = True
+    """Keep the chosen child's subtree for the next decision."""
+    reuse_decay: float = 1.0
+    """Factor on reused statistics (1 keeps them, 0 forgets them)."""
+    chunk: int = 16
+    """Iterations between clock checks under a wall-clock budget."""
+    max_depth: int = 10
+    """Levels the tree may grow below the root (the paper's m); playouts go on past them."""
+    futures: int = 32
+    """Sampled futures per decision shared by all iterations (common random numbers);
+    0: a fresh future every iteration."""
+
+    def __post_init__(self) -> None:
+        if self.iterations is None and self.budget_ms is None:
+            raise ValueError("MctsConfig needs iterations, budget_ms or both")
+        if self.iterations is not None and self.iterations < 1:
+            raise ValueError(f"iterations must be at least 1, got {self.iterations}")
+        if self.budget_ms is not None and not self.budget_ms > 0:
+            raise ValueError(f"budget_ms must be positive, got {self.budget_ms}")
+        if self.rollout not in ROLLOUTS:
+            raise ValueError(f"rollout must be one of {sorted(ROLLOUTS)}, got {self.rollout!r}")
+        if self.return_kind not in RETURNS:
+            raise ValueError(f"return_kind must be one of {sorted(RETURNS)}, got {self.return_kind!r}")
+        if not 0.0 <= self.rollout_epsilon <= 1.0 or not 0.0 <= self.reuse_decay <= 1.0:
+            raise ValueError("rollout_epsilon and reuse_decay must lie in [0, 1]")
+        if self.max_depth < 1:
+            raise ValueError(f"max_depth must be at least 1, got {self.max_depth}")
+        if self.futures < 0:
+            raise ValueError(f"futures must not be negative, got {self.futures}")
+        if not (self.c >= 0 and math.isfinite(self.c)) or self.chunk < 1:
+            raise ValueError("c must be finite and non-negative, chunk at least 1")
+
+
+class MctsPlanner:
+    """Open-loop MCTS with tree reuse over one scenario's hovering points."""
+
+    def __init__(self, scenario: Scenario, hover_points: np.ndarray, config: MctsConfig, rng: np.random.Generator) -> None:
+        self.scenario = scenario
+        self.params = pack(scenario)
+        self.hover_points = np.ascontiguousarray(hover_points, dtype=np.float64)
+        self.config = config
+        self.rng = rng
+        self.tree = self._new_tree()
+        self._expect: tuple[int, int] | None = None  # (interval, hover index) after our move
+
+    def _new_tree(self) -> Tree:
+        return Tree.empty(len(self.hover_points), (self.config.iterations or 1024) + 1)
+
+    def reset(self) -> None:
+        """Forget the tree (a new sortie, or a state the tree knows nothing about)."""
+        self.tree = self._new_tree()
+        self._expect = None
+
+    def plan(self, state: SortieState) -> Decision:
+        """The next hovering point for ``state`` and the line expected after it."""
+        start = time.perf_counter()
+        allowed = self._allowed(state)
+        if not allowed.any():
+            raise ValueError("no hovering point is allowed in this state: the sortie is over")
+        self._reuse_or_reset(state)
+        done = self._search(state, start)
+        child = self.tree.best_child(ROOT_INDEX, allowed)
+        if child == UNVISITED:  # budget too small for one iteration: fall back to greedy q
+            q = np.where(allowed, self._qvals(state), -np.inf)
+            action, line = int(np.argmax(q)), ()
+        else:
+            action = int(self.tree.action[child])
+            line = tuple(self.tree.principal_line(child))
+        if self.config.reuse_tree and child != UNVISITED:
+            self._chosen = child
+            self._expect = (state.interval + 1, action)
+        return Decision(
+            action=action,
+            line=(action, *line),
+            iterations=done,
+            wall_s=time.perf_counter() - start,
+            extra={"root_visits": float(self.tree.visits[ROOT_INDEX]), "nodes": self.tree.num_nodes},
+        )
+
+    def _reuse_or_reset(self, state: SortieState) -> None:
+        if self._expect is not None and self._expect == (state.interval, state.hover_index):
+            self.tree = self.tree.subtree(self._chosen, self.config.reuse_decay)
+        else:
+            self.tree = self._new_tree()
+        self._expect = None
+
+    def _search(self, state: SortieState, start: float) -> int:
+        cfg = self.config
+        deadline = None if cfg.budget_ms is None else start + cfg.budget_ms / 1e3
+        target = cfg.iterations if cfg.iterations is not None else math.inf
+        moves, tasks = self._futures(state)
+        done = 0
+        while done < target:
+            batch = int(min(target - done, cfg.chunk if deadline is not None else target - done))
+            self.tree.reserve(batch)
+            t = self.tree
+            t.num_nodes = search(
+                self.params, self.hover_points, t.parent, t.action, t.children, t.visits, t.value_sum,
+                t.num_nodes, state.uav_xyz, state.hover_index, state.users, state.tasks, state.served,
+                state.battery_j, state.interval, state.task_table, batch, cfg.c, ROLLOUTS[cfg.rollout],
+                cfg.rollout_epsilon, RETURNS[cfg.return_kind], state.reward_sum, state.interval, moves, tasks, cfg.max_depth, self.rng,
+            )
+            done += batch
+            if deadline is not None and time.perf_counter() >= deadline:
+                break
+        return done
+
+    def _futures(self, state: SortieState) -> tuple[np.ndarray, np.ndarray]:
+        """This decision's sampled futures, (S, H, I, 3) moves and (S, H, I) tasks."""
+        num_users = len(state.users)
+        horizon = remaining_intervals(self.params, num_users, state.interval)
+        count = self.config.futures if horizon > 0 else 0
+        moves = np.empty((count, horizon, num_users, 3))
+        tasks = np.empty((count, horizon, num_users), dtype=np.int64)
+        draw_futures(self.params, moves, tasks, self.rng)
+        return moves, tasks
+
+    def _qvals(self, state: SortieState) -> np.ndarray:
+        q = np.empty(len(self.hover_points))
+        evaluate_actions(
+            self.params, self.hover_points, state.hover_index, state.uav_xyz, state.users,
+            state.tasks, state.served, state.battery_j, q,
+        )
+        return q
+
+    def _allowed(self, state: SortieState) -> np.ndarray:
+        return np.isfinite(self._qvals(state))
+
+    def describe(self) -> dict:
+        return asdict(self.config)
