@@ -1,0 +1,259 @@
+"""The JSON messages on the zenoh keys, validated at decode.
+
+msgspec decodes and type-checks in one pass straight into frozen Structs, rejects unknown
+fields (``forbid_unknown_fields``) and reports the JSON path of the first bad value; it is
+several times faster than pydantic and has no compiled-model step, which matters on a
+companion computer answering every request inline. What JSON types cannot say (a position
+inside the area, finite numbers) is checked after the decode, so every refusal, whatever
+its cause, is one ``ProtocolError`` naming the field.
+
+Every message carries ``kind`` (its type tag) and ``schema`` (the version of its layout).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import re
+from typing import Annotated, Any, Literal, Union
+
+import msgspec
+
+from .area import Area
+from .errors import ProtocolError
+
+SCHEMA_VERSION = 1
+MAX_PAYLOAD_BYTES = 4096
+"""A request is a few hundred bytes; anything larger is refused before parsing."""
+MAX_TASKS = 1000
+"""Upper bound of a request's task count (the model's u_max is 20; this is a sanity cap)."""
+MAX_PLAN_POINTS = 200
+
+UserId = Annotated[str, msgspec.Meta(min_length=1, max_length=64, pattern=r"^[A-Za-z0-9_.:\-]+$")]
+ShortText = Annotated[str, msgspec.Meta(max_length=256)]
+Tasks = Annotated[int, msgspec.Meta(ge=0, le=MAX_TASKS)]
+Count = Annotated[int, msgspec.Meta(ge=0)]
+Fraction = Annotated[float, msgspec.Meta(ge=0.0, le=1.0)]
+
+EventKind = Literal[
+    "request_accepted", "request_rejected", "plan_updated", "mission_uploaded",
+    "upload_failed", "user_served", "waypoint_reached", "returning", "landed", "link_lost",
+    "link_restored",
+]
+
+
+class _Message(
+    msgspec.Struct, frozen=True, forbid_unknown_fields=True, kw_only=True, tag_field="kind"
+):
+    schema: int = SCHEMA_VERSION
+    """Layout version; a payload without it is read as version 1."""
+
+
+class TaskRequest(_Message, tag="task_request"):
+    """A ground user asks to offload ``tasks`` tasks from where it stands."""
+
+    user_id: UserId
+    x_m: float
+    y_m: float
+    tasks: Tasks
+    z_m: float = 0.0
+    client_ref: Annotated[str, msgspec.Meta(max_length=64)] | None = None
+    """The client's own correlation id, echoed in the reply."""
+
+
+class TaskAck(_Message, tag="task_ack"):
+    """The service accepted (and journalled) a request; ``request_id`` is the service's id."""
+
+    request_id: Annotated[int, msgspec.Meta(ge=1)]
+    user_id: UserId
+    accepted_at_s: float = 0.0
+    queue_position: Count = 0
+    client_ref: Annotated[str, msgspec.Meta(max_length=64)] | None = None
+
+
+class ErrorReply(_Message, tag="error"):
+    """The request was refused: ``field`` names what was wrong."""
+
+    field: ShortText
+    message: ShortText
+    client_ref: Annotated[str, msgspec.Meta(max_length=64)] | None = None
+
+
+class Status(_Message, tag="status"):
+    """Periodic snapshot of the vehicle as the service sees it."""
+
+    vehicle: ShortText = ""
+    time_s: float = 0.0
+    phase: Literal["idle", "planning", "flying", "returning", "landed", "lost"] = "idle"
+    armed: bool = False
+    mode: ShortText = ""
+    x_m: float = 0.0
+    y_m: float = 0.0
+    z_m: float = 0.0
+    battery_fraction: Fraction = 1.0
+    mission_seq: Count = 0
+    mission_total: Count = 0
+    pending_requests: Count = 0
+    served_users: Count = 0
+
+
+class PlanPoint(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
+    """A hovering point of the plan and whom it serves there."""
+
+    x_m: float
+    y_m: float
+    z_m: float
+    hold_s: Annotated[float, msgspec.Meta(ge=0.0)] = 0.0
+    user_id: UserId | None = None
+
+
+class Plan(_Message, tag="plan"):
+    """The current plan: hovering points in flying order, then return to launch."""
+
+    plan_id: Count = 0
+    time_s: float = 0.0
+    points: Annotated[list[PlanPoint], msgspec.Meta(max_length=MAX_PLAN_POINTS)] = []
+    predicted_energy_j: Annotated[float, msgspec.Meta(ge=0.0)] = 0.0
+
+
+class Event(_Message, tag="event"):
+    """Something happened; ``event`` says what."""
+
+    event: EventKind = "plan_updated"
+    time_s: float = 0.0
+    user_id: UserId | None = None
+    request_id: Annotated[int, msgspec.Meta(ge=1)] | None = None
+    detail: ShortText = ""
+
+
+class PendingRequest(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
+    """An accepted request not yet served."""
+
+    request_id: Annotated[int, msgspec.Meta(ge=1)]
+    user_id: UserId
+    x_m: float
+    y_m: float
+    z_m: float
+    tasks: Tasks
+
+
+class State(_Message, tag="state"):
+    """The reply of the state queryable: status, plan and what is still pending."""
+
+    status: Status = Status()
+    plan: Plan | None = None
+    pending: Annotated[list[PendingRequest], msgspec.Meta(max_length=10_000)] = []
+
+
+Message = Union[TaskRequest, TaskAck, ErrorReply, Status, Plan, Event, State]
+Reply = Union[TaskAck, ErrorReply]
+"""What the request queryable answers."""
+
+
+_XY_FIELDS = ("x_m", "y_m")
+
+
+def encode(message: Message) -> bytes:
+    """The message as compact JSON bytes."""
+    return msgspec.json.encode(message)
+
+
+def decode(payload: bytes | bytearray | memoryview | str, kind: Any, area: Area | None = None) -> Any:
+    """Decode ``payload`` as ``kind`` (a message type or a Union of them) and validate it.
+
+    With ``area`` every ``x_m``/``y_m`` must lie in the square and every ``z_m`` in
+    ``[0, area.max_altitude_m]``. Raises ``ProtocolError`` naming the first bad field.
+    """
+    if isinstance(payload, str):
+        payload = payload.encode("utf-8")
+    data = bytes(payload)
+    if len(data) > MAX_PAYLOAD_BYTES:
+        raise ProtocolError("payload", f"{len(data)} bytes exceeds the limit of {MAX_PAYLOAD_BYTES}")
+    try:
+        message = msgspec.json.decode(data, type=kind)
+    except msgspec.ValidationError as exc:
+        raise ProtocolError(*_explain(str(exc))) from None
+    except msgspec.DecodeError as exc:
+        raise ProtocolError(*_explain_malformed(data, str(exc))) from None
+    _check_values(message, area, "")
+    return message
+
+
+def decode_request(payload: bytes | bytearray | memoryview | str, area: Area) -> TaskRequest:
+    """Decode a task request; positions are checked against ``area``."""
+    return decode(payload, TaskRequest, area)
+
+
+def decode_reply(payload: bytes | bytearray | memoryview | str) -> TaskAck | ErrorReply:
+    """Decode what the request queryable answered (an ack or an error)."""
+    return decode(payload, Reply)
+
+
+_AT = re.compile(r" - at `\$\.?(?P<path>[^`]*)`$")
+_UNKNOWN = re.compile(r"unknown field `(?P<name>[^`]+)`")
+_MISSING = re.compile(r"missing required field `(?P<name>[^`]+)`")
+
+
+def _explain(text: str) -> tuple[str, str]:
+    """(field path, message) from a msgspec validation message."""
+    at = _AT.search(text)
+    prefix = at.group("path") if at else ""
+    message = _AT.sub("", text)
+    for pattern in (_UNKNOWN, _MISSING):
+        named = pattern.search(message)
+        if named:
+            name = named.group("name")
+            return (f"{prefix}.{name}" if prefix else name), message
+    return (prefix or "payload"), message
+
+
+def _explain_malformed(data: bytes, text: str) -> tuple[str, str]:
+    """msgspec refuses NaN and Infinity as malformed JSON; name the field that holds one."""
+    try:
+        loose = json.loads(data)
+    except (ValueError, UnicodeDecodeError):
+        return "payload", text
+    path = _first_non_finite(loose, "")
+    if path is not None:
+        return path, "must be a finite number (NaN and Infinity are not allowed)"
+    return "payload", text
+
+
+def _first_non_finite(value: Any, path: str) -> str | None:
+    if isinstance(value, float) and not math.isfinite(value):
+        return path or "payload"
+    if isinstance(value, dict):
+        for key, item in value.items():
+            found = _first_non_finite(item, f"{path}.{key}" if path else str(key))
+            if found:
+                return found
+    if isinstance(value, list):
+        for i, item in enumerate(value):
+            found = _first_non_finite(item, f"{path}[{i}]")
+            if found:
+                return found
+    return None
+
+
+def _check_values(message: Any, area: Area | None, path: str) -> None:
+    if isinstance(message, msgspec.Struct):
+        for name in message.__struct_fields__:
+            _check_field(getattr(message, name), name, area, f"{path}.{name}" if path else name)
+    if isinstance(message, _Message) and message.schema != SCHEMA_VERSION:
+        field = f"{path}.schema" if path else "schema"
+        raise ProtocolError(field, f"schema {message.schema} is not supported (expected {SCHEMA_VERSION})")
+
+
+def _check_field(value: Any, name: str, area: Area | None, path: str) -> None:
+    if isinstance(value, float):
+        if not math.isfinite(value):
+            raise ProtocolError(path, "must be a finite number")
+        if area is not None and name in _XY_FIELDS and not 0.0 <= value <= area.side_m:
+            raise ProtocolError(path, f"{value} lies outside the area [0, {area.side_m}] m")
+        if area is not None and name == "z_m" and not 0.0 <= value <= area.max_altitude_m:
+            raise ProtocolError(path, f"{value} lies outside [0, {area.max_altitude_m}] m")
+    elif isinstance(value, msgspec.Struct):
+        _check_values(value, area, path)
+    elif isinstance(value, list):
+        for i, item in enumerate(value):
+            _check_field(item, name, area, f"{path}[{i}]")

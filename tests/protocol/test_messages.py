@@ -1,0 +1,110 @@
+"""Message decoding: valid messages round-trip; each kind of bad input names its field."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from protocol import (
+    MAX_PAYLOAD_BYTES, Area, ErrorReply, Event, Keys, Plan, PlanPoint, ProtocolError, State, Status,
+    TaskAck, TaskRequest, decode, decode_reply, decode_request, encode,
+)
+from protocol.messages import MAX_TASKS
+
+AREA = Area(side_m=500.0, max_altitude_m=150.0)
+
+
+def request(**changes) -> bytes:
+    body = {"kind": "task_request", "schema": 1, "user_id": "u-7", "x_m": 120.5, "y_m": 30.0, "tasks": 12}
+    body.update(changes)
+    return json.dumps({k: v for k, v in body.items() if v is not ...}).encode()
+
+
+def refused(payload: bytes | str, kind=TaskRequest) -> ProtocolError:
+    with pytest.raises(ProtocolError) as err:
+        decode(payload, kind, AREA)
+    return err.value
+
+
+def test_a_valid_request_decodes() -> None:
+    msg = decode_request(request(), AREA)
+    assert msg == TaskRequest(user_id="u-7", x_m=120.5, y_m=30.0, tasks=12)
+    assert msg.z_m == 0.0 and msg.schema == 1
+
+
+def test_every_message_round_trips() -> None:
+    status = Status(vehicle="uav1", time_s=12.5, phase="flying", armed=True, mode="AUTO", x_m=10.0,
+                    y_m=20.0, z_m=100.0, battery_fraction=0.8, mission_seq=3, mission_total=9)
+    plan = Plan(plan_id=4, time_s=1.0, points=[PlanPoint(10.0, 20.0, 100.0, 31.5, "u-1")], predicted_energy_j=5e4)
+    messages = [
+        TaskRequest(user_id="a", x_m=0.0, y_m=500.0, tasks=0, z_m=3.0, client_ref="r1"),
+        TaskAck(request_id=17, user_id="a", accepted_at_s=3.5, queue_position=2, client_ref="r1"),
+        ErrorReply(field="x_m", message="outside"),
+        status, plan, Event(event="user_served", time_s=3.0, user_id="a", request_id=17),
+        State(status=status, plan=plan),
+    ]
+    for msg in messages:
+        assert decode(encode(msg), type(msg), AREA) == msg
+    assert decode_reply(encode(messages[1])) == messages[1]
+    assert decode_reply(encode(messages[2])) == messages[2]
+    assert json.loads(encode(messages[0]))["kind"] == "task_request"
+
+
+@pytest.mark.parametrize("payload, field", [
+    (request(colour="red"), "colour"),  # unknown field
+    (request(x_m="12"), "x_m"),  # wrong type
+    (request(tasks=1.5), "tasks"),
+    (request(user_id=""), "user_id"),
+    (request(user_id="x" * 65), "user_id"),
+    (request(user_id="a/b"), "user_id"),
+    (request(tasks=-1), "tasks"),  # negative tasks
+    (request(tasks=MAX_TASKS + 1), "tasks"),
+    (request(x_m=500.5), "x_m"),  # outside the area
+    (request(y_m=-0.1), "y_m"),
+    (request(z_m=151.0), "z_m"),
+    (request(tasks=...), "tasks"),  # missing
+    (request(schema=2), "schema"),
+    (request(kind="task_ack"), "kind"),
+    (request(x_m=1e999), "x_m"),  # infinity as a number too large for a double
+    (request().replace(b"120.5", b"NaN"), "x_m"),  # NaN, which JSON has no word for
+    (request().replace(b"30.0", b"-Infinity"), "y_m"),
+])
+def test_bad_requests_name_the_field(payload: bytes, field: str) -> None:
+    assert refused(payload).field == field
+
+
+def test_oversize_payload_is_refused_before_parsing() -> None:
+    payload = request(client_ref="x" * MAX_PAYLOAD_BYTES)
+    assert refused(payload).field == "payload"
+
+
+def test_malformed_json_and_non_objects() -> None:
+    assert refused(b"{not json").field == "payload"
+    assert refused(b"[1, 2]").field == "payload"
+
+
+def test_nested_fields_are_named_with_their_path() -> None:
+    bad_point = {"kind": "plan", "points": [{"x_m": 1, "y_m": 2, "z_m": 3}, {"x_m": 1, "y_m": 600, "z_m": 3}]}
+    assert refused(json.dumps(bad_point), Plan).field == "points[1].y_m"
+    extra = {"kind": "plan", "points": [{"x_m": 1, "y_m": 2, "z_m": 3, "speed": 1}]}
+    assert refused(json.dumps(extra), Plan).field == "points[0].speed"
+    state = {"kind": "state", "status": {"kind": "status", "battery_fraction": 1.5}}
+    assert refused(json.dumps(state), State).field == "status.battery_fraction"
+
+
+def test_error_carries_a_readable_message() -> None:
+    err = refused(request(x_m=900.0))
+    assert "outside the area" in err.message and str(err).startswith("x_m:")
+
+
+def test_keys() -> None:
+    keys = Keys(prefix="uavmec", vehicle="uav7")
+    assert [keys.request, keys.status, keys.plan, keys.events, keys.state, keys.alive] == [
+        "uavmec/uav7/request", "uavmec/uav7/status", "uavmec/uav7/plan", "uavmec/uav7/events",
+        "uavmec/uav7/state", "uavmec/uav7/alive",
+    ]
+    for bad in ("a/b", "*", "", "x y"):
+        with pytest.raises(ProtocolError) as err:
+            Keys(vehicle=bad)
+        assert err.value.field == "vehicle"
