@@ -1,17 +1,64 @@
-"""The `vehicle` command (not yet built)."""
+"""The MAVLink vehicle stub (SITL-stub): a simulated multirotor that flies uploaded missions.
+
+It speaks MAVLink 2 as ArduPilot Copter or PX4 would (heartbeat, telemetry, the mission
+protocol, arm/mode/takeoff/RTL commands) and drains its battery with the project's energy
+model. Logs go to stderr. Stop it with SIGINT or SIGTERM.
+"""
 
 from __future__ import annotations
 
 import argparse
+import logging
+import signal
 import sys
+import threading
 
-HELP = "vehicle (not yet built)"
+HELP = "run the simulated MAVLink vehicle (SITL-stub)"
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
-    pass
+    parser.add_argument("--mavlink", default="udpin:127.0.0.1:14550", metavar="URL",
+                        help="udpin:HOST:PORT, udpout:HOST:PORT or tcpin:HOST:PORT (default %(default)s)")
+    parser.add_argument("--flavour", choices=("ardupilot", "px4"), default="ardupilot",
+                        help="autopilot to imitate: item-0 convention and mode numbers (default %(default)s)")
+    parser.add_argument("--preset", default="field", help="scenario preset for the energy model (default %(default)s)")
+    parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
+                        help="override a scenario field, e.g. --set speed_mps=10 (repeatable)")
+    parser.add_argument("--origin", default=None, metavar="LAT,LON,ALT",
+                        help="geodetic origin of the local frame (default 47.397742,8.545594,488)")
+    parser.add_argument("--speedup", type=float, default=1.0, help="simulated seconds per wall second (default 1)")
+    parser.add_argument("--sysid", type=int, default=1, help="MAVLink system id (default 1)")
+    parser.add_argument("--item-timeout", type=float, default=1.0,
+                        help="seconds before re-requesting a mission item during an upload (default 1)")
+    parser.add_argument("--retries", type=int, default=5, help="re-requests before an upload is abandoned (default 5)")
+    parser.add_argument("--fence-margin", type=float, default=100.0,
+                        help="geofence: the scenario area grown by this many metres (default 100)")
+    parser.add_argument("--log-level", default="INFO", choices=("DEBUG", "INFO", "WARNING", "ERROR"))
 
 
 def run(args: argparse.Namespace) -> int:
-    print("vehicle: not yet built", file=sys.stderr)
-    return 2
+    logging.basicConfig(stream=sys.stderr, level=args.log_level,
+                        format="%(asctime)s vehicle %(levelname)s %(name)s: %(message)s")
+    # Imported here so that `--help` does not pay for numba and pymavlink.
+    from planner_service.model import ScenarioError, preset
+    from protocol.errors import MissionError
+    from protocol.geodesy import GeoOrigin
+    from sim_bridge.vehicle import Vehicle, VehicleConfig, VehicleError
+
+    try:
+        scenario = preset(args.preset).with_overrides(args.set)
+        origin = GeoOrigin.parse(args.origin) if args.origin else GeoOrigin()
+        config = VehicleConfig(
+            url=args.mavlink, flavour=args.flavour, scenario=scenario, origin=origin,
+            speedup=args.speedup, system_id=args.sysid, item_timeout_s=args.item_timeout,
+            max_retries=args.retries, fence_margin_m=args.fence_margin,
+        )
+        vehicle = Vehicle(config)
+    except (ScenarioError, MissionError, VehicleError) as exc:
+        print(f"vehicle: {exc}", file=sys.stderr)
+        return 2
+    stop = threading.Event()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda *_: stop.set())
+    vehicle.run(stop)
+    return 0

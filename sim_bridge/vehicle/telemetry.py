@@ -1,0 +1,188 @@
+"""Telemetry messages built from the simulated aircraft's state (pure functions)."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+from pymavlink.dialects.v20 import common as mavlink
+
+from protocol.geodesy import local_to_global
+
+from .flight import Flight
+from .modes import AUTOPILOT, Mode, custom_mode
+
+# A 4S lithium pack: 16.8 V full, 14.0 V at the end of its useful charge.
+CELLS = 4
+CELL_FULL_V, CELL_EMPTY_V = 4.2, 3.5
+CAPACITY_MAH = 5000
+
+_SENSORS = (
+    mavlink.MAV_SYS_STATUS_SENSOR_3D_GYRO | mavlink.MAV_SYS_STATUS_SENSOR_3D_ACCEL
+    | mavlink.MAV_SYS_STATUS_SENSOR_3D_MAG | mavlink.MAV_SYS_STATUS_SENSOR_ABSOLUTE_PRESSURE
+    | mavlink.MAV_SYS_STATUS_SENSOR_GPS | mavlink.MAV_SYS_STATUS_SENSOR_BATTERY
+)
+_AUTO_BITS = (
+    mavlink.MAV_MODE_FLAG_AUTO_ENABLED | mavlink.MAV_MODE_FLAG_GUIDED_ENABLED
+    | mavlink.MAV_MODE_FLAG_STABILIZE_ENABLED
+)
+_BASE_BITS = {
+    Mode.MANUAL: mavlink.MAV_MODE_FLAG_MANUAL_INPUT_ENABLED | mavlink.MAV_MODE_FLAG_STABILIZE_ENABLED,
+    Mode.GUIDED: mavlink.MAV_MODE_FLAG_GUIDED_ENABLED | mavlink.MAV_MODE_FLAG_STABILIZE_ENABLED,
+}
+FIRMWARE_VERSION = {"ardupilot": (4, 6, 0), "px4": (1, 15, 0)}
+FIRMWARE_TYPE_OFFICIAL = 255
+
+
+def time_boot_ms(flight: Flight) -> int:
+    """Milliseconds of simulated time since start (the vehicle's own clock)."""
+    return int(flight.time_s * 1000.0) % (1 << 32)
+
+
+def heartbeat(flight: Flight) -> Any:
+    base = mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | _BASE_BITS.get(flight.mode, _AUTO_BITS)
+    if flight.armed:
+        base |= mavlink.MAV_MODE_FLAG_SAFETY_ARMED
+    state = mavlink.MAV_STATE_ACTIVE if flight.armed else mavlink.MAV_STATE_STANDBY
+    if flight.failsafe and not flight.landed:
+        state = mavlink.MAV_STATE_CRITICAL
+    return mavlink.MAVLink_heartbeat_message(
+        mavlink.MAV_TYPE_QUADROTOR, AUTOPILOT[flight.flavour], base,
+        custom_mode(flight.flavour, flight.mode), state, 3,
+    )
+
+
+def autopilot_version(flight: Flight, system_id: int) -> Any:
+    major, minor, patch = FIRMWARE_VERSION[flight.flavour]
+    capabilities = (
+        mavlink.MAV_PROTOCOL_CAPABILITY_MISSION_FLOAT | mavlink.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT
+        | mavlink.MAV_PROTOCOL_CAPABILITY_MISSION_INT | mavlink.MAV_PROTOCOL_CAPABILITY_COMMAND_INT
+        | mavlink.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_GLOBAL_INT
+        | mavlink.MAV_PROTOCOL_CAPABILITY_MAVLINK2
+    )
+    version = (major << 24) | (minor << 16) | (patch << 8) | FIRMWARE_TYPE_OFFICIAL
+    return mavlink.MAVLink_autopilot_version_message(
+        capabilities, version, 0, 0, 0, [0] * 8, [0] * 8, [0] * 8, 0, 0, 0x5EED0000 + system_id,
+        [0] * 18,
+    )
+
+
+def _global(flight: Flight) -> tuple[int, int, float]:
+    lat, lon, alt = local_to_global(flight.origin, *flight.pos)
+    return int(round(lat * 1e7)), int(round(lon * 1e7)), alt
+
+
+def heading_cdeg(flight: Flight) -> int:
+    vx, vy, _ = flight.vel
+    if math.hypot(vx, vy) < 1e-3:
+        return 65535  # unknown
+    return int(round(math.degrees(math.atan2(vx, vy)) % 360.0 * 100)) % 36000
+
+
+def global_position_int(flight: Flight) -> Any:
+    lat, lon, alt = _global(flight)
+    vx, vy, vz = flight.vel
+    # NED velocities in cm/s: north = local y, east = local x, down = -z.
+    return mavlink.MAVLink_global_position_int_message(
+        time_boot_ms(flight), lat, lon, int(round(alt * 1000)), int(round(flight.pos[2] * 1000)),
+        int(round(vy * 100)), int(round(vx * 100)), int(round(-vz * 100)), heading_cdeg(flight),
+    )
+
+
+def local_position_ned(flight: Flight) -> Any:
+    x, y, z = flight.pos
+    vx, vy, vz = flight.vel
+    return mavlink.MAVLink_local_position_ned_message(time_boot_ms(flight), y, x, -z, vy, vx, -vz)
+
+
+def attitude(flight: Flight) -> Any:
+    hdg = heading_cdeg(flight)
+    yaw = 0.0 if hdg == 65535 else math.radians(hdg / 100.0)
+    if yaw > math.pi:
+        yaw -= 2 * math.pi
+    return mavlink.MAVLink_attitude_message(time_boot_ms(flight), 0.0, 0.0, yaw, 0.0, 0.0, 0.0)
+
+
+def gps_raw_int(flight: Flight) -> Any:
+    lat, lon, alt = _global(flight)
+    speed = math.hypot(flight.vel[0], flight.vel[1])
+    return mavlink.MAVLink_gps_raw_int_message(
+        int(flight.time_s * 1e6), mavlink.GPS_FIX_TYPE_3D_FIX, lat, lon, int(round(alt * 1000)), 80, 120,
+        int(round(speed * 100)), 65535, 14,
+    )
+
+
+def _voltage_v(flight: Flight) -> float:
+    return CELLS * (CELL_EMPTY_V + (CELL_FULL_V - CELL_EMPTY_V) * flight.battery_fraction)
+
+
+def _current_a(flight: Flight, power_w: float) -> float:
+    return power_w / _voltage_v(flight)
+
+
+def sys_status(flight: Flight, power_w: float) -> Any:
+    volts = _voltage_v(flight)
+    return mavlink.MAVLink_sys_status_message(
+        _SENSORS, _SENSORS, _SENSORS, 100, int(volts * 1000), int(_current_a(flight, power_w) * 100),
+        int(round(flight.battery_fraction * 100)), 0, 0, 0, 0, 0, 0,
+    )
+
+
+def battery_status(flight: Flight, power_w: float) -> Any:
+    cell_mv = int(_voltage_v(flight) / CELLS * 1000)
+    used_j = flight.scenario.battery_j - flight.energy_j
+    consumed_mah = int(CAPACITY_MAH * (1.0 - flight.battery_fraction))
+    return mavlink.MAVLink_battery_status_message(
+        0, mavlink.MAV_BATTERY_FUNCTION_ALL, mavlink.MAV_BATTERY_TYPE_LIPO, 32767,
+        [cell_mv] * CELLS + [65535] * 6, int(_current_a(flight, power_w) * 100), consumed_mah,
+        int(used_j / 100.0), int(round(flight.battery_fraction * 100)),
+    )
+
+
+def extended_sys_state(flight: Flight) -> Any:
+    if flight.landed:
+        landed = mavlink.MAV_LANDED_STATE_ON_GROUND
+    elif flight.vel[2] > 0.1 and flight.pos[2] < 5.0:
+        landed = mavlink.MAV_LANDED_STATE_TAKEOFF
+    elif flight.vel[2] < -0.1 and flight.mode in (Mode.LAND, Mode.RTL):
+        landed = mavlink.MAV_LANDED_STATE_LANDING
+    else:
+        landed = mavlink.MAV_LANDED_STATE_IN_AIR
+    return mavlink.MAVLink_extended_sys_state_message(mavlink.MAV_VTOL_STATE_MC, landed)
+
+
+def mission_state(flight: Flight) -> int:
+    if not flight.mission:
+        return mavlink.MISSION_STATE_NO_MISSION
+    if flight.mission_done:
+        return mavlink.MISSION_STATE_COMPLETE
+    if not flight.started:
+        return mavlink.MISSION_STATE_NOT_STARTED
+    return mavlink.MISSION_STATE_ACTIVE if flight.mode is Mode.AUTO else mavlink.MISSION_STATE_PAUSED
+
+
+def mission_current(flight: Flight, seq: int | None = None, state: int | None = None) -> Any:
+    """MISSION_CURRENT now, or as it was when an event of this step happened (``seq`` and
+    ``state``): at a high speed-up one step can pass several items, and each report must
+    say what was current then, or a ground station sees progress jump back and forth."""
+    # After the last item a vehicle keeps reporting the last one (MAVSDK reads "finished"
+    # from MISSION_ITEM_REACHED of the last item, not from seq running past the end).
+    last = max(len(flight.mission) - 1, 0)
+    seq = min(flight.current if seq is None else seq, last)
+    mode = 1 if flight.mode is Mode.AUTO else 2
+    state = mission_state(flight) if state is None else state
+    return mavlink.MAVLink_mission_current_message(seq, len(flight.mission), state, mode)
+
+
+def home_position(flight: Flight) -> Any:
+    x, y, z = flight.home
+    lat, lon, alt = local_to_global(flight.origin, x, y, z)
+    return mavlink.MAVLink_home_position_message(
+        int(round(lat * 1e7)), int(round(lon * 1e7)), int(round(alt * 1000)), y, x, -z,
+        [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0, int(flight.time_s * 1e6),
+    )
+
+
+def statustext(severity: int, text: str) -> Any:
+    return mavlink.MAVLink_statustext_message(severity, text.encode("ascii", "replace")[:50])
+

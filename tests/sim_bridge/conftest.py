@@ -1,0 +1,89 @@
+"""Fixtures that start the vehicle stub and the lossy proxy as real processes on loopback."""
+
+from __future__ import annotations
+
+import os
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Callable, Iterator
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[2]
+
+
+def free_udp_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
+        sock.bind(("127.0.0.1", 0))
+        return sock.getsockname()[1]
+
+
+def free_tcp_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as sock:
+        sock.bind(("127.0.0.1", 0))
+        return sock.getsockname()[1]
+
+
+class Process:
+    """A ``python -m sim_bridge ...`` child with its stderr in a file."""
+
+    def __init__(self, args: list[str], log_path: Path, ready: str) -> None:
+        env = dict(os.environ)
+        env["PYTHONPATH"] = str(REPO) + os.pathsep + env.get("PYTHONPATH", "")
+        self.log_path = log_path
+        self._log = open(log_path, "w")
+        self.proc = subprocess.Popen(
+            [sys.executable, "-m", "sim_bridge", *args], cwd=REPO, env=env,
+            stdout=subprocess.DEVNULL, stderr=self._log,
+        )
+        deadline = time.monotonic() + 20.0
+        while ready not in self.log():
+            if self.proc.poll() is not None:
+                raise RuntimeError(f"{args[0]} exited with {self.proc.returncode}:\n{self.log()}")
+            if time.monotonic() > deadline:
+                raise RuntimeError(f"{args[0]} not ready:\n{self.log()}")
+            time.sleep(0.05)
+
+    def log(self) -> str:
+        return self.log_path.read_text()
+
+    def stop(self) -> int:
+        if self.proc.poll() is None:
+            self.proc.terminate()
+            try:
+                self.proc.wait(5)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait(5)
+        self._log.close()
+        return self.proc.returncode
+
+
+@pytest.fixture
+def spawn(tmp_path: Path) -> Iterator[Callable[..., Process]]:
+    """spawn(args, ready) starts a sim_bridge command and stops it after the test."""
+    started: list[Process] = []
+
+    def start(args: list[str], ready: str) -> Process:
+        process = Process(args, tmp_path / f"{args[0]}-{len(started)}.log", ready)
+        started.append(process)
+        return process
+
+    yield start
+    for process in reversed(started):
+        process.stop()
+
+
+@pytest.fixture
+def vehicle(spawn: Callable[..., Process]) -> Callable[..., tuple[Process, int]]:
+    """vehicle(*extra_args) -> (process, udp port) of a vehicle listening on udpin."""
+
+    def start(*extra: str) -> tuple[Process, int]:
+        port = free_udp_port()
+        process = spawn(["vehicle", "--mavlink", f"udpin:127.0.0.1:{port}", *extra], "listening")
+        return process, port
+
+    return start

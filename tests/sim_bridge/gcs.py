@@ -1,0 +1,131 @@
+"""A small pymavlink ground station for the tests: the GCS side of the mission protocol
+with its own retries, commands with COMMAND_ACK, and waiting for messages."""
+
+from __future__ import annotations
+
+import os
+import time
+from typing import Any, Callable, Sequence
+
+os.environ.setdefault("MAVLINK20", "1")
+from pymavlink import mavutil  # noqa: E402
+
+from protocol.mission import MissionItem  # noqa: E402
+
+M = mavutil.mavlink
+
+
+class GcsError(RuntimeError):
+    """A ground-station operation failed; says which and how."""
+
+
+class GroundStation:
+    """pymavlink as a ground station (system 255, component 190)."""
+
+    def __init__(self, url: str, timeout_s: float = 0.3, retries: int = 30) -> None:
+        self.conn = mavutil.mavlink_connection(url, source_system=255, source_component=190)
+        self.timeout_s = timeout_s
+        self.retries = retries
+        self.target = (1, 1)
+        self.seen: list[Any] = []
+        """Every message received, in order (for assertions on telemetry)."""
+
+    def close(self) -> None:
+        self.conn.close()
+
+    def recv(self, types: Sequence[str] | None, timeout_s: float,
+             where: Callable[[Any], bool] = lambda m: True) -> Any | None:
+        """The next message of one of ``types`` passing ``where``, or None after ``timeout_s``."""
+        deadline = time.monotonic() + timeout_s
+        while True:
+            left = deadline - time.monotonic()
+            if left <= 0:
+                return None
+            msg = self.conn.recv_match(blocking=True, timeout=min(left, 0.05))
+            if msg is None:
+                continue
+            if msg.get_type() == "BAD_DATA":
+                continue
+            self.seen.append(msg)
+            if (types is None or msg.get_type() in types) and where(msg):
+                return msg
+
+    def wait_vehicle(self, timeout_s: float = 10.0) -> Any:
+        """Send heartbeats until the vehicle answers with its own."""
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            self.conn.mav.heartbeat_send(M.MAV_TYPE_GCS, M.MAV_AUTOPILOT_INVALID, 0, 0, 0)
+            hb = self.recv(["HEARTBEAT"], 0.2)
+            if hb is not None:
+                self.target = (hb.get_srcSystem(), hb.get_srcComponent())
+                return hb
+        raise GcsError("no heartbeat from the vehicle")
+
+    # --- mission protocol ---------------------------------------------------------------------
+    def upload(self, items: Sequence[MissionItem]) -> int:
+        """Upload ``items``; returns the MISSION_ACK result. Retries on silence."""
+        sys_id, comp_id = self.target
+        count = len(items)
+        self.conn.mav.mission_count_send(sys_id, comp_id, count, M.MAV_MISSION_TYPE_MISSION)
+        last_sent: int | None = None
+        silent = 0
+        while silent <= self.retries:
+            msg = self.recv(["MISSION_REQUEST_INT", "MISSION_REQUEST", "MISSION_ACK"], self.timeout_s)
+            if msg is None:
+                silent += 1
+                if last_sent is None:
+                    self.conn.mav.mission_count_send(sys_id, comp_id, count, M.MAV_MISSION_TYPE_MISSION)
+                else:
+                    self.conn.mav.send(items[last_sent].to_message(sys_id, comp_id))
+                continue
+            if msg.get_type() == "MISSION_ACK":
+                if last_sent is None and msg.type == M.MAV_MISSION_ACCEPTED and count:
+                    continue  # a stale ACK of an earlier operation
+                return int(msg.type)
+            if not 0 <= msg.seq < count:
+                raise GcsError(f"vehicle requested item {msg.seq} of {count}")
+            silent = 0
+            self.conn.mav.send(items[msg.seq].to_message(sys_id, comp_id))
+            last_sent = msg.seq
+        raise GcsError(f"upload: no answer after {self.retries} retries (last item sent {last_sent})")
+
+    def download(self) -> list[MissionItem]:
+        sys_id, comp_id = self.target
+        count_msg = None
+        for _ in range(self.retries):
+            self.conn.mav.mission_request_list_send(sys_id, comp_id, M.MAV_MISSION_TYPE_MISSION)
+            count_msg = self.recv(["MISSION_COUNT"], self.timeout_s)
+            if count_msg is not None:
+                break
+        if count_msg is None:
+            raise GcsError("download: no MISSION_COUNT")
+        items: list[MissionItem] = []
+        for seq in range(count_msg.count):
+            for _ in range(self.retries):
+                self.conn.mav.mission_request_int_send(sys_id, comp_id, seq, M.MAV_MISSION_TYPE_MISSION)
+                msg = self.recv(["MISSION_ITEM_INT"], self.timeout_s, lambda m, s=seq: m.seq == s)
+                if msg is not None:
+                    items.append(MissionItem.from_message(msg))
+                    break
+            else:
+                raise GcsError(f"download: no item {seq}")
+        self.conn.mav.mission_ack_send(sys_id, comp_id, M.MAV_MISSION_ACCEPTED, M.MAV_MISSION_TYPE_MISSION)
+        return items
+
+    # --- commands ---------------------------------------------------------------------------------
+    def command(self, command: int, *params: float) -> int:
+        """COMMAND_LONG with retries (confirmation counts up); returns the COMMAND_ACK result."""
+        sys_id, comp_id = self.target
+        p = list(params) + [0.0] * (7 - len(params))
+        for confirmation in range(self.retries):
+            self.conn.mav.command_long_send(sys_id, comp_id, command, confirmation, *p)
+            ack = self.recv(["COMMAND_ACK"], self.timeout_s, lambda m: m.command == command)
+            if ack is not None:
+                return int(ack.result)
+        raise GcsError(f"command {command}: no COMMAND_ACK")
+
+    def set_mode(self, custom_mode: int, sub_mode: int = 0) -> int:
+        return self.command(M.MAV_CMD_DO_SET_MODE, M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, custom_mode, sub_mode)
+
+    def arm(self) -> int:
+        return self.command(M.MAV_CMD_COMPONENT_ARM_DISARM, 1)
