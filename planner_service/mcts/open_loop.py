@@ -232,3 +232,62 @@ def draw_futures(p: np.ndarray, future_moves: np.ndarray, future_tasks: np.ndarr
     for s in range(future_moves.shape[0]):
         for h in range(future_moves.shape[1]):
             draw_chance(p, future_moves[s, h], future_tasks[s, h], rng)
+
+
+@jit
+def paired_rollouts(
+    p: np.ndarray,
+    hover_points: np.ndarray,
+    actions: np.ndarray,
+    uav0: np.ndarray,
+    hover0: int,
+    users0: np.ndarray,
+    tasks0: np.ndarray,
+    served0: np.ndarray,
+    battery0: float,
+    interval0: int,
+    task_table: np.ndarray,
+    return_kind: int,
+    past_sum: float,
+    past_count: int,
+    future_moves: np.ndarray,
+    future_tasks: np.ndarray,
+    out: np.ndarray,
+) -> None:
+    """Each of ``actions`` (A,) first, then the greedy policy, on each of the S futures:
+    ``out`` (S, A) receives the returns (of the first step's node, as ``search`` backs up)."""
+    users = users0.copy()
+    tasks = tasks0.copy()
+    served = served0.copy()
+    uav = uav0.copy()
+    qvals = np.empty(hover_points.shape[0])
+    limit = int(p[P.MAX_INTERVALS])
+    for s in range(future_moves.shape[0]):
+        for k in range(actions.shape[0]):
+            users[:] = users0
+            tasks[:] = tasks0
+            served[:] = served0
+            uav[:] = uav0
+            hover = hover0
+            battery = battery0
+            t = interval0
+            total = 0.0
+            steps = 0
+            while limit <= 0 or t < limit:
+                allowed = evaluate_actions(p, hover_points, hover, uav, users, tasks, served, battery, qvals)
+                if allowed == 0:
+                    break
+                a = actions[k] if steps == 0 else int(np.argmax(qvals))
+                outcome = take_interval(p, hover_points, a, uav, users, tasks, served)
+                battery -= outcome[2] + outcome[3] + outcome[4]
+                hover = a
+                t += 1
+                total += outcome[5]
+                apply_chance(p, users, tasks, t, task_table, future_moves[s, steps], future_tasks[s, steps])
+                steps += 1
+            if return_kind == RETURN_SORTIE:
+                out[s, k] = (past_sum + total) / max(past_count + steps, 1)
+            elif return_kind == RETURN_SUM:
+                out[s, k] = total
+            else:
+                out[s, k] = total / max(steps, 1)

@@ -33,6 +33,7 @@ from .open_loop import (
     ROLLOUT_EPSILON_GREEDY,
     ROLLOUT_RANDOM,
     draw_futures,
+    paired_rollouts,
     search,
 )
 from .tree import ROOT_INDEX, UNVISITED, Tree
@@ -49,17 +50,18 @@ class MctsConfig:
     """Iterations per decision (the paper's "training episodes"); None: only the clock."""
     budget_ms: float | None = None
     """Wall-clock budget per decision; None: only the iteration count."""
-    c: float = 0.35
+    c: float = 1.0
     """UCT exploration constant on min-max normalised values (see docs/PLANNER.md)."""
     rollout: str = "epsilon-greedy"
     """Playout policy: ``epsilon-greedy`` on the immediate q, or ``random``."""
-    rollout_epsilon: float = 0.2
+    rollout_epsilon: float = 0.1
     """Probability of a uniform step in an epsilon-greedy playout."""
-    return_kind: str = "mean"
-    """A node's return: ``mean`` of q from its step on (the paper's average reward), or ``sum``."""
+    return_kind: str = "sortie"
+    """A node's return: ``sortie`` (the whole sortie's average q, past intervals included:
+    the reported average reward), ``mean`` of q from the node's step on, or their ``sum``."""
     reuse_tree: bool = True
     """Keep the chosen child's subtree for the next decision."""
-    reuse_decay: float = 1.0
+    reuse_decay: float = 0.3
     """Factor on reused statistics (1 keeps them, 0 forgets them)."""
     chunk: int = 16
     """Iterations between clock checks under a wall-clock budget."""
@@ -68,6 +70,13 @@ class MctsConfig:
     futures: int = 32
     """Sampled futures per decision shared by all iterations (common random numbers);
     0: a fresh future every iteration."""
+    confidence_z: float = 2.0
+    """Leave the greedy choice (largest immediate q) only when the search's choice, each
+    followed by greedy, beats it on ``confirm_futures`` fresh futures by this many standard
+    errors of the paired difference; 0 always takes the search's choice."""
+    confirm_futures: int = 64
+    """Fresh futures for that confirmation. Fresh, because the search's own samples picked
+    the candidate and would favour it (the winner's curse)."""
 
     def __post_init__(self) -> None:
         if self.iterations is None and self.budget_ms is None:
@@ -86,6 +95,10 @@ class MctsConfig:
             raise ValueError(f"max_depth must be at least 1, got {self.max_depth}")
         if self.futures < 0:
             raise ValueError(f"futures must not be negative, got {self.futures}")
+        if self.confirm_futures < 2:
+            raise ValueError(f"confirm_futures must be at least 2, got {self.confirm_futures}")
+        if not (self.confidence_z >= 0 and math.isfinite(self.confidence_z)):
+            raise ValueError(f"confidence_z must be finite and non-negative, got {self.confidence_z}")
         if not (self.c >= 0 and math.isfinite(self.c)) or self.chunk < 1:
             raise ValueError("c must be finite and non-negative, chunk at least 1")
 
@@ -117,11 +130,11 @@ class MctsPlanner:
         if not allowed.any():
             raise ValueError("no hovering point is allowed in this state: the sortie is over")
         self._reuse_or_reset(state)
+        greedy = int(np.argmax(self._qvals(state)))
         done = self._search(state, start)
-        child = self.tree.best_child(ROOT_INDEX, allowed)
-        if child == UNVISITED:  # budget too small for one iteration: fall back to greedy q
-            q = np.where(allowed, self._qvals(state), -np.inf)
-            action, line = int(np.argmax(q)), ()
+        child = self._choose(state, greedy, allowed)
+        if child == UNVISITED:  # budget too small for one iteration: the greedy choice
+            action, line = greedy, ()
         else:
             action = int(self.tree.action[child])
             line = tuple(self.tree.principal_line(child))
@@ -143,11 +156,33 @@ class MctsPlanner:
             self.tree = self._new_tree()
         self._expect = None
 
+    def _choose(self, state: SortieState, greedy: int, allowed: np.ndarray) -> int:
+        """The most visited allowed root child, unless it fails to beat the greedy choice
+        on fresh paired futures (``confidence_z``): then the greedy child."""
+        best = self.tree.best_child(ROOT_INDEX, allowed)
+        greedy_child = self.tree.children[ROOT_INDEX, greedy]
+        if best == UNVISITED or greedy_child == UNVISITED or best == greedy_child:
+            return best
+        if self.config.confidence_z <= 0:
+            return best
+        returns = self._paired_returns(state, np.array([self.tree.action[best], greedy]))
+        return best if paired_t(returns[:, 0] - returns[:, 1]) >= self.config.confidence_z else int(greedy_child)
+
+    def _paired_returns(self, state: SortieState, actions: np.ndarray) -> np.ndarray:
+        moves, tasks = self._futures(state, self.config.confirm_futures)
+        out = np.empty((len(moves), len(actions)))
+        paired_rollouts(
+            self.params, self.hover_points, actions, state.uav_xyz, state.hover_index, state.users,
+            state.tasks, state.served, state.battery_j, state.interval, state.task_table,
+            RETURNS[self.config.return_kind], state.reward_sum, state.interval, moves, tasks, out,
+        )
+        return out
+
     def _search(self, state: SortieState, start: float) -> int:
         cfg = self.config
         deadline = None if cfg.budget_ms is None else start + cfg.budget_ms / 1e3
         target = cfg.iterations if cfg.iterations is not None else math.inf
-        moves, tasks = self._futures(state)
+        moves, tasks = self._futures(state, cfg.futures)
         done = 0
         while done < target:
             batch = int(min(target - done, cfg.chunk if deadline is not None else target - done))
@@ -157,18 +192,23 @@ class MctsPlanner:
                 self.params, self.hover_points, t.parent, t.action, t.children, t.visits, t.value_sum,
                 t.num_nodes, state.uav_xyz, state.hover_index, state.users, state.tasks, state.served,
                 state.battery_j, state.interval, state.task_table, batch, cfg.c, ROLLOUTS[cfg.rollout],
-                cfg.rollout_epsilon, RETURNS[cfg.return_kind], state.reward_sum, state.interval, moves, tasks, cfg.max_depth, self.rng,
+                cfg.rollout_epsilon, RETURNS[cfg.return_kind], state.reward_sum, state.interval, moves,
+                tasks, cfg.max_depth, self.rng,
             )
             done += batch
-            if deadline is not None and time.perf_counter() >= deadline:
-                break
+            if deadline is not None:
+                now = time.perf_counter()
+                # keep time for the confirmation: about 2 * confirm_futures playouts
+                per_iteration = (now - start) / done
+                if now + per_iteration * 2 * cfg.confirm_futures >= deadline:
+                    break
         return done
 
-    def _futures(self, state: SortieState) -> tuple[np.ndarray, np.ndarray]:
-        """This decision's sampled futures, (S, H, I, 3) moves and (S, H, I) tasks."""
+    def _futures(self, state: SortieState, count: int) -> tuple[np.ndarray, np.ndarray]:
+        """``count`` sampled futures from ``state``: (S, H, I, 3) moves and (S, H, I) tasks."""
         num_users = len(state.users)
         horizon = remaining_intervals(self.params, num_users, state.interval)
-        count = self.config.futures if horizon > 0 else 0
+        count = count if horizon > 0 else 0
         moves = np.empty((count, horizon, num_users, 3))
         tasks = np.empty((count, horizon, num_users), dtype=np.int64)
         draw_futures(self.params, moves, tasks, self.rng)
@@ -187,3 +227,12 @@ class MctsPlanner:
 
     def describe(self) -> dict:
         return asdict(self.config)
+
+
+
+def paired_t(diff: np.ndarray) -> float:
+    """t-statistic of the mean of paired differences ``diff`` (S,); +-inf without spread."""
+    spread = diff.std(ddof=1) if len(diff) > 1 else 0.0
+    if spread == 0.0:
+        return math.inf if diff.mean() > 0 else -math.inf
+    return float(diff.mean() / (spread / math.sqrt(len(diff))))
