@@ -1,17 +1,32 @@
-"""The `bench` command (not yet built)."""
+"""Performance figures: mcts decision latency (median, p99) and playouts per second at the
+paper's size (K=20, I=10) and larger, with a plain pure-Python reference timed in the same
+run so the speed-up is a ratio. Figures, not pass/fail: run it on a quiet machine."""
 
 from __future__ import annotations
 
 import argparse
+import json
+import sys
 
-from .common import not_yet_built
-
-HELP = "bench (not yet built)"
+HELP = "performance figures: decision latency, playouts/s, speed-up over a plain reference"
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
-    pass
+    parser.add_argument("--json", action="store_true", help="print the figures as JSON")
+    parser.add_argument("--decisions", type=int, default=50, help="decisions timed at the paper's size (default: 50; a fifth, at least 10, at the larger sizes)")
+    parser.add_argument("--iterations", type=int, default=1000, help="MCTS iterations per decision (default: 1000)")
+    parser.add_argument("--reference-decisions", type=int, default=5, help="decisions timed with the pure-Python reference (default: 5; 0 skips it)")
+    parser.add_argument("--quick", action="store_true", help="only the paper's size")
 
 
 def run(args: argparse.Namespace) -> int:
-    return not_yet_built("bench")
+    from ..bench.run import SIZES, format_table, run_bench
+
+    if args.decisions < 1 or args.iterations < 1 or args.reference_decisions < 0:
+        print("error: --decisions and --iterations must be at least 1", file=sys.stderr)
+        return 2
+    sizes = SIZES[:1] if args.quick else SIZES
+    results = run_bench(args.decisions, args.iterations, args.reference_decisions, sizes,
+                        progress=lambda msg: print(msg, file=sys.stderr, flush=True))
+    print(json.dumps(results, indent=1) if args.json else format_table(results))
+    return 0
