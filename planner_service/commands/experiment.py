@@ -1,17 +1,104 @@
-"""The `experiment` command (not yet built)."""
+"""Run a figure of the paper (or ``all``): a CSV of every point (mean and 95 % interval over
+seeds), a PNG figure and a JSON summary with the paper's claims checked, in --out DIR.
+
+Full form: episodes 10, 30, 100, 300, 1000 and 20 seeds; --quick: episodes 10, 30, 100 and
+3 seeds (every experiment together in about a minute). See docs/EXPERIMENTS.md.
+"""
 
 from __future__ import annotations
 
 import argparse
+import datetime
+import os
+import platform
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any
 
-from .common import not_yet_built
+from ..experiments import (EXPERIMENTS, FULL_EPISODES, FULL_SEEDS, QUICK_EPISODES, QUICK_SEEDS, ExperimentError,
+                           Progress, RunConfig, experiment, run_experiments)
+from ..model import HAVE_NUMBA
+from .common import add_scenario_arguments, scenario_from_args
 
-HELP = "experiment (not yet built)"
+HELP = "a figure of the paper (or all): CSV, PNG and JSON summary"
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
-    pass
+    parser.add_argument("name", choices=[*EXPERIMENTS, "all"], help="the experiment, or all of them")
+    parser.add_argument("--out", required=True, type=Path, help="directory for the CSV, PNG and JSON files")
+    parser.add_argument("--quick", action="store_true",
+                        help=f"small form: episodes {','.join(map(str, QUICK_EPISODES))}, {QUICK_SEEDS} seeds")
+    parser.add_argument("--seeds", type=int, default=None,
+                        help=f"number of seeds (default {FULL_SEEDS}; {QUICK_SEEDS} with --quick)")
+    parser.add_argument("--first-seed", type=int, default=0, help="seeds are first-seed, first-seed + 1, ... (default 0)")
+    parser.add_argument("--episodes", default=None, metavar="N,N,...",
+                        help=f"the episodes axis (default {','.join(map(str, FULL_EPISODES))})")
+    parser.add_argument("--workers", type=int, default=min(2, os.cpu_count() or 1),
+                        help="worker processes (default: min(2, cores)); 1 runs in this process")
+    add_scenario_arguments(parser)
 
 
 def run(args: argparse.Namespace) -> int:
-    return not_yet_built("experiment")
+    try:
+        cfg = _config(args)
+    except ValueError as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2
+    exps = list(EXPERIMENTS.values()) if args.name == "all" else [experiment(args.name)]
+    start = time.perf_counter()
+    progress = Progress(0, f"{args.name} ({cfg.base.name})")
+    try:
+        written = run_experiments(exps, cfg, args.out, max(args.workers, 1), progress, _provenance())
+    except ExperimentError as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 1
+    wall = time.perf_counter() - start
+    for path in written:
+        print(path)
+    print(f"{args.name}: {len(exps)} experiment(s) on {cfg.base.name}, {len(cfg.seeds)} seeds, "
+          f"episodes {list(cfg.episodes)}, {wall:.1f} s wall on {args.workers} worker(s)", file=sys.stderr)
+    return 0
+
+
+def _config(args: argparse.Namespace) -> RunConfig:
+    if args.episodes is not None:
+        try:
+            episodes = tuple(int(x) for x in args.episodes.split(","))
+        except ValueError:
+            raise ValueError(f"--episodes must be integers separated by commas, got {args.episodes!r}") from None
+    else:
+        episodes = QUICK_EPISODES if args.quick else FULL_EPISODES
+    if not episodes or min(episodes) < 1 or len(set(episodes)) != len(episodes):
+        raise ValueError("--episodes must be distinct positive integers")
+    seeds = args.seeds if args.seeds is not None else (QUICK_SEEDS if args.quick else FULL_SEEDS)
+    if seeds < 1:
+        raise ValueError("--seeds must be at least 1")
+    base = scenario_from_args(args)
+    return RunConfig(base=base, episodes=tuple(sorted(episodes)),
+                     seeds=tuple(range(args.first_seed, args.first_seed + seeds)), quick=args.quick)
+
+
+def _provenance() -> dict[str, Any]:
+    """Where the numbers came from: the command, the commit (and whether the planner code
+    differed from it), the machine."""
+    repo = Path(__file__).resolve().parents[2]
+
+    def git(*cmd: str) -> str:
+        try:
+            return subprocess.run(["git", *cmd], cwd=repo, capture_output=True, text=True, timeout=10).stdout.strip()
+        except (OSError, subprocess.SubprocessError):
+            return ""
+
+    return {
+        "command": "python -m planner_service " + " ".join(sys.argv[1:]),
+        "commit": git("rev-parse", "HEAD"),
+        "uncommitted_planner_changes": git("status", "--porcelain", "--", "planner_service/model", "planner_service/mcts",
+                                           "planner_service/baselines", "planner_service/policy.py",
+                                           "planner_service/sortie.py").splitlines(),
+        "started": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
+        "python": platform.python_version(),
+        "numba": HAVE_NUMBA,
+        "cores": os.cpu_count(),
+    }
