@@ -27,26 +27,62 @@ AT_BASE = -1
 
 
 @jit
+def eligible_users(p: np.ndarray, tasks: np.ndarray, served: np.ndarray, out: np.ndarray) -> int:
+    """Fill ``out`` (I,) bool with who may be served now (3); returns how many."""
+    count = 0
+    for i in range(tasks.shape[0]):
+        out[i] = is_eligible(p, tasks[i], served[i])
+        count += out[i]
+    return count
+
+
+@jit
+def nearest_eligible(
+    p: np.ndarray, hover_xyz: np.ndarray, users: np.ndarray, tasks: np.ndarray, eligible: np.ndarray,
+    distance: np.ndarray,
+) -> int:
+    """The nearest user among ``eligible`` (4); users within ``nearest_tie_m`` of the
+    nearest are tied and the larger task wins (Fig. 2), then the lower index. ``NO_USER``
+    if nobody is eligible. ``distance`` (I,) is scratch space (squared distances)."""
+    nearest_sq = math.inf
+    for i in range(users.shape[0]):
+        if eligible[i]:
+            distance[i] = distance_sq_m2(hover_xyz, users[i])
+            nearest_sq = min(nearest_sq, distance[i])
+    # within the tie of the nearest: d <= d_min + tie, compared squared (no square roots)
+    reach = math.sqrt(nearest_sq) + p[P.TIE_M]
+    reach_sq = reach * reach
+    chosen = NO_USER
+    for i in range(users.shape[0]):
+        if eligible[i] and distance[i] <= reach_sq:
+            if chosen == NO_USER or tasks[i] > tasks[chosen]:
+                chosen = i
+    return chosen
+
+
+@jit
 def served_user(
     p: np.ndarray, hover_xyz: np.ndarray, users: np.ndarray, tasks: np.ndarray, served: np.ndarray
 ) -> int:
-    """The nearest eligible user (4), (3); users within ``nearest_tie_m`` of the nearest
-    are tied and the larger task wins (Fig. 2), then the lower index. ``NO_USER`` if none."""
-    best_d = math.inf
-    for i in range(users.shape[0]):
-        if is_eligible(p, tasks[i], served[i]):
-            d = math.sqrt(distance_sq_m2(hover_xyz, users[i]))
-            if d < best_d:
-                best_d = d
-    if best_d == math.inf:
-        return NO_USER
-    chosen = NO_USER
-    for i in range(users.shape[0]):
-        if is_eligible(p, tasks[i], served[i]):
-            d = math.sqrt(distance_sq_m2(hover_xyz, users[i]))
-            if d <= best_d + p[P.TIE_M] and (chosen == NO_USER or tasks[i] > tasks[chosen]):
-                chosen = i
-    return chosen
+    """Who is served from ``hover_xyz``: the nearest eligible user (see ``nearest_eligible``)."""
+    eligible = np.empty(users.shape[0], dtype=np.bool_)
+    eligible_users(p, tasks, served, eligible)
+    return nearest_eligible(p, hover_xyz, users, tasks, eligible, np.empty(users.shape[0]))
+
+
+@jit
+def user_outcome(
+    p: np.ndarray, from_xyz: np.ndarray, hover_xyz: np.ndarray, user_xyz: np.ndarray, tasks: int
+) -> tuple[float, float, float, float, float]:
+    """Fly ``from_xyz`` -> ``hover_xyz`` and serve a user with ``tasks`` at ``user_xyz``:
+    (bits, e_hover_j, e_comp_j, e_flight_j, q)."""
+    bits = tasks * p[P.BITS_PER_TASK]  # S(t) = u_i(t) B_t
+    rate = upload_rate_bps(p, channel_gain(p, hover_xyz, user_xyz))
+    e_h = hover_energy_j(p, bits, rate)
+    e_c = computation_energy_j(p, bits)
+    e_f = flight_energy_j(p, math.sqrt(distance_sq_m2(from_xyz, hover_xyz)))
+    q = interval_reward(p, tasks, e_h + e_c + e_f)
+    return bits, e_h, e_c, e_f, q
 
 
 @jit
@@ -66,12 +102,7 @@ def service_outcome(
     user = served_user(p, hover_xyz, users, tasks, served)
     if user == NO_USER:
         return NO_USER, 0.0, 0.0, 0.0, 0.0, 0.0
-    bits = tasks[user] * p[P.BITS_PER_TASK]  # S(t) = u_i(t) B_t
-    rate = upload_rate_bps(p, channel_gain(p, hover_xyz, users[user]))
-    e_h = hover_energy_j(p, bits, rate)
-    e_c = computation_energy_j(p, bits)
-    e_f = flight_energy_j(p, math.sqrt(distance_sq_m2(from_xyz, hover_xyz)))
-    q = interval_reward(p, tasks[user], e_h + e_c + e_f)
+    bits, e_h, e_c, e_f, q = user_outcome(p, from_xyz, hover_xyz, users[user], tasks[user])
     return user, bits, e_h, e_c, e_f, q
 
 
@@ -108,14 +139,16 @@ def evaluate_actions(
     is not allowed (same point without ``allow_stay``, nobody eligible, over budget).
     Returns the number of allowed actions."""
     allowed = 0
+    eligible = np.empty(users.shape[0], dtype=np.bool_)
+    distance = np.empty(users.shape[0])
+    anyone = eligible_users(p, tasks, served, eligible) > 0
     for k in range(hover_points.shape[0]):
         out_q[k] = -math.inf
-        if k == hover_index and p[P.ALLOW_STAY] < 0.5:
+        if not anyone or (k == hover_index and p[P.ALLOW_STAY] < 0.5):
             continue
-        user, bits, e_h, e_c, e_f, q = service_outcome(
-            p, uav_xyz, hover_points[k], users, tasks, served
-        )
-        if user == NO_USER or not within_budget(p, battery_j, e_h + e_c + e_f, hover_points[k]):
+        user = nearest_eligible(p, hover_points[k], users, tasks, eligible, distance)
+        bits, e_h, e_c, e_f, q = user_outcome(p, uav_xyz, hover_points[k], users[user], tasks[user])
+        if not within_budget(p, battery_j, e_h + e_c + e_f, hover_points[k]):
             continue
         out_q[k] = q
         allowed += 1
