@@ -88,10 +88,8 @@ def _uct_child(
 
 
 @jit
-def rollout_action(qvals: np.ndarray, allowed: int, policy: int, epsilon: float, rng: np.random.Generator) -> int:
-    """A playout step: uniform among allowed actions, or epsilon-greedy on q."""
-    if policy == ROLLOUT_EPSILON_GREEDY and rng.random() >= epsilon:
-        return int(np.argmax(qvals))
+def random_allowed(qvals: np.ndarray, allowed: int, rng: np.random.Generator) -> int:
+    """A uniform draw among the ``allowed`` actions (those with a finite q)."""
     pick = rng.integers(0, allowed)
     for a in range(qvals.shape[0]):
         if qvals[a] > -math.inf:
@@ -99,6 +97,37 @@ def rollout_action(qvals: np.ndarray, allowed: int, policy: int, epsilon: float,
                 return a
             pick -= 1
     return -1
+
+
+@jit
+def rollout_action(qvals: np.ndarray, allowed: int, policy: int, epsilon: float, rng: np.random.Generator) -> int:
+    """A playout step: uniform among allowed actions, or epsilon-greedy on q."""
+    if policy == ROLLOUT_EPSILON_GREEDY and rng.random() >= epsilon:
+        return int(np.argmax(qvals))
+    return random_allowed(qvals, allowed, rng)
+
+
+@jit
+def node_return(
+    kind: int, own_sum: float, own_steps: int, whole_sum: float, whole_steps: int, past_sum: float, past_count: int
+) -> float:
+    """What a node backs up: its own steps' mean or sum, or the whole sortie's average
+    (``past_*``: the intervals flown before the root; ``whole_*``: this iteration's)."""
+    if kind == RETURN_SUM:
+        return own_sum
+    if kind == RETURN_SORTIE:
+        count = past_count + whole_steps
+        return (past_sum + whole_sum) / count if count > 0 else 0.0
+    return own_sum / own_steps if own_steps > 0 else 0.0
+
+
+@jit
+def _reset(uav, users, tasks, served, uav0, users0, tasks0, served0) -> None:  # noqa: ANN001
+    """Copy the root state's arrays into an iteration's, in place."""
+    uav[:] = uav0
+    users[:] = users0
+    tasks[:] = tasks0
+    served[:] = served0
 
 
 @jit
@@ -153,10 +182,7 @@ def search(
     new_tasks = np.empty_like(tasks0)
     for _ in range(iterations):
         future = -1
-        users[:] = users0
-        tasks[:] = tasks0
-        served[:] = served0
-        uav[:] = uav0
+        _reset(uav, users, tasks, served, uav0, users0, tasks0, served0)
         hover = hover0
         battery = battery0
         t = interval0
@@ -211,14 +237,7 @@ def search(
             suffix[k] = suffix[k + 1] + rewards[k]
         for j in range(depth):
             first = j - 1 if j > 0 else 0  # node path[j] is entered by step j - 1
-            n = steps - first
-            if return_kind == RETURN_SUM:
-                ret = suffix[first]
-            elif return_kind == RETURN_SORTIE:
-                whole = past_count + steps
-                ret = (past_sum + suffix[0]) / whole if whole > 0 else 0.0
-            else:
-                ret = suffix[first] / n if n > 0 else 0.0
+            ret = node_return(return_kind, suffix[first], steps - first, suffix[0], steps, past_sum, past_count)
             visits[path[j]] += 1.0
             value_sum[path[j]] += ret
     return num_nodes
@@ -264,10 +283,7 @@ def paired_rollouts(
     limit = int(p[P.MAX_INTERVALS])
     for s in range(future_moves.shape[0]):
         for k in range(actions.shape[0]):
-            users[:] = users0
-            tasks[:] = tasks0
-            served[:] = served0
-            uav[:] = uav0
+            _reset(uav, users, tasks, served, uav0, users0, tasks0, served0)
             hover = hover0
             battery = battery0
             t = interval0
@@ -285,9 +301,4 @@ def paired_rollouts(
                 total += outcome[5]
                 apply_chance(p, users, tasks, t, task_table, future_moves[s, steps], future_tasks[s, steps])
                 steps += 1
-            if return_kind == RETURN_SORTIE:
-                out[s, k] = (past_sum + total) / max(past_count + steps, 1)
-            elif return_kind == RETURN_SUM:
-                out[s, k] = total
-            else:
-                out[s, k] = total / max(steps, 1)
+            out[s, k] = node_return(return_kind, total, steps, total, steps, past_sum, past_count)

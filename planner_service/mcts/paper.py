@@ -32,18 +32,8 @@ from ..model import params as P
 from ..model._jit import jit
 from ..model.interval import advance_chance, evaluate_actions, take_interval
 from ..policy import Decision
+from .open_loop import random_allowed
 from .tree import ROOT_INDEX, UNVISITED, Tree
-
-
-@jit
-def _random_allowed(qvals: np.ndarray, allowed: int, rng: np.random.Generator) -> int:
-    pick = rng.integers(0, allowed)
-    for a in range(qvals.shape[0]):
-        if qvals[a] > -math.inf:
-            if pick == 0:
-                return a
-            pick -= 1
-    return -1
 
 
 @jit
@@ -182,7 +172,7 @@ def _random_playout(p, hover_points, leaf, node_hover, node_battery, node_interv
         allowed = evaluate_actions(p, hover_points, hover, uav, users, tasks, served, battery, qvals)
         if allowed == 0:
             break
-        a = _random_allowed(qvals, allowed, rng)
+        a = random_allowed(qvals, allowed, rng)
         outcome = take_interval(p, hover_points, a, uav, users, tasks, served)
         battery -= outcome[2] + outcome[3] + outcome[4]
         hover = a
