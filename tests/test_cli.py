@@ -50,3 +50,13 @@ def test_same_result_without_numba(python, python_env):
     python_env["UAV_PLANNER_NO_NUMBA"] = "1"
     without = json.loads(run(python, python_env, *args).stdout)
     assert with_numba["trace"] == without["trace"]
+
+
+def test_plan_with_a_clock_budget_only(python, python_env):
+    out = run(python, python_env, "-m", "planner_service", "plan", "--algo", "mcts", "--budget-ms", "15",
+              "--seed", "2", "--json").stdout
+    summary = json.loads(out)
+    assert summary["iterations"] is None and summary["budget_ms"] == 15.0
+    assert summary["intervals"] >= 1 and summary["fairness_violations"] == 0
+    bad = run(python, python_env, "-m", "planner_service", "plan", "--algo", "mcts-paper", "--budget-ms", "15", check=False)
+    assert bad.returncode == 2 and "iterations" in bad.stderr

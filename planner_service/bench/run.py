@@ -56,7 +56,7 @@ def run_bench(decisions: int, iterations: int, reference_decisions: int, sizes=S
     }
     for k, i in sizes:
         scenario = scenario_of(k, i)
-        count = decisions if (k, i) == SIZES[0] else max(decisions // 5, 10)
+        count = decisions
         hover_points, states = decision_states(scenario, count)
         seeds = list(range(1000, 1000 + count))
         if progress:

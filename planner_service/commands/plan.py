@@ -16,21 +16,30 @@ HELP = "one simulated sortie without I/O; JSON summary with --json"
 def configure(parser: argparse.ArgumentParser) -> None:
     add_scenario_arguments(parser)
     parser.add_argument("--algo", default="mcts", choices=algorithms(), help="planner (default: mcts)")
-    parser.add_argument("--iterations", type=int, default=1000, help="MCTS iterations per decision, or training episodes (default: 1000)")
-    parser.add_argument("--budget-ms", type=float, default=None, help="wall-clock budget per decision in ms (anytime MCTS)")
+    parser.add_argument("--iterations", type=int, default=None,
+                        help="MCTS iterations per decision, or training episodes for ql/dqn (default: 1000, "
+                             "or no limit when --budget-ms is given)")
+    parser.add_argument("--budget-ms", type=float, default=None,
+                        help="wall-clock budget per mcts decision in ms (anytime); with --iterations, whichever ends first")
     parser.add_argument("--seed", type=int, default=0, help="seed of the world and the planner (default: 0)")
     parser.add_argument("--json", action="store_true", help="print the full JSON summary (with scenario and trace)")
 
 
 def run(args: argparse.Namespace) -> int:
-    if args.iterations < 1:
+    if args.iterations is None and args.budget_ms is None:
+        args.iterations = 1000
+    if args.iterations is not None and args.iterations < 1:
         print("error: --iterations must be at least 1", file=sys.stderr)
         return 2
     if args.budget_ms is not None and not args.budget_ms > 0:
         print("error: --budget-ms must be positive", file=sys.stderr)
         return 2
     scenario = scenario_from_args(args)
-    summary = run_sortie(scenario, args.algo, args.seed, PolicySpec(args.iterations, args.budget_ms))
+    try:
+        summary = run_sortie(scenario, args.algo, args.seed, PolicySpec(args.iterations, args.budget_ms))
+    except ValueError as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2
     if args.json:
         json.dump(summary, sys.stdout, indent=1)
         print()
