@@ -19,7 +19,7 @@ def hover_energy_j(p: np.ndarray, bits: float, rate_bps: float) -> float:
 @jit
 def computation_energy_j(p: np.ndarray, bits: float) -> float:
     """e_c = gamma_c C S f_c^2 (6)."""
-    return p[P.CAPACITANCE] * p[P.CYCLES_PER_BIT] * bits * p[P.CPU_HZ] * p[P.CPU_HZ]
+    return p[P.CAPACITANCE] * p[P.CYCLES_PER_BIT] * bits * p[P.CPU_HZ] ** 2
 
 
 @jit
@@ -52,5 +52,5 @@ def flight_energy_j(p: np.ndarray, distance_m: float) -> float:
     kappa = 0.5 * p[P.MASS] * distance_m / v
     e_f1 = kappa * v * v  # (7)
     ratio = p[P.ACCEL] / p[P.GRAVITY]
-    e_f2 = p[P.KAPPA1] * v * v * v + p[P.KAPPA2] / v * (1.0 + ratio * ratio)  # (8)
+    e_f2 = p[P.KAPPA1] * v**3 + p[P.KAPPA2] / v * (1.0 + ratio * ratio)  # (8)
     return e_f1 + e_f2
