@@ -1,18 +1,56 @@
-"""The main job: vehicle stub, simulated users and the service on loopback, one sortie."""
+"""The main job on the embedded default: the vehicle stub, simulated ground users and the
+service on loopback, one sortie flown with the stub's speed-up. Progress (served users,
+battery, throughput) on the terminal; summary.json, trajectory.png and mission.plan (the
+first complete mission, QGroundControl format) in --out, with the logs and the journal.
+Every process it starts is stopped, also on error or Ctrl-C."""
 
 from __future__ import annotations
 
 import argparse
+import json
 import sys
+import threading
+from pathlib import Path
 
 HELP = "the main job on the embedded default (writes summary.json, trajectory.png, mission.plan)"
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", default="demo-out", help="output folder (default: demo-out)")
+    parser.add_argument("--users", type=int, default=10, help="simulated users (default 10)")
+    parser.add_argument("--speedup", type=float, default=25.0, help="simulated seconds per wall second (default 25)")
+    parser.add_argument("--budget-ms", type=float, default=150.0, help="planner budget per decision (default 150)")
+    parser.add_argument("--backend", default="pymavlink", choices=["pymavlink", "mavsdk"], help="MAVLink library")
+    parser.add_argument("--flavour", default="ardupilot", choices=["ardupilot", "px4"], help="autopilot the stub imitates")
+    parser.add_argument("--seed", type=int, default=1, help="seed of the users and the planner (default 1)")
+    parser.add_argument("--timeout", type=float, default=180.0, help="give up after this many wall seconds (default 180)")
 
 
 def run(args: argparse.Namespace) -> int:
-    print("demo: not yet built (the service lands with issue 7); try:", file=sys.stderr)
-    print("  python -m planner_service plan --algo greedy --seed 1", file=sys.stderr)
+    from ..service.demo import DemoError, run_demo
+
+    out = Path(args.out)
+    try:
+        summary = run_demo(out, users=args.users, speedup=args.speedup, budget_ms=args.budget_ms, backend=args.backend,
+                           flavour=args.flavour, seed=args.seed, timeout_s=args.timeout, echo=_echo)
+    except DemoError as err:
+        print(f"demo failed: {err}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        print("demo interrupted; every process stopped", file=sys.stderr)
+        return 130
+    print(f"\n{summary['intervals']} services to {summary['served_users']} users, "
+          f"{summary['throughput_tasks_per_interval']:.1f} tasks/interval, average reward {summary['average_reward']:.3f}, "
+          f"energy {summary['energy_used_j'] / 1e3:.1f} of {summary['energy_budget_j'] / 1e3:.1f} kJ, "
+          f"fairness violations {summary['fairness_violations']}, energy violation {summary['energy_violation']}")
+    print(f"requests: {json.dumps(summary['requests'])}")
+    print(f"{summary['wall_s']:.1f} s wall; wrote {out / 'summary.json'}, {out / 'trajectory.png'}, {out / 'mission.plan'}")
     return 0
+
+
+_lock = threading.Lock()
+
+
+def _echo(line: str) -> None:
+    with _lock:
+        print(line, flush=True)

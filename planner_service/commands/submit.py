@@ -1,17 +1,47 @@
-"""The `submit` command (not yet built)."""
+"""Submit one task request to the service over zenoh and print its reply (the ack's
+request id, or the error naming the refused field)."""
 
 from __future__ import annotations
 
 import argparse
+import sys
 
-from .common import not_yet_built
-
-HELP = "submit (not yet built)"
+HELP = "a zenoh client that submits one task request"
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
-    pass
+    parser.add_argument("--user", required=True, help="user id (1-64 of A-Z a-z 0-9 _ . : -)")
+    parser.add_argument("--x", type=float, required=True, help="east position, local metres")
+    parser.add_argument("--y", type=float, required=True, help="north position, local metres")
+    parser.add_argument("--z", type=float, default=0.0, help="height, local metres (default 0)")
+    parser.add_argument("--tasks", type=int, required=True, help="number of tasks to offload")
+    parser.add_argument("--connect", action="append", default=None, metavar="ENDPOINT",
+                        help="zenoh endpoint of the service (default tcp/127.0.0.1:7447; repeatable)")
+    parser.add_argument("--prefix", default="uavmec", help="key prefix (default uavmec)")
+    parser.add_argument("--vehicle", default="uav1", help="vehicle id (default uav1)")
+    parser.add_argument("--timeout", type=float, default=5.0, help="seconds to wait for the service (default 5)")
 
 
 def run(args: argparse.Namespace) -> int:
-    return not_yet_built("submit")
+    from protocol import Keys, ProtocolError
+    from protocol.client import ClientError, PlannerClient
+
+    try:
+        keys = Keys(args.prefix, args.vehicle)
+    except ProtocolError as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2
+    with PlannerClient(args.connect or ["tcp/127.0.0.1:7447"], keys, timeout_s=args.timeout) as client:
+        if not client.wait_for_service(args.timeout):
+            print(f"error: no service alive at {keys.alive}", file=sys.stderr)
+            return 1
+        try:
+            ack = client.submit(args.user, args.x, args.y, args.tasks, args.z)
+        except ClientError as err:
+            print(f"refused: {err.field}: {err.message}", file=sys.stderr)
+            return 1
+        except ProtocolError as err:
+            print(f"error: {err}", file=sys.stderr)
+            return 1
+    print(f"accepted: request {ack.request_id} for {ack.user_id} (queue position {ack.queue_position})")
+    return 0

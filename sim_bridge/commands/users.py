@@ -1,17 +1,59 @@
-"""The `users` command (not yet built)."""
+"""Simulated ground users: each walks by random waypoint and submits a task request over
+zenoh every interval. Stops on SIGINT/SIGTERM, after --duration, or when the service says
+its sortie is over. Logs go to stderr; a one-line summary per user at the end."""
 
 from __future__ import annotations
 
 import argparse
+import logging
+import signal
 import sys
+import threading
 
-HELP = "users (not yet built)"
+HELP = "simulated ground users that move by random waypoint and submit requests over zenoh"
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
-    pass
+    parser.add_argument("--count", type=int, default=10, help="number of users (default 10)")
+    parser.add_argument("--preset", default="field", help="scenario preset: area, layout and task draws (default field)")
+    parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE", help="override a scenario field")
+    parser.add_argument("--interval", type=float, default=40.0,
+                        help="simulated seconds between one user's requests (default 40)")
+    parser.add_argument("--speedup", type=float, default=1.0, help="simulated seconds per wall second (default 1)")
+    parser.add_argument("--seed", type=int, default=0, help="seed of the walks and task draws (default 0)")
+    parser.add_argument("--duration", type=float, default=None, help="stop after this many wall seconds")
+    parser.add_argument("--connect", action="append", default=None, metavar="ENDPOINT",
+                        help="zenoh endpoint of the service (default tcp/127.0.0.1:7447; repeatable)")
+    parser.add_argument("--prefix", default="uavmec")
+    parser.add_argument("--vehicle", default="uav1")
+    parser.add_argument("--log-level", default="INFO", choices=("DEBUG", "INFO", "WARNING", "ERROR"))
 
 
 def run(args: argparse.Namespace) -> int:
-    print("users: not yet built", file=sys.stderr)
-    return 2
+    logging.basicConfig(stream=sys.stderr, level=args.log_level, format="%(asctime)s users %(levelname)s %(message)s")
+    from planner_service.model import ScenarioError, preset
+    from protocol import Keys, ProtocolError
+    from protocol.client import PlannerClient
+    from sim_bridge.users import run_users
+
+    if args.count < 1 or not args.interval > 0 or not args.speedup > 0:
+        print("error: --count must be at least 1, --interval and --speedup positive", file=sys.stderr)
+        return 2
+    try:
+        scenario = preset(args.preset).with_overrides(args.set)
+        keys = Keys(args.prefix, args.vehicle)
+    except (ScenarioError, ProtocolError) as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2
+    stop = threading.Event()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda *_: stop.set())
+    with PlannerClient(args.connect or ["tcp/127.0.0.1:7447"], keys) as client:
+        logging.getLogger("sim_bridge.users").info("%d users waiting for the service at %s", args.count, keys.alive)
+        while not client.wait_for_service(1.0):
+            if stop.is_set():
+                return 0
+        walkers = run_users(client, scenario, args.count, args.interval, args.speedup, args.seed, stop, args.duration)
+    for w in walkers:
+        print(f"{w.user_id}: {w.submitted} submitted, {w.acked} acked, {len(w.refused)} refused", file=sys.stderr)
+    return 0

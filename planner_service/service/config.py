@@ -1,0 +1,326 @@
+"""The service's configuration: a TOML file, every key with a default, overridable on the
+command line with ``--set section.key=value``.
+
+Sections are frozen dataclasses; ``load_config`` reads the file, applies the overrides and
+validates everything, so that a bad value is refused at start with the key that holds it,
+never half-way through a sortie. ``docs/planner.example.toml`` documents every key.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import tomllib
+from dataclasses import dataclass, field, fields
+from pathlib import Path
+from typing import Any, Mapping
+
+from protocol import Area, GeoOrigin, Keys, ProtocolError
+
+from ..model import Scenario, ScenarioError, preset
+from .errors import ConfigError
+
+ZENOH_MODES = ("peer", "client", "router")
+BACKENDS = ("pymavlink", "mavsdk")
+
+
+@dataclass(frozen=True)
+class ZenohConfig:
+    mode: str = "peer"
+    """peer (default), client (needs ``connect``) or router."""
+    listen: tuple[str, ...] = ("tcp/127.0.0.1:7447",)
+    """Endpoints this session listens on (loopback by default)."""
+    connect: tuple[str, ...] = ()
+    """Endpoints of routers or peers to connect to."""
+    multicast_scouting: bool = False
+    """Off by default: peers are found through the explicit endpoints only."""
+    prefix: str = "uavmec"
+    """First chunk of every key expression."""
+    vehicle: str = "uav1"
+    """Second chunk: the vehicle id."""
+    status_hz: float = 2.0
+    """Rate of the status publication (at least 1 Hz)."""
+
+
+@dataclass(frozen=True)
+class MavlinkConfig:
+    backend: str = "pymavlink"
+    """pymavlink (default) or mavsdk (the native mavsdk 4 binding, mission_raw)."""
+    url: str = "udpout:127.0.0.1:14550"
+    """pymavlink connection string (udpout:, udpin:, tcp:, serial device); the mavsdk
+    backend takes the same string and rewrites it to its own form (udpout://...)."""
+    flavour: str = "ardupilot"
+    """ardupilot (item 0 is home) or px4."""
+    start_mission: bool = False
+    """Arm and start the mission once one is uploaded. Off by default: on a real aircraft
+    the operator arms; turn it on only where the operator allows it (the stub, SITL)."""
+    item_timeout_s: float = 0.5
+    """Wait for the autopilot's next request or ack before repeating the last message."""
+    retries: int = 10
+    """Repeats of one message before an upload is given up."""
+    link_timeout_s: float = 3.0
+    """Silence after which the link counts as lost (and is reopened)."""
+    source_system: int = 255
+    source_component: int = 190
+
+
+@dataclass(frozen=True)
+class PlannerConfig:
+    budget_ms: float = 200.0
+    """Wall-clock budget of one MCTS decision."""
+    iterations: int = 0
+    """Iteration cap per decision; 0: the budget alone decides."""
+    seed: int = 0
+    """Seed of the planner's random generator."""
+    min_requests: int = 1
+    """Pending requests needed before the first plan of a sortie."""
+    replan_min_interval_s: float = 1.0
+    """Least wall time between two re-plans caused by new requests (re-plans at a
+    hovering point are never delayed); 0 re-plans on every request."""
+
+
+@dataclass(frozen=True)
+class JournalConfig:
+    path: str = "planner-journal.sqlite"
+    """SQLite file (WAL); a restart with the same file resumes the sortie."""
+    synchronous: str = "FULL"
+    """SQLite synchronous level: FULL syncs every accepted request to disk before the ack."""
+
+
+@dataclass(frozen=True)
+class OriginConfig:
+    lat_deg: float = 47.397742
+    lon_deg: float = 8.545594
+    alt_m: float = 488.0
+    """The geodetic point that is local (0, 0, 0) (default: PX4 SITL's home)."""
+
+
+@dataclass(frozen=True)
+class SafetyConfig:
+    area_side_m: float = 500.0
+    """Every waypoint and request inside [0, side]^2 local metres."""
+    max_altitude_m: float = 120.0
+    min_flight_altitude_m: float = 10.0
+    rtl_battery_fraction: float = 0.1
+    """Command return to launch when the battery fraction reaches this (airborne)."""
+    energy_margin_j: float = 1000.0
+    """Kept back from every plan on top of the model's reserve and the landing descent,
+    for what the model does not see (wind, an estimate's error)."""
+
+
+@dataclass(frozen=True)
+class ServiceConfig:
+    zenoh: ZenohConfig = field(default_factory=ZenohConfig)
+    mavlink: MavlinkConfig = field(default_factory=MavlinkConfig)
+    planner: PlannerConfig = field(default_factory=PlannerConfig)
+    journal: JournalConfig = field(default_factory=JournalConfig)
+    origin: OriginConfig = field(default_factory=OriginConfig)
+    safety: SafetyConfig = field(default_factory=SafetyConfig)
+    scenario_preset: str = "field"
+    scenario_overrides: tuple[tuple[str, Any], ...] = ()
+    """(name, value) pairs from the [scenario] section besides ``preset``."""
+
+    def scenario(self) -> Scenario:
+        """The planning scenario: the preset with the configured overrides."""
+        try:
+            base = preset(self.scenario_preset)
+            return base.with_overrides({k: v if isinstance(v, str) else _text(v) for k, v in self.scenario_overrides})
+        except ScenarioError as err:
+            raise ConfigError(f"scenario.{err.field}", str(err)) from None
+
+    def area(self) -> Area:
+        s = self.safety
+        return Area(s.area_side_m, s.max_altitude_m, s.min_flight_altitude_m)
+
+    def origin_point(self) -> GeoOrigin:
+        return GeoOrigin(self.origin.lat_deg, self.origin.lon_deg, self.origin.alt_m)
+
+    def keys(self) -> Keys:
+        return Keys(self.zenoh.prefix, self.zenoh.vehicle)
+
+
+_SECTIONS = {"zenoh": ZenohConfig, "mavlink": MavlinkConfig, "planner": PlannerConfig,
+             "journal": JournalConfig, "origin": OriginConfig, "safety": SafetyConfig}
+
+
+def _text(value: Any) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, (list, tuple)):
+        return ",".join(str(v) for v in value)
+    return str(value)
+
+
+def _coerce(key: str, current: Any, value: Any) -> Any:
+    """``value`` (from TOML or a ``--set`` string) as the type of the default ``current``."""
+    try:
+        if isinstance(current, bool):
+            if isinstance(value, bool):
+                return value
+            text = str(value).strip().lower()
+            if text not in ("true", "false", "1", "0", "yes", "no", "on", "off"):
+                raise ValueError
+            return text in ("true", "1", "yes", "on")
+        if isinstance(current, int):
+            if isinstance(value, bool) or (isinstance(value, float) and not value.is_integer()):
+                raise ValueError
+            return int(value)
+        if isinstance(current, float):
+            if isinstance(value, bool):
+                raise ValueError
+            number = float(value)
+            if not math.isfinite(number):
+                raise ValueError
+            return number
+        if isinstance(current, tuple):
+            if isinstance(value, str):
+                return tuple(part.strip() for part in value.split(",") if part.strip())
+            if isinstance(value, (list, tuple)) and all(isinstance(v, str) for v in value):
+                return tuple(value)
+            raise ValueError
+        if isinstance(current, str):
+            if not isinstance(value, str):
+                raise ValueError
+            return value
+    except (TypeError, ValueError):
+        raise ConfigError(key, f"cannot read {value!r} as {type(current).__name__}") from None
+    return value
+
+
+def _apply(raw: dict[str, dict[str, Any]], overrides: Mapping[str, Any]) -> dict[str, dict[str, Any]]:
+    merged = {section: dict(values) for section, values in raw.items()}
+    for dotted, value in overrides.items():
+        section, _, key = dotted.partition(".")
+        if not key:
+            raise ConfigError(dotted, "an override is section.key=value")
+        merged.setdefault(section, {})[key] = value
+    return merged
+
+
+def parse_overrides(items: list[str]) -> dict[str, str]:
+    """``["zenoh.mode=client", ...]`` -> {"zenoh.mode": "client"}."""
+    out: dict[str, str] = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        if not sep or not key.strip():
+            raise ConfigError(item, "an override is section.key=value")
+        out[key.strip()] = value.strip()
+    return out
+
+
+def build_config(raw: Mapping[str, Any], overrides: Mapping[str, Any] | None = None) -> ServiceConfig:
+    """A validated ``ServiceConfig`` from parsed TOML and ``section.key`` overrides."""
+    for section, values in raw.items():
+        if section != "scenario" and section not in _SECTIONS:
+            raise ConfigError(section, f"unknown section; expected one of {sorted([*_SECTIONS, 'scenario'])}")
+        if not isinstance(values, dict):
+            raise ConfigError(section, "must be a table")
+    merged = _apply({k: v for k, v in raw.items()}, overrides or {})
+    sections: dict[str, Any] = {}
+    for name, cls in _SECTIONS.items():
+        values = merged.get(name, {})
+        defaults = cls()
+        known = {f.name for f in fields(cls)}
+        kwargs: dict[str, Any] = {}
+        for key, value in values.items():
+            if key not in known:
+                raise ConfigError(f"{name}.{key}", f"unknown key; expected one of {sorted(known)}")
+            kwargs[key] = _coerce(f"{name}.{key}", getattr(defaults, key), value)
+        sections[name] = dataclasses.replace(defaults, **kwargs)
+    for name in merged:
+        if name not in _SECTIONS and name != "scenario":
+            raise ConfigError(name, f"unknown section; expected one of {sorted([*_SECTIONS, 'scenario'])}")
+    scenario = dict(merged.get("scenario", {}))
+    preset_name = scenario.pop("preset", "field")
+    if not isinstance(preset_name, str):
+        raise ConfigError("scenario.preset", "must be a string")
+    config = ServiceConfig(**sections, scenario_preset=preset_name,
+                           scenario_overrides=tuple(sorted(scenario.items())))
+    validate(config)
+    return config
+
+
+def load_config(path: str | Path | None, overrides: Mapping[str, Any] | None = None) -> ServiceConfig:
+    """Read ``path`` (TOML; None: only defaults) and apply ``overrides``."""
+    raw: dict[str, Any] = {}
+    if path is not None:
+        try:
+            with open(path, "rb") as handle:
+                raw = tomllib.load(handle)
+        except OSError as err:
+            raise ConfigError("config", f"cannot read {path}: {err.strerror or err}") from None
+        except tomllib.TOMLDecodeError as err:
+            raise ConfigError("config", f"{path} is not valid TOML: {err}") from None
+    return build_config(raw, overrides)
+
+
+def validate(c: ServiceConfig) -> None:
+    """Refuse values the service could not run with; ``ConfigError`` names the key."""
+    z, m, p, s = c.zenoh, c.mavlink, c.planner, c.safety
+    if z.mode not in ZENOH_MODES:
+        raise ConfigError("zenoh.mode", f"{z.mode!r} is not one of {ZENOH_MODES}")
+    if z.mode == "client" and not z.connect:
+        raise ConfigError("zenoh.connect", "client mode needs at least one endpoint to connect to")
+    if not z.status_hz >= 1.0:
+        raise ConfigError("zenoh.status_hz", f"must be at least 1 Hz, got {z.status_hz}")
+    try:
+        c.keys()
+    except ProtocolError as err:
+        raise ConfigError(f"zenoh.{err.field}", err.message) from None
+    if m.backend not in BACKENDS:
+        raise ConfigError("mavlink.backend", f"{m.backend!r} is not one of {BACKENDS}")
+    if m.flavour not in ("ardupilot", "px4"):
+        raise ConfigError("mavlink.flavour", f"{m.flavour!r} is not ardupilot or px4")
+    for key in ("item_timeout_s", "link_timeout_s"):
+        if not getattr(m, key) > 0:
+            raise ConfigError(f"mavlink.{key}", "must be positive")
+    if m.retries < 1:
+        raise ConfigError("mavlink.retries", "must be at least 1")
+    if not p.budget_ms > 0:
+        raise ConfigError("planner.budget_ms", "must be positive")
+    if p.iterations < 0 or p.min_requests < 1 or p.replan_min_interval_s < 0:
+        raise ConfigError("planner", "iterations >= 0, min_requests >= 1, replan_min_interval_s >= 0")
+    if c.journal.synchronous.upper() not in ("OFF", "NORMAL", "FULL", "EXTRA"):
+        raise ConfigError("journal.synchronous", "must be OFF, NORMAL, FULL or EXTRA")
+    if not s.energy_margin_j >= 0:
+        raise ConfigError("safety.energy_margin_j", "must not be negative")
+    if not 0.0 <= s.rtl_battery_fraction < 1.0:
+        raise ConfigError("safety.rtl_battery_fraction", "must lie in [0, 1)")
+    try:
+        area = c.area()
+        c.origin_point()
+    except (ProtocolError, ValueError) as err:
+        raise ConfigError("safety" if isinstance(err, ProtocolError) else "origin", str(err)) from None
+    scenario = c.scenario()
+    if scenario.dimensions != 2:
+        raise ConfigError("scenario.preset", "the service flies 2-D scenarios (one altitude)")
+    if scenario.area_side_m > area.side_m:
+        raise ConfigError("safety.area_side_m", f"the scenario's area ({scenario.area_side_m} m) exceeds the safety area ({area.side_m} m)")
+    if not area.min_flight_altitude_m <= scenario.altitude_m <= area.max_altitude_m:
+        raise ConfigError("safety.max_altitude_m", f"the scenario's altitude {scenario.altitude_m} m is outside "
+                          f"[{area.min_flight_altitude_m}, {area.max_altitude_m}] m")
+
+
+def to_toml(c: ServiceConfig) -> str:
+    """The configuration as TOML (the demo writes the one it runs)."""
+    lines: list[str] = []
+    for name in _SECTIONS:
+        lines.append(f"[{name}]")
+        for f in fields(getattr(c, name)):
+            lines.append(f"{f.name} = {_toml_value(getattr(getattr(c, name), f.name))}")
+        lines.append("")
+    lines.append("[scenario]")
+    lines.append(f"preset = {_toml_value(c.scenario_preset)}")
+    for key, value in c.scenario_overrides:
+        lines.append(f"{key} = {_toml_value(value)}")
+    return "\n".join(lines) + "\n"
+
+
+def _toml_value(value: Any) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, str):
+        return '"' + value.replace("\\", "\\\\").replace('"', '\\"') + '"'
+    if isinstance(value, (tuple, list)):
+        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
+    return repr(value)

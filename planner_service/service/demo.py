@@ -1,0 +1,169 @@
+"""The demo sortie: vehicle stub, users and service as real processes on loopback, watched
+over zenoh; then the summary, the trajectory figure and the mission file."""
+
+from __future__ import annotations
+
+import json
+import socket
+import threading
+import time
+from pathlib import Path
+from typing import Any, Callable
+
+from protocol import Event, Status, write_plan
+from protocol.client import PlannerClient
+
+from .config import build_config, to_toml
+from .errors import ServiceError
+from .journal import Journal
+from .processes import Child, free_port
+from .progress import item_from_dict
+from .report import sortie_summary
+
+
+class DemoError(ServiceError):
+    """The demo could not fly its sortie."""
+
+
+def run_demo(out: Path, *, users: int = 10, speedup: float = 25.0, budget_ms: float = 150.0,
+             backend: str = "pymavlink", flavour: str = "ardupilot", seed: int = 1, timeout_s: float = 180.0,
+             echo: Callable[[str], None] = print) -> dict[str, Any]:
+    """Fly one sortie; returns the summary (also written to ``out/summary.json``)."""
+    out.mkdir(parents=True, exist_ok=True)
+    journal_path = out / "journal.sqlite"
+    for stale in (journal_path, out / "journal.sqlite-wal", out / "journal.sqlite-shm"):
+        stale.unlink(missing_ok=True)
+    zenoh_port, mav_port = free_port(), free_port(socket.SOCK_DGRAM)
+    endpoint = f"tcp/127.0.0.1:{zenoh_port}"
+    config = build_config({}, {
+        "zenoh.listen": endpoint, "mavlink.url": f"udpout:127.0.0.1:{mav_port}", "mavlink.backend": backend,
+        "mavlink.flavour": flavour, "mavlink.start_mission": "true", "planner.budget_ms": str(budget_ms),
+        "planner.seed": str(seed), "journal.path": str(journal_path),
+        "planner.min_requests": str(users),  # the first plan sees every user
+    })
+    (out / "planner.toml").write_text(to_toml(config))
+    scenario = config.scenario()
+    children: list[Child] = []
+    statuses: list[Status] = []
+    events: list[Event] = []
+    landed = threading.Event()
+    start = time.monotonic()
+    try:
+        echo(f"demo: vehicle stub ({flavour}, x{speedup:g}), service ({backend}, {budget_ms:g} ms), {users} users; "
+             f"logs in {out}")
+        vehicle = Child("sim_bridge", ["vehicle", "--mavlink", f"udpin:127.0.0.1:{mav_port}", "--flavour", flavour,
+                                       "--speedup", str(speedup)], out / "vehicle.log")
+        children.append(vehicle)
+        vehicle.wait_ready("listening")
+        service = Child("planner_service", ["serve", "--config", str(out / "planner.toml")], out / "service.log")
+        children.append(service)
+        service.wait_ready("ready:", 60.0)
+        with PlannerClient([endpoint], config.keys()) as client:
+            if not client.wait_for_service(20.0):
+                raise DemoError("the service's liveliness token never appeared")
+
+            def on_event(ev: Event) -> None:
+                events.append(ev)
+                if ev.event == "user_served":
+                    echo(f"  served {ev.user_id}: {ev.detail}")
+                elif ev.event in ("returning", "landed", "upload_failed", "link_lost"):
+                    echo(f"  {ev.event}: {ev.detail}")
+                if ev.event == "landed":
+                    landed.set()
+
+            client.follow_events(on_event)
+            client.follow_status(statuses.append)
+            children.append(Child("sim_bridge", ["users", "--count", str(users), "--speedup", str(speedup),
+                                                 "--seed", str(seed), "--connect", endpoint], out / "users.log"))
+            last_print = 0.0
+            while not landed.wait(0.2):
+                now = time.monotonic()
+                if now - start > timeout_s:
+                    raise DemoError(f"no landing within {timeout_s:g} s; see {out}/service.log")
+                for child in children:
+                    if child.proc.poll() is not None and child.name != "sim_bridge users":
+                        raise DemoError(f"{child.name} exited with {child.proc.returncode}:\n{child.log()[-1500:]}")
+                if now - last_print >= 1.0 and statuses:
+                    last_print = now
+                    echo(_progress_line(statuses[-1], events, now - start))
+            time.sleep(0.6)  # the last status publications after the landing
+    finally:
+        codes = {child.name: child.stop() for child in reversed(children)}
+    wall = time.monotonic() - start
+    bad = {name: code for name, code in codes.items() if code not in (0, -2, 130)}
+    if bad:
+        raise DemoError(f"children exited badly: {bad}")
+    journal = Journal(journal_path)
+    try:
+        final_battery = statuses[-1].battery_fraction * scenario.battery_j if statuses else None
+        summary = sortie_summary(journal, scenario, final_battery)
+        summary.update(preset=scenario.name, algo="mcts", backend=backend, flavour=flavour, users=users,
+                       speedup=speedup, budget_ms=budget_ms, seed=seed, wall_s=wall, scenario=scenario.as_dict(),
+                       config=str(out / "planner.toml"))
+        missions = [m for m in journal.missions() if m.result == "accepted" and m.points]
+        if missions:
+            items = [item_from_dict(i) for i in missions[0].items]
+            (out / "mission.plan").write_text(write_plan(items, flavour, config.origin_point()))  # type: ignore[arg-type]
+        requests = journal.requests()
+        services = journal.services()
+    finally:
+        journal.close()
+    (out / "summary.json").write_text(json.dumps(summary, indent=1))
+    plot_trajectory(out / "trajectory.png", scenario, statuses, requests, services, summary)
+    return summary
+
+
+def _progress_line(s: Status, events: list[Event], wall_s: float) -> str:
+    served = [e for e in events if e.event == "user_served"]
+    tasks = sum(int(e.detail.split()[0]) for e in served if e.detail.split() and e.detail.split()[0].isdigit())
+    users = len({e.user_id for e in served})
+    per = tasks / len(served) if served else 0.0
+    return (f"[{wall_s:5.1f} s] {s.phase:9s} {s.mode:12s} battery {s.battery_fraction:4.0%}  "
+            f"at ({s.x_m:5.0f}, {s.y_m:5.0f}, {s.z_m:4.0f}) m  served {users} users / {len(served)} services, "
+            f"{per:.1f} tasks/interval  pending {s.pending_requests}")
+
+
+def plot_trajectory(path: Path, scenario: Any, statuses: list[Status], requests: list[Any], services: list[Any],
+                    summary: dict[str, Any]) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from ..model import hover_points
+
+    points = hover_points(scenario)
+    fig, (ax, bx) = plt.subplots(1, 2, figsize=(12, 5.5), gridspec_kw={"width_ratios": [1.2, 1]})
+    ax.scatter(points[:, 0], points[:, 1], marker="s", s=30, c="lightgrey", label="hovering points")
+    ax.scatter([r.x_m for r in requests], [r.y_m for r in requests], s=6, c="tab:blue", alpha=0.3,
+               label="user requests")
+    xs = [s.x_m for s in statuses if s.phase != "lost"]
+    ys = [s.y_m for s in statuses if s.phase != "lost"]
+    ax.plot(xs, ys, "-", c="tab:red", lw=1.2, label="UAV track (status)")
+    for n, s in enumerate(services, 1):
+        ax.annotate(str(n), (s.x_m, s.y_m), textcoords="offset points", xytext=(4, 4), fontsize=8)
+    ax.scatter([s.x_m for s in services], [s.y_m for s in services], c="tab:red", s=40, zorder=3, label="services")
+    side = scenario.area_side_m
+    ax.set_xlim(-20, side + 20)
+    ax.set_ylim(-20, side + 20)
+    ax.set_aspect("equal")
+    ax.set_xlabel("x east (m)")
+    ax.set_ylabel("y north (m)")
+    ax.set_title(f"{summary['intervals']} services to {summary['served_users']} users, "
+                 f"{summary['throughput_tasks_per_interval']:.1f} tasks/interval")
+    ax.legend(loc="upper right", fontsize=7)
+    if statuses:
+        t0 = statuses[0].time_s
+        bx.plot([s.time_s - t0 for s in statuses], [100 * s.battery_fraction for s in statuses], c="tab:green")
+    bx.axhline(100 * scenario.battery_threshold, ls="--", c="grey", label="reserve threshold")
+    bx.set_xlabel("wall time (s)")
+    bx.set_ylabel("battery (%)")
+    bx.set_ylim(0, 102)
+    bx.legend(fontsize=7)
+    bx.set_title("battery")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+__all__ = ["DemoError", "run_demo", "plot_trajectory"]

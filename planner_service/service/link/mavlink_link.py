@@ -1,0 +1,254 @@
+"""The pymavlink backend: a reader thread turns bytes into messages and hands each to the
+event loop (``call_soon_threadsafe``); everything else (uploads, commands, heartbeats,
+the link watchdog) runs on the loop and never blocks it: UDP sends do not block, and the
+mission protocol waits with ``asyncio.wait_for`` on a queue.
+
+Reconnect: the reader reopens the connection after a socket error (TCP); over UDP a
+silent vehicle is "lost" after ``link_timeout_s`` and "restored" on its next heartbeat
+(our heartbeats keep going, so a ``udpin`` vehicle learns our address again).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import os
+import threading
+import time
+from typing import Any, Callable, Sequence
+
+os.environ.setdefault("MAVLINK20", "1")
+from pymavlink import mavutil  # noqa: E402
+
+from protocol import MissionItem  # noqa: E402
+
+from ..errors import LinkError  # noqa: E402
+from .base import ClockRate, LinkEvent, LinkSettings, Telemetry, VehicleLink, mode_name  # noqa: E402
+from .upload import MissionUpload  # noqa: E402
+
+M = mavutil.mavlink
+AIRBORNE_STATES = frozenset({M.MAV_LANDED_STATE_IN_AIR, M.MAV_LANDED_STATE_TAKEOFF, M.MAV_LANDED_STATE_LANDING})
+MISSION_REPLIES = frozenset({"MISSION_REQUEST_INT", "MISSION_REQUEST", "MISSION_ACK"})
+
+
+def result_name(code: int) -> str:
+    entry = M.enums["MAV_RESULT"].get(code)
+    return entry.name if entry is not None else f"MAV_RESULT {code}"
+
+
+class PymavlinkLink(VehicleLink):
+    def __init__(self, settings: LinkSettings, on_event: Callable[[LinkEvent], None]) -> None:
+        super().__init__(settings, on_event)
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._conn: Any = None
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._target = (1, 1)
+        self._last_heartbeat = 0.0
+        self._lost = False
+        self._connected = asyncio.Event()
+        self._mission_queue: asyncio.Queue[Any] | None = None
+        self._acks: dict[int, asyncio.Future[int]] = {}
+        self._upload_lock = asyncio.Lock()
+        self._command_lock = asyncio.Lock()
+        self._tasks: list[asyncio.Task[None]] = []
+        self._clock_rate = ClockRate()
+
+    # --- lifecycle ------------------------------------------------------------------------
+    async def connect(self, timeout_s: float) -> None:
+        self._loop = asyncio.get_running_loop()
+        self._thread = threading.Thread(target=self._reader, name="mavlink-reader", daemon=True)
+        self._thread.start()
+        self._tasks.append(asyncio.create_task(self._heartbeats(), name="mavlink-heartbeats"))
+        try:
+            await asyncio.wait_for(self._connected.wait(), timeout_s)
+        except TimeoutError:
+            raise LinkError("connect", f"no autopilot heartbeat at {self.settings.url} within {timeout_s:g} s") from None
+
+    async def close(self) -> None:
+        self._stop.set()
+        for task in self._tasks:
+            task.cancel()
+        await asyncio.gather(*self._tasks, return_exceptions=True)
+        if self._thread is not None:
+            await asyncio.to_thread(self._thread.join, 2.0)
+        conn, self._conn = self._conn, None
+        if conn is not None:
+            conn.close()
+
+    def _open(self) -> Any:
+        s = self.settings
+        kwargs: dict[str, Any] = {"source_system": s.source_system, "source_component": s.source_component}
+        if s.url.startswith("tcp:"):
+            kwargs["autoreconnect"] = True
+        return mavutil.mavlink_connection(s.url, **kwargs)
+
+    def _reader(self) -> None:
+        """Reader thread: messages to the loop; reopen the connection after an error."""
+        backoff = 0.2
+        while not self._stop.is_set():
+            conn = self._conn
+            if conn is None:
+                try:
+                    conn = self._conn = self._open()
+                    backoff = 0.2
+                except (OSError, ValueError):
+                    self._stop.wait(backoff)
+                    backoff = min(backoff * 2, 2.0)
+                    continue
+            try:
+                msg = conn.recv_match(blocking=True, timeout=0.05)
+            except (OSError, ValueError):
+                self._conn = None
+                try:
+                    conn.close()
+                except OSError:
+                    pass
+                continue
+            if msg is None or msg.get_type() == "BAD_DATA" or self._stop.is_set():
+                continue
+            try:
+                self._loop.call_soon_threadsafe(self._on_message, msg)  # type: ignore[union-attr]
+            except RuntimeError:  # the loop closed under us: shutting down
+                return
+
+    def _send(self, msg: Any) -> None:
+        conn = self._conn
+        if conn is None:
+            raise LinkError("send", f"{msg.get_type()}: the connection is not open")
+        try:
+            conn.mav.send(msg)
+        except OSError as err:
+            raise LinkError("send", f"{msg.get_type()}: {err}") from None
+
+    async def _heartbeats(self) -> None:
+        """Our heartbeat at 1 Hz (a udpin vehicle answers the last peer heard) and the
+        link watchdog."""
+        while True:
+            if self._conn is not None:
+                try:
+                    self._conn.mav.heartbeat_send(M.MAV_TYPE_GCS, M.MAV_AUTOPILOT_INVALID, 0, 0, 0)
+                except OSError:
+                    pass
+            silent = time.monotonic() - self._last_heartbeat
+            if self._connected.is_set() and not self._lost and silent > self.settings.link_timeout_s:
+                self._lost = True
+                self._set(connected=False)
+                self.on_event(LinkEvent("lost", text=f"no heartbeat for {silent:.1f} s"))
+            await asyncio.sleep(0.5 if not self._connected.is_set() else 1.0)
+
+    # --- incoming -------------------------------------------------------------------------
+    def _set(self, **changes: Any) -> None:
+        self.telemetry = Telemetry(**{**self.telemetry.__dict__, **changes})
+
+    def _on_message(self, msg: Any) -> None:
+        kind = msg.get_type()
+        if kind == "HEARTBEAT":
+            if msg.autopilot == M.MAV_AUTOPILOT_INVALID or msg.get_srcComponent() != 1:
+                return  # another ground station or a component that is not the autopilot
+            self._target = (msg.get_srcSystem(), msg.get_srcComponent())
+            self._last_heartbeat = time.monotonic()
+            armed = bool(msg.base_mode & M.MAV_MODE_FLAG_SAFETY_ARMED)
+            mode = mode_name(self.settings.flavour, msg.custom_mode)
+            old_mode = self.telemetry.mode
+            self._set(armed=armed, mode=mode, connected=True)
+            if not self._connected.is_set():
+                self._connected.set()
+                self.on_event(LinkEvent("connected", text=mode))
+            elif self._lost:
+                self._lost = False
+                self.on_event(LinkEvent("restored", text=mode))
+            if old_mode and mode != old_mode:
+                self.on_event(LinkEvent("mode", text=mode))
+            return
+        if msg.get_srcSystem() != self._target[0]:
+            return
+        if kind in MISSION_REPLIES:
+            if self._mission_queue is not None:
+                self._mission_queue.put_nowait(msg)
+        elif kind == "COMMAND_ACK":
+            future = self._acks.get(msg.command)
+            if future is not None and not future.done():
+                future.set_result(int(msg.result))
+        elif kind == "GLOBAL_POSITION_INT":
+            rate = self._clock_rate.update(msg.time_boot_ms / 1e3, time.monotonic())
+            self._set(valid=True, lat_deg=msg.lat / 1e7, lon_deg=msg.lon / 1e7, rel_alt_m=msg.relative_alt / 1e3,
+                      time_rate=rate, position_at=time.monotonic())
+        elif kind == "BATTERY_STATUS":
+            changes: dict[str, Any] = {"battery_at": time.monotonic()}
+            if msg.energy_consumed >= 0:
+                changes["energy_used_j"] = msg.energy_consumed * 100.0  # hJ -> J
+            if msg.battery_remaining >= 0:
+                changes["battery_fraction"] = msg.battery_remaining / 100.0
+            self._set(**changes)
+        elif kind == "SYS_STATUS" and msg.battery_remaining >= 0 and self.telemetry.energy_used_j is None:
+            self._set(battery_fraction=msg.battery_remaining / 100.0, battery_at=time.monotonic())
+        elif kind == "EXTENDED_SYS_STATE":
+            airborne = msg.landed_state in AIRBORNE_STATES
+            was = self.telemetry.airborne
+            self._set(airborne=airborne)
+            if was and msg.landed_state == M.MAV_LANDED_STATE_ON_GROUND:
+                self.on_event(LinkEvent("landed"))
+        elif kind == "MISSION_CURRENT":
+            total = int(getattr(msg, "total", 0) or 0)
+            changed = msg.seq != self.telemetry.mission_seq
+            self._set(mission_seq=int(msg.seq), mission_total=total if total != 0xFFFF else 0)
+            if changed:
+                self.on_event(LinkEvent("current", seq=int(msg.seq)))
+        elif kind == "MISSION_ITEM_REACHED":
+            self.on_event(LinkEvent("reached", seq=int(msg.seq)))
+        elif kind == "STATUSTEXT":
+            self.on_event(LinkEvent("text", text=str(msg.text)))
+
+    # --- operations -------------------------------------------------------------------------
+    async def upload(self, items: Sequence[MissionItem]) -> None:
+        async with self._upload_lock:
+            if not self._connected.is_set() or self._lost:
+                raise LinkError("upload_mission()", "NO_LINK: the autopilot is not connected")
+            queue: asyncio.Queue[Any] = asyncio.Queue()
+            self._mission_queue = queue
+            machine = MissionUpload(items, self._send, self._target, self.settings.retries)
+            try:
+                machine.begin()
+                while True:
+                    try:
+                        msg = await asyncio.wait_for(queue.get(), self.settings.item_timeout_s)
+                        done = machine.on_message(msg)
+                    except TimeoutError:
+                        done = machine.on_timeout()
+                    if done is not None:
+                        break
+            finally:
+                self._mission_queue = None
+            if not done.accepted:
+                raise LinkError("upload_mission()", done.result)
+
+    async def command(self, command: int, *params: float, what: str) -> None:
+        """COMMAND_LONG with the confirmation counting up on each repeat."""
+        p = [float(x) for x in params] + [0.0] * (7 - len(params))
+        async with self._command_lock:
+            assert self._loop is not None
+            for confirmation in range(self.settings.retries):
+                future: asyncio.Future[int] = self._loop.create_future()
+                self._acks[command] = future
+                try:
+                    self._send(M.MAVLink_command_long_message(*self._target, command, confirmation, *p))
+                    result = await asyncio.wait_for(future, self.settings.item_timeout_s)
+                except TimeoutError:
+                    continue
+                finally:
+                    self._acks.pop(command, None)
+                if result in (M.MAV_RESULT_ACCEPTED, M.MAV_RESULT_IN_PROGRESS):
+                    return
+                raise LinkError(what, result_name(result))
+            raise LinkError(what, f"NO_ANSWER after {self.settings.retries} tries")
+
+    async def start(self) -> None:
+        await self.command(M.MAV_CMD_COMPONENT_ARM_DISARM, 1, what="arm()")
+        if self.settings.flavour == "px4":
+            await self.command(M.MAV_CMD_DO_SET_MODE, M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 4, 4, what="set_mode(AUTO.MISSION)")
+        else:
+            await self.command(M.MAV_CMD_DO_SET_MODE, M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 3, what="set_mode(AUTO)")
+        await self.command(M.MAV_CMD_MISSION_START, 0, 0, what="start_mission()")
+
+    async def return_to_launch(self) -> None:
+        await self.command(M.MAV_CMD_NAV_RETURN_TO_LAUNCH, what="return_to_launch()")

@@ -1,0 +1,232 @@
+"""From the journal and the vehicle's telemetry to a safe, complete plan. Pure (numbers in,
+numbers out): the service runs ``Planner.decide`` in a worker thread.
+
+- ``assemble``: the model's ``SortieState`` from what the service knows. Users are every
+  user heard from (in order of first request), standing where they last reported; a user
+  with a pending request has its task count, any other has 0 (nothing to offload, so not
+  eligible); service counts come from the journal (the fairness rule spans restarts).
+- ``predict_path``: the planner's line as hovering points with hold times, by stepping a
+  copy of the state along it with the model: the user served at each point, its upload
+  time (bits / rate: the hold), the energy. A served user's request is consumed (its next
+  task count is unknown until it asks again), so the line stops where nobody known is
+  eligible, and where the next step would break the energy reserve (9b) with the way home.
+- ``check_path``: an independent guard before upload: every point inside the area and
+  altitude limits, the predicted energy above the reserve.
+
+The number of users I of an ``MctsPlanner`` is fixed by its scenario: when a new user
+appears the planner is rebuilt for the new I (its tree is lost; it is rebuilt from the
+next decision on). Padding with absent users would keep the tree but make every playout
+pay for users that do not exist.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from protocol import Area
+
+from ..mcts import MctsConfig, MctsPlanner
+from ..model import AT_BASE, NO_USER, Scenario, SortieState, base_position, hover_points, pack
+from ..model.channel import channel_gain, upload_rate_bps
+from ..model.energy import flight_energy_j
+from ..model.interval import return_energy_j, service_outcome, within_budget
+from ..policy import Decision
+from .errors import PlanningError
+from .journal import RequestRow, ServiceRow, UserRow
+
+
+@dataclass(frozen=True)
+class VehicleFix:
+    """What the telemetry says about the vehicle, in local metres and joules."""
+
+    x_m: float
+    y_m: float
+    z_m: float
+    battery_j: float
+    airborne: bool
+
+
+@dataclass(frozen=True)
+class Assembled:
+    """The model's state and how its user indices map back to the journal."""
+
+    state: SortieState
+    user_ids: tuple[str, ...]
+    request_ids: tuple[int, ...]
+    """Pending request id of each user index, 0 where none."""
+
+
+@dataclass(frozen=True)
+class PlannedPoint:
+    hover_index: int
+    x_m: float
+    y_m: float
+    z_m: float
+    hold_s: float
+    user_id: str
+    request_id: int
+    tasks: int
+    bits: float
+    energy_j: float
+    reward: float
+
+
+@dataclass(frozen=True)
+class PlannedPath:
+    points: tuple[PlannedPoint, ...]
+    predicted_energy_j: float
+    """Energy of the points' flights, hovers and computation, plus the flight home."""
+    battery_after_j: float
+    """Predicted battery on landing."""
+    stop_reason: str
+    """Why the path ends where it does (the line ended, nobody eligible, energy reserve)."""
+
+
+def assemble(scenario: Scenario, users: list[UserRow], pending: list[RequestRow], services: list[ServiceRow],
+             fix: VehicleFix, last_hover_index: int) -> Assembled:
+    """The sortie state for the planner (shapes: users (I, 3), tasks and served (I,))."""
+    ids = tuple(u.user_id for u in users)
+    index = {uid: i for i, uid in enumerate(ids)}
+    n = len(ids)
+    positions = np.array([[u.x_m, u.y_m, u.z_m] for u in users], dtype=np.float64).reshape(n, 3)
+    tasks = np.zeros(n, dtype=np.int64)
+    request_ids = [0] * n
+    for row in pending:
+        i = index[row.user_id]
+        tasks[i] = row.tasks
+        request_ids[i] = row.request_id
+        positions[i] = (row.x_m, row.y_m, row.z_m)
+    served = np.array([u.services for u in users], dtype=np.int64)
+    if fix.airborne:
+        uav = np.array([fix.x_m, fix.y_m, fix.z_m], dtype=np.float64)
+        hover_index = last_hover_index
+    else:  # on the ground: the model's sortie starts at its base position
+        uav, hover_index = base_position(scenario), AT_BASE
+    state = SortieState(
+        uav_xyz=uav, hover_index=hover_index, users=positions, tasks=tasks, served=served,
+        battery_j=float(fix.battery_j), interval=len(services),
+        energy_used_j=float(scenario.battery_j - fix.battery_j),
+        task_table=np.zeros((0, n), dtype=np.int64), reward_sum=float(sum(s.reward for s in services)),
+    )
+    return Assembled(state, ids, tuple(request_ids))
+
+
+def hold_time_s(p: np.ndarray, hover_xyz: np.ndarray, user_xyz: np.ndarray, bits: float) -> float:
+    """How long the user's upload of ``bits`` takes from ``hover_xyz``: S / R."""
+    return float(bits / upload_rate_bps(p, channel_gain(p, hover_xyz, user_xyz)))
+
+
+def predict_path(scenario: Scenario, points: np.ndarray, assembled: Assembled, line: tuple[int, ...]) -> PlannedPath:
+    """Step a copy of the state along ``line`` (hovering-point indices) with the model."""
+    p = pack(scenario)
+    state = assembled.state.copy()
+    uav, hover_index, battery = state.uav_xyz.copy(), state.hover_index, state.battery_j
+    out: list[PlannedPoint] = []
+    reason = "the planned line ends"
+    for k in line:
+        if not 0 <= k < len(points):
+            raise PlanningError("line", f"hovering point {k} does not exist (K = {len(points)})")
+        if k == hover_index and not scenario.allow_stay:
+            reason = "the line stays at one point"
+            break
+        user, bits, e_h, e_c, e_f, q = service_outcome(p, uav, points[k], state.users, state.tasks, state.served)
+        if user == NO_USER:
+            reason = "nobody known is eligible further on"
+            break
+        energy = e_h + e_c + e_f
+        if not within_budget(p, battery, energy, points[k]):
+            reason = "the energy reserve"
+            break
+        out.append(PlannedPoint(
+            hover_index=int(k), x_m=float(points[k][0]), y_m=float(points[k][1]), z_m=float(points[k][2]),
+            hold_s=hold_time_s(p, points[k], state.users[user], bits), user_id=assembled.user_ids[user],
+            request_id=assembled.request_ids[user], tasks=int(state.tasks[user]), bits=float(bits),
+            energy_j=float(energy), reward=float(q)))
+        battery -= energy
+        state.served[user] += 1
+        state.tasks[user] = 0  # its request is consumed; its next one is not known yet
+        uav, hover_index = points[k].copy(), int(k)
+    home = return_energy_j(p, uav) if out else return_energy_j(p, state.uav_xyz)
+    spent = sum(pt.energy_j for pt in out) + home
+    return PlannedPath(tuple(out), float(spent), float(state.battery_j - spent), reason)
+
+
+def check_path(path: PlannedPath, area: Area, scenario: Scenario, battery_j: float) -> None:
+    """Refuse a path that leaves the area or altitude limits or eats into the reserve."""
+    for i, pt in enumerate(path.points):
+        if not area.contains_xy(pt.x_m, pt.y_m):
+            raise PlanningError("area", f"point {i} ({pt.x_m:.1f}, {pt.y_m:.1f}) m lies outside [0, {area.side_m}]^2")
+        if not area.min_flight_altitude_m <= pt.z_m <= area.max_altitude_m:
+            raise PlanningError("altitude", f"point {i} at {pt.z_m:.1f} m is outside "
+                                f"[{area.min_flight_altitude_m}, {area.max_altitude_m}] m")
+        if not (math.isfinite(pt.hold_s) and pt.hold_s >= 0):
+            raise PlanningError("hold", f"point {i} has hold {pt.hold_s} s")
+    floor = scenario.energy_floor_j
+    # points' energy, plus the way home when the scenario keeps it in reserve
+    needed = path.predicted_energy_j if scenario.reserve_return_energy else sum(p.energy_j for p in path.points)
+    if path.points and battery_j - needed < floor - 1e-6:
+        raise PlanningError("energy", f"the path needs {needed:.0f} J of {battery_j:.0f} J and would go "
+                            f"below the reserve of {floor:.0f} J")
+
+
+def not_served_reason(scenario: Scenario, tasks: int, services: int, ending: str) -> str:
+    """Why a pending request was not served when the sortie ended."""
+    if tasks <= 0:
+        return "no tasks to offload"
+    if services >= scenario.max_services_per_user:
+        return f"fairness: already served {services} times (limit {scenario.max_services_per_user})"
+    if services > 0 and tasks <= scenario.fairness_threshold_tasks:
+        return (f"fairness: a repeat needs more than {scenario.fairness_threshold_tasks:g} tasks, "
+                f"asked {tasks}")
+    return ending
+
+
+def planning_battery_j(scenario: Scenario, battery_j: float, stale_vehicle_s: float, margin_j: float) -> float:
+    """The battery the planner may count on: the last reading, less what the vehicle spends
+    until the plan is flown (``stale_vehicle_s`` of vehicle time: the reading's age plus
+    the search, at the most power-hungry of hovering and cruising), less the landing
+    descent from the base altitude (the model's way home ends at base, in the air) and the
+    configured margin."""
+    p = pack(scenario)
+    power_w = max(scenario.hover_power_w, flight_energy_j(p, scenario.speed_mps))  # 1 s of cruise
+    descent_j = flight_energy_j(p, scenario.base_z_m)
+    return battery_j - power_w * max(stale_vehicle_s, 0.0) - descent_j - margin_j
+
+
+def should_return(battery_fraction: float, airborne: bool, returning: bool, threshold: float) -> bool:
+    """Command return to launch: airborne, not already returning, battery at the threshold."""
+    return airborne and not returning and battery_fraction <= threshold
+
+
+class Planner:
+    """The MCTS planner for the current set of users; rebuilt when that set grows."""
+
+    def __init__(self, scenario: Scenario, config: MctsConfig, seed: int) -> None:
+        self.base = scenario
+        self.config = config
+        self.points = hover_points(scenario)
+        self.rng = np.random.default_rng(seed)
+        self._planner: MctsPlanner | None = None
+        self._users = -1
+
+    def scenario_for(self, num_users: int) -> Scenario:
+        return self.base.replace(num_users=max(num_users, 1))
+
+    def decide(self, assembled: Assembled) -> tuple[Decision | None, PlannedPath]:
+        """The next decision and the predicted path; (None, empty path) when nothing is
+        allowed (the sortie is over for now). Runs in a worker thread: CPU-bound, nogil."""
+        n = len(assembled.user_ids)
+        scenario = self.scenario_for(n)
+        if n != self._users or self._planner is None:
+            self._planner = MctsPlanner(scenario, self.points, self.config, self.rng)
+            self._users = n
+        if n == 0:
+            return None, predict_path(scenario, self.points, assembled, ())
+        try:
+            decision = self._planner.plan(assembled.state)
+        except ValueError:  # no hovering point allowed: nobody eligible or no energy
+            return None, predict_path(scenario, self.points, assembled, ())
+        return decision, predict_path(scenario, self.points, assembled, decision.line)

@@ -1,0 +1,68 @@
+"""Child processes for the demo and the end-to-end bench: each in its own process group
+with its stderr in a log file, started ready (a line in its log) and always stopped
+(SIGINT, then SIGKILL to the group after a bounded wait)."""
+
+from __future__ import annotations
+
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+from .errors import ServiceError
+
+REPO = Path(__file__).resolve().parents[2]
+
+
+class ChildError(ServiceError):
+    """A child process failed to start or become ready."""
+
+
+def free_port(kind: int = socket.SOCK_STREAM) -> int:
+    """A port on 127.0.0.1 that was free a moment ago (TCP by default, SOCK_DGRAM for UDP)."""
+    with socket.socket(socket.AF_INET, kind) as sock:
+        sock.bind(("127.0.0.1", 0))
+        return sock.getsockname()[1]
+
+
+class Child:
+    """``python -m MODULE ARGS`` with stderr in ``log_path``."""
+
+    def __init__(self, module: str, args: list[str], log_path: Path) -> None:
+        env = dict(os.environ, PYTHONPATH=str(REPO) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+        self.name = f"{module} {args[0] if args else ''}".strip()
+        self.log_path = log_path
+        self._log = open(log_path, "w")
+        self.proc = subprocess.Popen([sys.executable, "-m", module, *args], cwd=REPO, env=env,
+                                     stdout=subprocess.DEVNULL, stderr=self._log, start_new_session=True)
+
+    def log(self) -> str:
+        return self.log_path.read_text(errors="replace")
+
+    def wait_ready(self, marker: str, timeout_s: float = 30.0) -> None:
+        deadline = time.monotonic() + timeout_s
+        while marker not in self.log():
+            if self.proc.poll() is not None:
+                raise ChildError(f"{self.name} exited with {self.proc.returncode}:\n{self.log()[-2000:]}")
+            if time.monotonic() > deadline:
+                raise ChildError(f"{self.name} not ready after {timeout_s:g} s:\n{self.log()[-2000:]}")
+            time.sleep(0.05)
+
+    def stop(self, timeout_s: float = 10.0) -> int:
+        """SIGINT, wait, then SIGKILL to the whole group; the exit status."""
+        if self.proc.poll() is None:
+            try:
+                self.proc.send_signal(signal.SIGINT)
+                self.proc.wait(timeout_s)
+            except subprocess.TimeoutExpired:
+                try:
+                    os.killpg(self.proc.pid, signal.SIGKILL)
+                except ProcessLookupError:
+                    pass
+                self.proc.wait(5)
+        if not self._log.closed:
+            self._log.close()
+        return int(self.proc.returncode)

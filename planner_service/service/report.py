@@ -1,0 +1,54 @@
+"""A finished (or running) sortie's figures, read from the journal: the same spirit as the
+``plan --json`` summary (throughput, reward, energy, served users, violations), plus what
+happened to every request."""
+
+from __future__ import annotations
+
+from collections import Counter
+from typing import Any
+
+from ..model import Scenario
+from .journal import Journal
+
+
+def fairness_violations(scenario: Scenario, services: list[tuple[str, int]]) -> int:
+    """Services (user, tasks) in order that break rule (3) or the limit (9c)."""
+    counts: Counter[str] = Counter()
+    bad = 0
+    for user, tasks in services:
+        c = counts[user]
+        if tasks <= 0 or c >= scenario.max_services_per_user or (c >= 1 and tasks <= scenario.fairness_threshold_tasks):
+            bad += 1
+        counts[user] += 1
+    return bad
+
+
+def sortie_summary(journal: Journal, scenario: Scenario, final_battery_j: float | None) -> dict[str, Any]:
+    services = journal.services()
+    requests = journal.requests()
+    n = len(services)
+    tasks = [s.tasks for s in services]
+    statuses = Counter(r.status for r in requests)
+    reasons = Counter(r.reason for r in requests if r.status == "not_served")
+    missions = journal.missions()
+    floor = scenario.energy_floor_j
+    return {
+        "intervals": n,
+        "throughput_tasks_per_interval": sum(tasks) / n if n else 0.0,
+        "throughput_bits_per_interval": sum(s.bits for s in services) / n if n else 0.0,
+        "total_tasks": int(sum(tasks)),
+        "average_reward": sum(s.reward for s in services) / n if n else 0.0,
+        "energy_used_j": None if final_battery_j is None else float(scenario.battery_j - final_battery_j),
+        "energy_budget_j": float((1.0 - scenario.battery_threshold) * scenario.battery_j),
+        "final_battery_j": final_battery_j,
+        "served": [s.user_id for s in services],
+        "served_users": len({s.user_id for s in services}),
+        "hover_points": [s.hover_index for s in services],
+        "fairness_violations": fairness_violations(scenario, [(s.user_id, s.tasks) for s in services]),
+        "energy_violation": None if final_battery_j is None else bool(final_battery_j < floor),
+        "requests": {"accepted": len(requests), **{k: statuses.get(k, 0) for k in ("served", "replaced", "not_served", "pending")}},
+        "not_served_reasons": dict(reasons),
+        "missions_uploaded": sum(1 for m in missions if m.result == "accepted"),
+        "upload_failures": sum(1 for m in missions if m.result != "accepted"),
+        "sortie_over": journal.get_meta("sortie_over"),
+    }
