@@ -1,0 +1,111 @@
+"""Planning numbers checked by hand on the field preset (B = 2 kHz, P_u = 0.1 W, rho_0 =
+-50 dB, sigma^2 = -120 dBm, P_h = 168.49 W, 100 kJ, reserve theta = 0.1 + the way home)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from planner_service.model import field, hover_points, pack
+from planner_service.model.energy import flight_energy_j
+from planner_service.service.errors import PlanningError
+from planner_service.service.journal import RequestRow, UserRow
+from planner_service.service.planning import (PlannedPath, PlannedPoint, VehicleFix, assemble, check_path,
+                                              hold_time_s, not_served_reason, planning_battery_j, predict_path,
+                                              should_return)
+from protocol import Area
+
+S = field()
+P = pack(S)
+HP = hover_points(S)
+RATE_BELOW = 2000.0 * math.log2(1.0 + 0.1 * (1e-5 / 100.0 ** 2) / 1e-15)  # 33 219.3 bit/s at 100 m
+
+
+def users_below(a: int, b: int, tasks: tuple[int, int], battery_j: float = 100_000.0):
+    users = [UserRow("u0", HP[a][0], HP[a][1], 0.0, 0), UserRow("u1", HP[b][0], HP[b][1], 0.0, 0)]
+    pending = [RequestRow(i + 1, f"u{i}", users[i].x_m, users[i].y_m, 0.0, t, None, 0.0, "pending", "")
+               for i, t in enumerate(tasks) if t > 0]
+    return assemble(S, users, pending, [], VehicleFix(0.0, 0.0, 0.0, battery_j, False), -1)
+
+
+def test_hold_is_bits_over_rate() -> None:
+    assert RATE_BELOW == pytest.approx(33_219.3, abs=0.1)
+    hold = hold_time_s(P, HP[5], np.array([HP[5][0], HP[5][1], 0.0]), 10 * 1e5)
+    assert hold == pytest.approx(1e6 / 33_219.3, rel=1e-6)  # 30.10 s for 10 tasks straight below
+
+
+def test_assemble_from_the_ground_starts_at_base() -> None:
+    a = users_below(5, 11, (10, 0))
+    assert a.state.hover_index == -1 and list(a.state.uav_xyz) == [0.0, 0.0, 100.0]
+    assert list(a.state.tasks) == [10, 0] and a.request_ids == (1, 0) and a.user_ids == ("u0", "u1")
+    assert a.state.task_table.shape == (0, 2)
+
+
+def test_path_steps_the_model_along_the_line() -> None:
+    a = users_below(5, 11, (10, 12))
+    path = predict_path(S, HP, a, (5, 11))
+    assert [(p.hover_index, p.user_id, p.request_id, p.tasks) for p in path.points] == [(5, "u0", 1, 10), (11, "u1", 2, 12)]
+    assert path.points[0].hold_s == pytest.approx(1e6 / RATE_BELOW, rel=1e-6)
+    assert path.points[1].hold_s == pytest.approx(1.2e6 / RATE_BELOW, rel=1e-6)
+    # energy of the first interval: hover P_h * hold + computation + flight from base
+    d = math.dist((0.0, 0.0, 100.0), HP[5])
+    e_c = 1e3 * 1e-28 * (2e9) ** 2 * 1e6  # (6): C gamma f^2 S = 0.4 J
+    expected = 168.49 * 1e6 / RATE_BELOW + e_c + flight_energy_j(P, d)
+    assert path.points[0].energy_j == pytest.approx(expected, rel=1e-9)
+    home = flight_energy_j(P, math.dist(HP[11], (0.0, 0.0, 100.0)))
+    assert path.predicted_energy_j == pytest.approx(sum(p.energy_j for p in path.points) + home, rel=1e-9)
+
+
+def test_path_stops_where_nobody_known_is_eligible() -> None:
+    a = users_below(5, 11, (10, 0))
+    path = predict_path(S, HP, a, (5, 11, 3))
+    assert [p.hover_index for p in path.points] == [5]
+    assert path.stop_reason == "nobody known is eligible further on"
+
+
+def test_path_stops_at_the_energy_reserve() -> None:
+    a = users_below(5, 11, (10, 12))
+    first = predict_path(S, HP, a, (5,)).points[0].energy_j
+    # just enough for the first interval, the way home from it and the 10 kJ floor
+    battery = first + flight_energy_j(P, math.dist(HP[5], (0.0, 0.0, 100.0))) + 10_000.0 + 1.0
+    path = predict_path(S, HP, users_below(5, 11, (10, 12), battery), (5, 11))
+    assert [p.hover_index for p in path.points] == [5] and path.stop_reason == "the energy reserve"
+    assert path.battery_after_j == pytest.approx(10_001.0, abs=1e-6)
+    check_path(path, Area(500.0, 120.0, 10.0), S, battery)  # exactly within the reserve
+
+
+def _point(x: float, y: float, z: float, energy: float = 100.0) -> PlannedPoint:
+    return PlannedPoint(0, x, y, z, 1.0, "u", 1, 1, 1e5, energy, 0.0)
+
+
+@pytest.mark.parametrize("point, check", [
+    (_point(600.0, 10.0, 100.0), "area"),
+    (_point(10.0, -1.0, 100.0), "area"),
+    (_point(10.0, 10.0, 130.0), "altitude"),
+    (_point(10.0, 10.0, 5.0), "altitude"),
+    (_point(10.0, 10.0, 100.0, energy=95_000.0), "energy"),
+])
+def test_check_path_refuses(point: PlannedPoint, check: str) -> None:
+    path = PlannedPath((point,), point.energy_j + 500.0, 0.0, "")
+    with pytest.raises(PlanningError) as err:
+        check_path(path, Area(500.0, 120.0, 10.0), S, 100_000.0)
+    assert err.value.check == check
+
+
+def test_planning_battery_keeps_the_drain_the_descent_and_the_margin() -> None:
+    cruise_w = flight_energy_j(P, 20.0)  # one second at 20 m/s
+    assert cruise_w == pytest.approx(178.3, abs=0.1)  # Zeng's P(20), docs/MODEL.md
+    descent = flight_energy_j(P, 100.0)
+    assert descent == pytest.approx(100.0 * cruise_w / 20.0)
+    assert planning_battery_j(S, 50_000.0, 10.0, 1_000.0) == pytest.approx(50_000.0 - 10 * cruise_w - descent - 1_000.0)
+
+
+def test_not_served_reasons_and_return() -> None:
+    assert not_served_reason(S, 0, 0, "x") == "no tasks to offload"
+    assert not_served_reason(S, 18, 2, "x") == "fairness: already served 2 times (limit 2)"
+    assert not_served_reason(S, 15, 1, "x") == "fairness: a repeat needs more than 15 tasks, asked 15"
+    assert not_served_reason(S, 16, 1, "sortie ended") == "sortie ended"
+    assert should_return(0.10, True, False, 0.1) and not should_return(0.11, True, False, 0.1)
+    assert not should_return(0.05, False, False, 0.1) and not should_return(0.05, True, True, 0.1)

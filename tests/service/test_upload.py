@@ -1,0 +1,60 @@
+"""The mission upload state machine, fed the autopilot's messages by hand."""
+
+from __future__ import annotations
+
+from pymavlink.dialects.v20 import common as M
+
+from planner_service.service.link.upload import MissionUpload
+from protocol import GeoOrigin, HoverPoint, encode_path
+
+ITEMS = encode_path([HoverPoint(10.0, 20.0, 50.0, 3.0), HoverPoint(60.0, 20.0, 50.0, 3.0)], GeoOrigin(), "ardupilot")
+
+
+def machine(retries: int = 3) -> tuple[MissionUpload, list]:
+    sent: list = []
+    return MissionUpload(ITEMS, sent.append, (1, 1), retries), sent
+
+
+def req(seq: int, legacy: bool = False):
+    cls = M.MAVLink_mission_request_message if legacy else M.MAVLink_mission_request_int_message
+    return cls(255, 190, seq, M.MAV_MISSION_TYPE_MISSION)
+
+
+def ack(result: int):
+    return M.MAVLink_mission_ack_message(255, 190, result, M.MAV_MISSION_TYPE_MISSION)
+
+
+def test_count_items_ack() -> None:
+    up, sent = machine()
+    up.begin()
+    assert sent[0].get_type() == "MISSION_COUNT" and sent[0].count == len(ITEMS) == 5
+    assert up.on_message(ack(M.MAV_MISSION_ACCEPTED)) is None  # stale ACK before any request
+    for seq in range(len(ITEMS)):
+        assert up.on_message(req(seq, legacy=(seq == 2))) is None  # ArduPilot's legacy request too
+    done = up.on_message(ack(M.MAV_MISSION_ACCEPTED))
+    assert done is not None and done.accepted and done.result == "MAV_MISSION_ACCEPTED"
+    assert [m.get_type() for m in sent[1:]] == ["MISSION_ITEM_INT"] * 5
+    assert [m.seq for m in sent[1:]] == [0, 1, 2, 3, 4]
+
+
+def test_silence_repeats_then_gives_up() -> None:
+    up, sent = machine(retries=2)
+    up.begin()
+    assert up.on_timeout() is None and sent[-1].get_type() == "MISSION_COUNT"
+    up.on_message(req(0))
+    assert up.on_timeout() is None and sent[-1].get_type() == "MISSION_ITEM_INT" and sent[-1].seq == 0
+    assert up.on_timeout() is None
+    done = up.on_timeout()
+    assert done is not None and not done.accepted and done.result.startswith("NO_ANSWER after 2 repeats of item 0")
+
+
+def test_refusal_and_bad_request() -> None:
+    up, _ = machine()
+    up.begin()
+    up.on_message(req(0))
+    done = up.on_message(ack(M.MAV_MISSION_INVALID_PARAM5_X))
+    assert done is not None and not done.accepted and done.result == "MAV_MISSION_INVALID_PARAM5_X"
+    up2, _ = machine()
+    up2.begin()
+    bad = up2.on_message(req(9))
+    assert bad is not None and not bad.accepted and "BAD_REQUEST" in bad.result
