@@ -354,7 +354,10 @@ class Service:
 
     def _ready_to_plan(self) -> bool:
         t = self.link.telemetry
-        if self.sortie_over or not t.connected or not t.valid:
+        if self.sortie_over:
+            return False
+        if not t.connected or not t.valid:  # no vehicle yet: look again soon
+            asyncio.get_running_loop().call_later(RETRY_S / 2, self._wake.set)
             return False
         if t.airborne and t.mode in RETURNING_MODES:
             return False  # returning: the safety or the operator decided; no more plans

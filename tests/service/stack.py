@@ -1,0 +1,90 @@
+"""Real processes on loopback for the end-to-end tests (helper of conftest.py): the vehicle stub, the service and
+the simulated users, each on free ports, zenoh with multicast scouting off and explicit
+tcp/127.0.0.1 endpoints; every process is stopped when the test ends."""
+
+from __future__ import annotations
+
+import socket
+import sqlite3
+import threading
+import time
+from pathlib import Path
+from typing import Any, Callable
+
+from planner_service.service.config import build_config, to_toml
+from planner_service.service.processes import Child, free_port
+from protocol import Event
+from protocol.client import PlannerClient
+
+
+class Stack:
+    """A vehicle stub and a service wired together; ``client`` follows the events."""
+
+    def __init__(self, tmp: Path) -> None:
+        self.tmp = tmp
+        self.children: list[Child] = []
+        self.mav_port = free_port(socket.SOCK_DGRAM)
+        self.zenoh_port = free_port()
+        self.endpoint = f"tcp/127.0.0.1:{self.zenoh_port}"
+        self.journal_path = tmp / "journal.sqlite"
+        self.events: list[Event] = []
+        self.client: PlannerClient | None = None
+        self._lock = threading.Lock()
+
+    def vehicle(self, *extra: str) -> Child:
+        child = Child("sim_bridge", ["vehicle", "--mavlink", f"udpin:127.0.0.1:{self.mav_port}", *extra],
+                      self.tmp / f"vehicle-{len(self.children)}.log")
+        self.children.append(child)
+        child.wait_ready("listening")
+        return child
+
+    def service(self, **overrides: str) -> Child:
+        settings = {"zenoh.listen": self.endpoint, "mavlink.url": f"udpout:127.0.0.1:{self.mav_port}",
+                    "journal.path": str(self.journal_path), "planner.budget_ms": "100", **overrides}
+        config = build_config({}, {k.replace("__", "."): v for k, v in settings.items()})
+        path = self.tmp / "planner.toml"
+        path.write_text(to_toml(config))
+        child = Child("planner_service", ["serve", "--config", str(path)], self.tmp / f"service-{len(self.children)}.log")
+        self.children.append(child)
+        child.wait_ready("ready:", 60.0)
+        if self.client is None:
+            self.client = PlannerClient([self.endpoint])
+            self.client.follow_events(self._on_event)
+        assert self.client.wait_for_service(20.0), "the service's liveliness token never appeared"
+        return child
+
+    def users(self, *extra: str) -> Child:
+        child = Child("sim_bridge", ["users", "--connect", self.endpoint, *extra], self.tmp / "users.log")
+        self.children.append(child)
+        return child
+
+    def _on_event(self, ev: Event) -> None:
+        with self._lock:
+            self.events.append(ev)
+
+    def wait_event(self, predicate: Callable[[Event], bool], timeout_s: float, what: str) -> Event:
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            with self._lock:
+                for ev in self.events:
+                    if predicate(ev):
+                        return ev
+            time.sleep(0.05)
+        logs = "\n".join(f"--- {c.name}\n{c.log()[-3000:]}" for c in self.children)
+        raise AssertionError(f"no {what} within {timeout_s} s\n{logs}")
+
+    def rows(self, sql: str) -> list[tuple[Any, ...]]:
+        """Read the journal as another process would (read-only, beside the WAL writer)."""
+        db = sqlite3.connect(f"file:{self.journal_path}?mode=ro", uri=True)
+        try:
+            return db.execute(sql).fetchall()
+        finally:
+            db.close()
+
+    def close(self) -> None:
+        if self.client is not None:
+            self.client.close()
+        for child in reversed(self.children):
+            child.stop()
+
+
