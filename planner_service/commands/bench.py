@@ -17,9 +17,16 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--iterations", type=int, default=1000, help="MCTS iterations per decision (default: 1000)")
     parser.add_argument("--reference-decisions", type=int, default=5, help="decisions timed with the pure-Python reference (default: 5; 0 skips it)")
     parser.add_argument("--quick", action="store_true", help="only the paper's size")
+    parser.add_argument("--e2e", action="store_true",
+                        help="instead: end-to-end latency on loopback, request -> mission accepted by the vehicle stub "
+                             "(real service and stub processes; the planner's time excluded)")
+    parser.add_argument("--e2e-requests", type=int, default=200, help="requests timed with --e2e (default: 200)")
+    parser.add_argument("--e2e-budget-ms", type=float, default=20.0, help="planner budget with --e2e (default: 20)")
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.e2e:
+        return _run_e2e(args)
     from ..bench.run import SIZES, format_table, run_bench
 
     if args.decisions < 1 or args.iterations < 1 or args.reference_decisions < 0:
@@ -29,4 +36,15 @@ def run(args: argparse.Namespace) -> int:
     results = run_bench(args.decisions, args.iterations, args.reference_decisions, sizes,
                         progress=lambda msg: print(msg, file=sys.stderr, flush=True))
     print(json.dumps(results, indent=1) if args.json else format_table(results))
+    return 0
+
+
+def _run_e2e(args: argparse.Namespace) -> int:
+    from ..bench.e2e import format_e2e, run_e2e
+
+    if args.e2e_requests < 1 or not args.e2e_budget_ms > 0:
+        print("error: --e2e-requests must be at least 1 and --e2e-budget-ms positive", file=sys.stderr)
+        return 2
+    results = run_e2e(args.e2e_requests, args.e2e_budget_ms, progress=lambda msg: print(msg, file=sys.stderr, flush=True))
+    print(json.dumps(results, indent=1) if args.json else format_e2e(results))
     return 0

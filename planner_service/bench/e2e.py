@@ -1,0 +1,123 @@
+"""End-to-end latency on loopback: a task request submitted over zenoh until the mission
+that includes it is accepted by the vehicle stub (MISSION_ACK), seen by the client as the
+service's ``mission_uploaded`` event. The planner's own time (reported in that event) is
+subtracted, so the figure is what the I/O path costs: zenoh query, validation, the SQLite
+journal (synchronous FULL), the hand-over to the planner thread and back, mission encoding
+and validation, the MAVLink upload handshake, the event publication.
+
+Real processes: ``sim_bridge vehicle`` (udpin) and ``planner_service serve`` with
+``planner.replan_min_interval_s = 0`` (every request re-plans) and the vehicle on the
+ground (``start_mission`` off), so every request produces one upload."""
+
+from __future__ import annotations
+
+import socket
+import statistics
+import tempfile
+import threading
+import time
+from pathlib import Path
+from typing import Any, Callable
+
+from protocol import Event
+from protocol.client import PlannerClient
+
+from ..service.config import build_config, to_toml
+from ..service.processes import Child, free_port
+
+
+def percentile(values: list[float], q: float) -> float:
+    ordered = sorted(values)
+    k = min(len(ordered) - 1, max(0, int(round(q / 100.0 * (len(ordered) - 1)))))
+    return ordered[k]
+
+
+def run_e2e(requests: int = 200, budget_ms: float = 20.0, users: int = 10,
+            progress: Callable[[str], None] | None = None) -> dict[str, Any]:
+    with tempfile.TemporaryDirectory(prefix="uav-e2e-") as tmp:
+        return _run(Path(tmp), requests, budget_ms, users, progress or (lambda _: None))
+
+
+def _run(tmp: Path, requests: int, budget_ms: float, users: int, progress: Callable[[str], None]) -> dict[str, Any]:
+    mav_port, zenoh_port = free_port(socket.SOCK_DGRAM), free_port()
+    endpoint = f"tcp/127.0.0.1:{zenoh_port}"
+    config = build_config({}, {"zenoh.listen": endpoint, "mavlink.url": f"udpout:127.0.0.1:{mav_port}",
+                               "planner.budget_ms": str(budget_ms), "planner.replan_min_interval_s": "0",
+                               "journal.path": str(tmp / "journal.sqlite")})
+    (tmp / "planner.toml").write_text(to_toml(config))
+    children: list[Child] = []
+    events: list[tuple[float, Event]] = []
+    cond = threading.Condition()
+
+    def on_event(ev: Event) -> None:
+        if ev.event == "mission_uploaded":
+            with cond:
+                events.append((time.perf_counter(), ev))
+                cond.notify_all()
+
+    try:
+        vehicle = Child("sim_bridge", ["vehicle", "--mavlink", f"udpin:127.0.0.1:{mav_port}"], tmp / "vehicle.log")
+        children.append(vehicle)
+        vehicle.wait_ready("listening")
+        service = Child("planner_service", ["serve", "--config", str(tmp / "planner.toml")], tmp / "service.log")
+        children.append(service)
+        service.wait_ready("ready:", 60.0)
+        with PlannerClient([endpoint], config.keys()) as client:
+            if not client.wait_for_service(20.0):
+                raise RuntimeError("the service never appeared")
+            client.follow_events(on_event)
+            time.sleep(1.0)  # the vehicle link and the planner's warm-up
+            e2e_ms, ack_ms, planner_ms, total_ms = [], [], [], []
+            warm = 5
+            for i in range(requests + warm):
+                x, y = 50.0 + (37.0 * i) % 400.0, 50.0 + (53.0 * i) % 400.0
+                t0 = time.perf_counter()
+                ack = client.submit(f"user-{i % users}", x, y, 5 + i % 10)
+                t_ack = time.perf_counter()
+                found = _wait_for(cond, events, ack.request_id, 10.0)
+                if found is None:
+                    raise RuntimeError(f"no mission for request {ack.request_id}; see {tmp}/service.log")
+                t1, ev = found
+                plan = float(ev.detail.split("planner_ms=")[1].split()[0])
+                if i >= warm:
+                    ack_ms.append((t_ack - t0) * 1e3)
+                    total_ms.append((t1 - t0) * 1e3)
+                    planner_ms.append(plan)
+                    e2e_ms.append((t1 - t0) * 1e3 - plan)
+                if i % 50 == 0:
+                    progress(f"e2e: {i}/{requests + warm} requests")
+    finally:
+        for child in reversed(children):
+            child.stop()
+    return {
+        "requests": requests, "budget_ms": budget_ms,
+        "e2e_ms_median": statistics.median(e2e_ms), "e2e_ms_p99": percentile(e2e_ms, 99),
+        "e2e_ms_max": max(e2e_ms),
+        "ack_ms_median": statistics.median(ack_ms), "ack_ms_p99": percentile(ack_ms, 99),
+        "planner_ms_median": statistics.median(planner_ms),
+        "total_ms_median": statistics.median(total_ms), "total_ms_p99": percentile(total_ms, 99),
+    }
+
+
+def _wait_for(cond: threading.Condition, events: list[tuple[float, Event]], request_id: int,
+              timeout_s: float) -> tuple[float, Event] | None:
+    deadline = time.monotonic() + timeout_s
+    with cond:
+        while True:
+            for t, ev in events:
+                newest = int(ev.detail.split("newest_request=")[1].split(";")[0].split()[0])
+                if newest >= request_id:
+                    return t, ev
+            left = deadline - time.monotonic()
+            if left <= 0:
+                return None
+            cond.wait(left)
+
+
+def format_e2e(r: dict[str, Any]) -> str:
+    return (f"end-to-end on loopback ({r['requests']} requests, planner budget {r['budget_ms']:g} ms excluded):\n"
+            f"  request -> mission accepted by the stub: median {r['e2e_ms_median']:.1f} ms, "
+            f"p99 {r['e2e_ms_p99']:.1f} ms, max {r['e2e_ms_max']:.1f} ms\n"
+            f"  request -> ack:                          median {r['ack_ms_median']:.1f} ms, p99 {r['ack_ms_p99']:.1f} ms\n"
+            f"  planner (excluded):                      median {r['planner_ms_median']:.1f} ms; "
+            f"total median {r['total_ms_median']:.1f} ms, p99 {r['total_ms_p99']:.1f} ms")
