@@ -50,13 +50,16 @@ class Setting:
 @dataclass(frozen=True)
 class Job:
     """One sortie. ``episodes`` is None for algorithms without training (``STATIC``);
-    ``record_paths`` also returns every user's position at every interval (trajectory)."""
+    ``record_paths`` also returns every user's position at every interval (trajectory);
+    ``repeats`` > 1 flies the (deterministic) sortie that many times and keeps the fastest
+    wall time, the usual way to measure time on a machine shared with other work."""
 
     scenario: Scenario
     algo: str
     episodes: int | None
     seed: int
     record_paths: bool = False
+    repeats: int = 1
 
     def describe(self) -> str:
         n = "" if self.episodes is None else f" n={self.episodes}"
@@ -67,7 +70,7 @@ class Job:
         first so that two workers finish together."""
         n = self.episodes or 0
         per_episode = {"dqn": 4e-3, "ql": 5e-4, "mcts-paper": 2.5e-4, "ts-mcts": 2.5e-4, "mcts": 2.5e-4}
-        return 1e-3 + per_episode.get(self.algo, 0.0) * n
+        return self.repeats * (1e-3 + per_episode.get(self.algo, 0.0) * n)
 
 
 Record = dict[str, Any]
@@ -78,6 +81,12 @@ def run_job(job: Job) -> Record:
     ``record_paths``)."""
     spec = PolicySpec(iterations=job.episodes if job.episodes is not None else 1)
     summary = run_sortie(job.scenario, job.algo, job.seed, spec)
+    for _ in range(job.repeats - 1):
+        again = run_sortie(job.scenario, job.algo, job.seed, spec)
+        if again["trace"] != summary["trace"]:  # the minimum of unequal sorties would mean nothing
+            raise RuntimeError(f"{job.describe()} is not deterministic: a repeat flew another sortie")
+        if again["wall_s"] < summary["wall_s"]:
+            summary = again
     record: Record = {m: float(summary[m]) for m in METRICS}
     record.update(algo=job.algo, episodes=job.episodes, seed=job.seed)
     if job.record_paths:

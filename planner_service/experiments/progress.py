@@ -14,6 +14,9 @@ def _clock() -> float:
 class Progress:
     """``label [#####.....] done/total pct elapsed, ~left``.
 
+    Items may carry a weight (an estimate of their cost): the bar, the percentage and the
+    time left then follow the weights, while done/total still counts items, because an
+    experiment's first jobs (the longest) would otherwise predict hours.
     On a terminal the line redraws in place (at most every 0.2 s); in a log (not a tty) a
     line is printed at every tenth of the work, so that CI logs stay short.
     """
@@ -26,13 +29,16 @@ class Progress:
         self.clock = clock
         self.width = width
         self.done = 0
+        self.total_weight = 0.0
+        self.done_weight = 0.0
         self.start = clock()
         self._last_draw = -1.0
         self._last_decile = -1
         self._tty = bool(getattr(self.stream, "isatty", lambda: False)())
 
-    def update(self, n: int = 1) -> None:
+    def update(self, n: int = 1, weight: float = 0.0) -> None:
         self.done = min(self.done + n, self.total)
+        self.done_weight += weight
         now = self.clock()
         if self._tty:
             if now - self._last_draw >= 0.2 or self.done == self.total:
@@ -40,7 +46,7 @@ class Progress:
                 self.stream.write("\r" + self.line(now))
                 self.stream.flush()
         else:
-            decile = 10 * self.done // self.total if self.total else 10
+            decile = int(10 * self.fraction())
             if decile != self._last_decile:
                 self._last_decile = decile
                 self.stream.write(self.line(now) + "\n")
@@ -51,8 +57,15 @@ class Progress:
             self.stream.write("\r" + self.line(self.clock()) + "\n")
             self.stream.flush()
 
+    def fraction(self) -> float:
+        if self.done >= self.total:
+            return 1.0
+        if self.total_weight > 0:
+            return min(self.done_weight / self.total_weight, 1.0)
+        return self.done / self.total
+
     def line(self, now: float) -> str:
-        frac = self.done / self.total if self.total else 1.0
+        frac = self.fraction()
         filled = int(round(frac * self.width))
         elapsed = now - self.start
         left = elapsed * (1 - frac) / frac if frac > 0 else float("nan")

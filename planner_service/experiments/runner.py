@@ -31,6 +31,7 @@ def run_jobs(jobs: Iterable[Job], workers: int, cache: dict[Job, Record] | None 
     todo.sort(key=lambda j: -j.cost_estimate_s())
     if progress is not None:
         progress.total = len(todo)
+        progress.total_weight = sum(j.cost_estimate_s() for j in todo)
     if not todo:
         return cache
     if workers <= 1:
@@ -38,7 +39,7 @@ def run_jobs(jobs: Iterable[Job], workers: int, cache: dict[Job, Record] | None 
         for job in todo:
             cache[job] = _run(job)
             if progress is not None:
-                progress.update()
+                progress.update(weight=job.cost_estimate_s())
         return cache
     ctx = multiprocessing.get_context("spawn")
     with ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=warm_up) as pool:
@@ -55,7 +56,7 @@ def run_jobs(jobs: Iterable[Job], workers: int, cache: dict[Job, Record] | None 
                 job = pending.pop(fut)
                 cache[job] = fut.result()
                 if progress is not None:
-                    progress.update()
+                    progress.update(weight=job.cost_estimate_s())
                 nxt = next(queue, None)
                 if nxt is not None:
                     pending[pool.submit(_run, nxt)] = nxt
