@@ -282,20 +282,19 @@ class Flight:
             if arrived:
                 self.hold_left = max(0.0, float(item.param1))
             return used
-        if self.hold_left > EPS_S:
-            used = min(budget, self.hold_left)
-            self._hover(used, computing=True)
-            self.hold_left -= used
-            return used
-        self._reached(events)
-        return 0.0
+        return self._hold(budget, events)
 
     def _delay(self, item: MissionItem, budget: float, events: list[FlightEvent]) -> float:
         """MAV_CMD_NAV_DELAY (MAVSDK's loiter time): wait param1 seconds where it is; the
         time-of-day form (param1 = -1) is not simulated and completes at once."""
         if self.hold_left is None:
             self.hold_left = max(0.0, float(item.param1)) if math.isfinite(item.param1) else 0.0
-        if self.hold_left > EPS_S:
+        return self._hold(budget, events)
+
+    def _hold(self, budget: float, events: list[FlightEvent]) -> float:
+        """Hover (computing the user's tasks) for what is left of the hold, then mark the
+        item reached; returns the simulated seconds used."""
+        if self.hold_left is not None and self.hold_left > EPS_S:
             used = min(budget, self.hold_left)
             self._hover(used, computing=True)
             self.hold_left -= used
