@@ -23,7 +23,7 @@ from protocol import Event
 from protocol.client import PlannerClient
 
 from ..service.config import build_config, to_toml
-from ..service.processes import Child, free_port
+from ..service.processes import Child, free_port, start_vehicle_and_service
 
 
 def percentile(values: list[float], q: float) -> float:
@@ -56,12 +56,7 @@ def _run(tmp: Path, requests: int, budget_ms: float, users: int, progress: Calla
                 cond.notify_all()
 
     try:
-        vehicle = Child("sim_bridge", ["vehicle", "--mavlink", f"udpin:127.0.0.1:{mav_port}"], tmp / "vehicle.log")
-        children.append(vehicle)
-        vehicle.wait_ready("listening")
-        service = Child("planner_service", ["serve", "--config", str(tmp / "planner.toml")], tmp / "service.log")
-        children.append(service)
-        service.wait_ready("ready:", 60.0)
+        start_vehicle_and_service(tmp, ["--mavlink", f"udpin:127.0.0.1:{mav_port}"], children)
         with PlannerClient([endpoint], config.keys()) as client:
             if not client.wait_for_service(20.0):
                 raise RuntimeError("the service never appeared")

@@ -16,7 +16,7 @@ from protocol.client import PlannerClient
 from .config import build_config, to_toml
 from .errors import ServiceError
 from .journal import Journal
-from .processes import Child, free_port
+from .processes import Child, free_port, start_vehicle_and_service
 from .progress import item_from_dict
 from .report import sortie_summary
 
@@ -51,13 +51,9 @@ def run_demo(out: Path, *, users: int = 10, speedup: float = 25.0, budget_ms: fl
     try:
         echo(f"demo: vehicle stub ({flavour}, x{speedup:g}), service ({backend}, {budget_ms:g} ms), {users} users; "
              f"logs in {out}")
-        vehicle = Child("sim_bridge", ["vehicle", "--mavlink", f"udpin:127.0.0.1:{mav_port}", "--flavour", flavour,
-                                       "--speedup", str(speedup)], out / "vehicle.log")
-        children.append(vehicle)
-        vehicle.wait_ready("listening")
-        service = Child("planner_service", ["serve", "--config", str(out / "planner.toml")], out / "service.log")
-        children.append(service)
-        service.wait_ready("ready:", 60.0)
+        start_vehicle_and_service(
+            out, ["--mavlink", f"udpin:127.0.0.1:{mav_port}", "--flavour", flavour, "--speedup", str(speedup)], children
+        )
         with PlannerClient([endpoint], config.keys()) as client:
             if not client.wait_for_service(20.0):
                 raise DemoError("the service's liveliness token never appeared")
