@@ -12,19 +12,9 @@ from typing import Callable, Iterator
 
 import pytest
 
+from planner_service.service.processes import free_port
+
 REPO = Path(__file__).resolve().parents[2]
-
-
-def free_udp_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
-        sock.bind(("127.0.0.1", 0))
-        return sock.getsockname()[1]
-
-
-def free_tcp_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as sock:
-        sock.bind(("127.0.0.1", 0))
-        return sock.getsockname()[1]
 
 
 class Process:
@@ -82,7 +72,7 @@ def vehicle(spawn: Callable[..., Process]) -> Callable[..., tuple[Process, int]]
     """vehicle(*extra_args) -> (process, udp port) of a vehicle listening on udpin."""
 
     def start(*extra: str) -> tuple[Process, int]:
-        port = free_udp_port()
+        port = free_port(socket.SOCK_DGRAM)
         process = spawn(["vehicle", "--mavlink", f"udpin:127.0.0.1:{port}", *extra], "listening")
         return process, port
 

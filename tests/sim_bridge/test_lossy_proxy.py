@@ -9,7 +9,7 @@ import time
 
 import pytest
 
-from conftest import free_udp_port
+from planner_service.service.processes import free_port
 from gcs import M, GroundStation
 from protocol.geodesy import GeoOrigin
 from protocol.mission import HoverPoint, encode_path, same_items
@@ -19,7 +19,7 @@ from sim_bridge.proxy import Impairment, LossyProxy, ProxyError
 @pytest.mark.timeout(60)
 def test_upload_through_20_percent_loss_each_way(vehicle, spawn) -> None:
     _, vehicle_port = vehicle("--item-timeout", "0.25", "--retries", "20")
-    proxy_port = free_udp_port()
+    proxy_port = free_port(socket.SOCK_DGRAM)
     proxy = spawn(["lossy-proxy", "--listen", f"127.0.0.1:{proxy_port}", "--forward", f"127.0.0.1:{vehicle_port}",
                    "--drop", "0.2", "--dup", "0.05", "--delay-ms", "30", "--seed", "11"], "lossy proxy")
     gcs = GroundStation(f"udpout:127.0.0.1:{proxy_port}", timeout_s=0.2, retries=40)

@@ -8,7 +8,7 @@ import socket
 import pytest
 
 from gcs import M, GroundStation
-from conftest import free_tcp_port
+from planner_service.service.processes import free_port
 from protocol.geodesy import GeoOrigin
 from protocol.mission import HoverPoint, MissionItem, encode_path, same_items
 
@@ -187,7 +187,7 @@ def test_garbage_does_not_stop_the_vehicle(vehicle, gcs_factory) -> None:
 
 @pytest.mark.timeout(30)
 def test_tcp_link(spawn, gcs_factory) -> None:
-    port = free_tcp_port()
+    port = free_port()
     spawn(["vehicle", "--mavlink", f"tcpin:127.0.0.1:{port}"], "listening")
     gcs = gcs_factory(f"tcp:127.0.0.1:{port}")
     gcs.wait_vehicle()
