@@ -1,8 +1,9 @@
 """Run a figure of the paper (or ``all``): a CSV of every point (mean and 95 % interval over
 seeds), a PNG figure and a JSON summary with the paper's claims checked, in --out DIR.
 
-Full form: episodes 10, 30, 100, 300, 1000 and 20 seeds; --quick: episodes 10, 30, 100 and
-3 seeds (every experiment together in about a minute). See docs/EXPERIMENTS.md.
+Full form: episodes 10, 30, 100, 300, 1000 and 20 seeds (``all``: about 25 core-minutes per
+preset, 12-17 minutes on 2 workers); --quick: episodes 10, 30, 100 and 3 seeds (``all`` in
+about 20 s). See docs/EXPERIMENTS.md.
 """
 
 from __future__ import annotations
