@@ -13,7 +13,7 @@ HELP = "performance figures: decision latency, playouts/s, speed-up over a plain
 
 def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--json", action="store_true", help="print the figures as JSON")
-    parser.add_argument("--decisions", type=int, default=50, help="decisions timed at each size (default: 50; the K=200, I=1000 size takes about 9 s a decision)")
+    parser.add_argument("--decisions", type=int, default=50, help="decisions timed at each size (default: 50; at K=200, I=1000 a decision takes about 2 s)")
     parser.add_argument("--iterations", type=int, default=1000, help="MCTS iterations per decision (default: 1000)")
     parser.add_argument("--reference-decisions", type=int, default=5, help="decisions timed with the pure-Python reference (default: 5; 0 skips it)")
     parser.add_argument("--quick", action="store_true", help="only the paper's size")
