@@ -22,6 +22,11 @@ NO_FILE_RX_MAX_MESSAGE_BYTES = 1 << 20
 """Largest message (after defragmentation) a session without a file accepts; zenoh's own
 default is 1 GiB, which lets one query take that much memory before anyone reads it."""
 
+RECONNECT = {"period_init_ms": 250, "period_max_ms": 1000, "period_increase_factor": 2}
+"""How often a lost ``connect`` endpoint (a restarted router) is tried again, unless the file
+sets ``connect/retry``: at most every second, so a router's restart costs about a second
+(zenoh's default backs off to 4 s)."""
+
 
 def session_config(mode: str, listen: Sequence[str] = (), connect: Sequence[str] = (),
                    multicast_scouting: bool = False, config_file: str | Path | None = None) -> zenoh.Config:
@@ -35,6 +40,8 @@ def session_config(mode: str, listen: Sequence[str] = (), connect: Sequence[str]
     else:
         conf = zenoh.Config()
         conf.insert_json5("transport/link/rx/max_message_size", str(NO_FILE_RX_MAX_MESSAGE_BYTES))
+    if json.loads(conf.get_json("connect/retry")) is None:
+        conf.insert_json5("connect/retry", json.dumps(RECONNECT))
     conf.insert_json5("mode", json.dumps(mode))
     conf.insert_json5("scouting/multicast/enabled", "true" if multicast_scouting else "false")
     conf.insert_json5("listen/endpoints", json.dumps(list(listen)))

@@ -11,7 +11,7 @@ import pytest
 from planner_service.service.config import load_config, parse_overrides
 from planner_service.service.errors import ConfigError
 from protocol import ProtocolError
-from protocol.zenoh_config import NO_FILE_RX_MAX_MESSAGE_BYTES, session_config
+from protocol.zenoh_config import NO_FILE_RX_MAX_MESSAGE_BYTES, RECONNECT, session_config
 
 
 def test_the_file_is_the_base_and_our_keys_win(tmp_path: Path) -> None:
@@ -19,6 +19,7 @@ def test_the_file_is_the_base_and_our_keys_win(tmp_path: Path) -> None:
     path.write_text("""{
       // comments are fine: JSON5
       mode: "client",
+      connect: { retry: { period_init_ms: 5000, period_max_ms: 5000, period_increase_factor: 1 } },
       listen: { endpoints: ["tcp/127.0.0.1:1"] },
       transport: { link: { tls: { enable_mtls: true, root_ca_certificate: "/x/ca.pem" } } },
     }""")
@@ -27,7 +28,8 @@ def test_the_file_is_the_base_and_our_keys_win(tmp_path: Path) -> None:
     assert json.loads(conf.get_json("listen/endpoints")) == ["tls/127.0.0.1:7000"]
     assert json.loads(conf.get_json("transport/link/tls/enable_mtls")) is True
     assert json.loads(conf.get_json("transport/link/tls/root_ca_certificate")) == "/x/ca.pem"
-    # the file's own message size (zenoh's default here) is left alone
+    # what the file sets is left alone: its reconnection and (zenoh's default) message size
+    assert json.loads(conf.get_json("connect/retry"))["period_max_ms"] == 5000
     assert json.loads(conf.get_json("transport/link/rx/max_message_size")) != NO_FILE_RX_MAX_MESSAGE_BYTES
 
 
@@ -35,6 +37,7 @@ def test_without_a_file_messages_are_capped() -> None:
     conf = session_config("peer", ["tcp/127.0.0.1:7000"])
     assert json.loads(conf.get_json("transport/link/rx/max_message_size")) == NO_FILE_RX_MAX_MESSAGE_BYTES
     assert json.loads(conf.get_json("scouting/multicast/enabled")) is False
+    assert json.loads(conf.get_json("connect/retry")) == RECONNECT
 
 
 @pytest.mark.parametrize("text, words", [
