@@ -16,7 +16,7 @@ import zenoh
 from .errors import ProtocolError
 from .keys import Keys
 from .messages import ErrorReply, Event, Plan, State, Status, TaskAck, TaskRequest, decode, decode_reply, encode
-from .zenoh_config import session_config
+from .zenoh_config import error_text, session_config
 
 
 class ClientError(ProtocolError):
@@ -53,7 +53,7 @@ class PlannerClient:
                 session = zenoh.open(conf)
             except zenoh.ZError as err:
                 raise ClientError("service", f"cannot open a zenoh session to {list(connect)}: "
-                                  f"{str(err).split(' at ')[0]}") from None
+                                  f"{error_text(err)}") from None
         self.session = session
         self._subs: list[Any] = []
 

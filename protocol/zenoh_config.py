@@ -11,6 +11,7 @@ default.
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 from typing import Sequence
 
@@ -28,6 +29,14 @@ sets ``connect/retry``: at most every second, so a router's restart costs about 
 (zenoh's default backs off to 4 s)."""
 
 
+_SOURCE = re.compile(r" at \S+\.rs:\d+\.?$")
+
+
+def error_text(err: BaseException) -> str:
+    """A zenoh error's message without the Rust source location zenoh appends."""
+    return _SOURCE.sub("", str(err).strip())
+
+
 def session_config(mode: str, listen: Sequence[str] = (), connect: Sequence[str] = (),
                    multicast_scouting: bool = False, config_file: str | Path | None = None) -> zenoh.Config:
     """A zenoh Config: ``config_file`` (or zenoh's defaults) with mode, explicit endpoints and
@@ -36,7 +45,7 @@ def session_config(mode: str, listen: Sequence[str] = (), connect: Sequence[str]
         try:
             conf = zenoh.Config.from_file(str(config_file))
         except (zenoh.ZError, OSError, ValueError) as err:
-            raise ProtocolError("config_file", f"{config_file}: {err}") from None
+            raise ProtocolError("config_file", f"{config_file}: {error_text(err)}") from None
     else:
         conf = zenoh.Config()
         conf.insert_json5("transport/link/rx/max_message_size", str(NO_FILE_RX_MAX_MESSAGE_BYTES))

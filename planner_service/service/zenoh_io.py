@@ -22,6 +22,7 @@ from typing import Any, Callable, Sequence
 import zenoh
 
 from protocol import ErrorReply, Keys, ProtocolError, encode
+from protocol.zenoh_config import error_text
 from protocol.zenoh_config import session_config as _session_config
 
 from .config import ZenohConfig
@@ -114,9 +115,9 @@ class ZenohIO:
                 c = self.cfg
                 if c.mode != "client":
                     raise ZenohError(f"cannot open a zenoh session ({c.mode}, listen {list(c.listen)}, "
-                                     f"connect {list(c.connect)}): {err}") from None
+                                     f"connect {list(c.connect)}): {error_text(err)}") from None
                 if not warned:
-                    log.warning("waiting for a zenoh router at %s: %s", list(c.connect), str(err).split(" at ")[0])
+                    log.warning("waiting for a zenoh router at %s: %s", list(c.connect), error_text(err))
                     warned = True
                 if stopping.is_set():
                     return False

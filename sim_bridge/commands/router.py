@@ -27,7 +27,7 @@ def run(args: argparse.Namespace) -> int:
     import zenoh
 
     from protocol import ProtocolError
-    from protocol.zenoh_config import session_config
+    from protocol.zenoh_config import error_text, session_config
 
     stop = threading.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
@@ -36,7 +36,7 @@ def run(args: argparse.Namespace) -> int:
         conf = session_config("router", args.listen, args.connect, False, args.zenoh_config)
         session = zenoh.open(conf)
     except (ProtocolError, zenoh.ZError) as err:
-        print(f"error: cannot start the router on {args.listen}: {str(err).split(' at ')[0]}", file=sys.stderr)
+        print(f"error: cannot start the router on {args.listen}: {error_text(err)}", file=sys.stderr)
         return 1
     print(f"router listening on {args.listen} (zid {session.info.zid()})", file=sys.stderr, flush=True)
     try:
