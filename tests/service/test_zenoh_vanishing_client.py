@@ -21,8 +21,8 @@ def open_fds(pid: int) -> int:
 @pytest.mark.timeout(120)
 def test_killed_clients_leave_nothing_behind(stack: Stack) -> None:
     stack.vehicle()
-    # the rate bound off the way: every request reaches the journal path, as a real load would
-    service = stack.service(intake__max_requests_per_s="10000")
+    # the bounds out of the way: every request reaches the journal, as a real load would
+    service = stack.service(intake__max_requests_per_s="10000", intake__max_pending_requests="1000")
     client = stack.client
     assert client is not None
     pid = service.proc.pid
