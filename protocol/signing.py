@@ -88,7 +88,8 @@ def load_key(path: str | os.PathLike[str]) -> bytes:
     text = raw.decode("ascii", errors="replace")
     text = text[:-1] if text.endswith("\n") else text
     if len(text) != 2 * KEY_BYTES:
-        raise SigningError(name, f"must hold {2 * KEY_BYTES} hex characters (a 32-byte key), found {len(text)} characters")
+        raise SigningError(name, f"must hold {2 * KEY_BYTES} hex characters (a 32-byte key), "
+                                 f"found {len(text)} characters")
     try:
         return bytes.fromhex(text)
     except ValueError:
@@ -178,7 +179,8 @@ class TimestampStore:
         try:
             fd = os.open(lock_path, os.O_RDWR | os.O_CREAT, 0o600)
         except OSError as err:
-            raise SigningError(str(self.path), f"cannot create the lock file {lock_path}: {err.strerror or err}") from None
+            raise SigningError(str(self.path),
+                               f"cannot create the lock file {lock_path}: {err.strerror or err}") from None
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except OSError:

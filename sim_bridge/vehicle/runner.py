@@ -17,6 +17,7 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from planner_service.model import Scenario
 from protocol.geodesy import GeoOrigin, local_to_global
+from protocol.errors import SigningError
 from protocol.mission import GLOBAL_FRAMES, NAV_POSITION_COMMANDS, MissionItem, f32, item_local
 from protocol.signing import Signer, TimestampStore, default_timestamp_path, load_key
 
@@ -122,8 +123,8 @@ class Vehicle:
     # --- loop ------------------------------------------------------------------------------
     def run(self, stop: threading.Event) -> None:
         """Serve until ``stop`` is set."""
-        log.info("vehicle (%s) listening on %s, speed-up %g%s", self.config.flavour, self.config.url, self.config.speedup,
-                 ", signing enforced" if self.signer is not None else "")
+        log.info("vehicle (%s) listening on %s, speed-up %g%s", self.config.flavour, self.config.url,
+                 self.config.speedup, ", signing enforced" if self.signer is not None else "")
         try:
             while not stop.is_set():
                 wait = self._last_tick + self.config.tick_s - self.clock()
@@ -135,7 +136,10 @@ class Vehicle:
             self.link.close()
             if self.signer is not None:
                 log.info("signing: %s", self.signer.stats.summary())
-                self.signer.close()
+                try:
+                    self.signer.close()
+                except SigningError as err:
+                    log.error("signing timestamp not stored: %s", err)
 
     def _safely(self, fn: Callable[..., None], *args: Any) -> None:
         try:
@@ -165,7 +169,10 @@ class Vehicle:
         self.store.tick()
         if self.signer is not None and now >= self._signing_due:
             self._signing_due = now + SIGNING_TICK_S
-            self.signer.tick()
+            try:
+                self.signer.tick()
+            except SigningError as err:  # a full disk must not stop the telemetry below
+                log.error("signing timestamp not stored (a restart could reuse timestamps): %s", err)
         self._stream(now)
 
     def _stream(self, now: float) -> None:
