@@ -69,6 +69,7 @@ def test_another_key_on_the_vehicle_fails_cleanly_and_says_so(stack: Stack, tmp_
     warning = next(line for line in service.log().splitlines() if "signs with another key" in line)
     assert "bad signature" in warning and str(ours) in warning
     assert "mission of" not in vehicle.log()
+    assert "Traceback" not in service.log() and "Traceback" not in vehicle.log()
     summary = signing_summary(vehicle.log())
     assert "0 signed accepted" in summary and "bad signature" in summary, summary
 
