@@ -93,7 +93,10 @@ class Service:
         self.zio = ZenohIO(config.zenoh, self.keys)
         m = config.mavlink
         self.link = open_link(m.backend, LinkSettings(m.url, m.flavour, m.item_timeout_s, m.retries, m.link_timeout_s,
-                                                      m.source_system, m.source_component), self._on_link_event)
+                                                      m.source_system, m.source_component,
+                                                      signing_key_file=m.signing_key_file,
+                                                      signing_timestamp_file=m.signing_timestamp_file),
+                              self._on_link_event)
         self.executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix="planner")
         self.stopping = asyncio.Event()
         self._wake = asyncio.Event()

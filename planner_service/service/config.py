@@ -10,12 +10,15 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import os
 import tomllib
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any, Mapping
 
 from protocol import Area, GeoOrigin, Keys, ProtocolError
+from protocol.errors import SigningError
+from protocol.signing import default_timestamp_path, load_key
 
 from ..model import Scenario, ScenarioError, preset
 from .errors import ConfigError
@@ -82,6 +85,13 @@ class MavlinkConfig:
     """Silence after which the link counts as lost (and is reopened)."""
     source_system: int = 255
     source_component: int = 190
+    signing_key_file: str = ""
+    """MAVLink 2 signing: sign every message with the key in this file (64 hex characters,
+    mode 0600; ``keygen`` makes one) and accept only correctly signed ones. Empty: off.
+    Needs the pymavlink backend."""
+    signing_timestamp_file: str = ""
+    """Where the last signing timestamp is kept so that a restart never reuses one; empty:
+    beside the key (KEY.service-timestamp)."""
 
 
 @dataclass(frozen=True)
@@ -306,6 +316,7 @@ def validate(c: ServiceConfig) -> None:
             raise ConfigError(f"mavlink.{key}", "must be positive")
     if m.retries < 1:
         raise ConfigError("mavlink.retries", "must be at least 1")
+    _validate_signing(m)
     if not p.budget_ms > 0:
         raise ConfigError("planner.budget_ms", "must be positive")
     if p.iterations < 0 or p.min_requests < 1 or p.replan_min_interval_s < 0:
@@ -332,6 +343,27 @@ def validate(c: ServiceConfig) -> None:
     if not area.min_flight_altitude_m <= scenario.altitude_m <= area.max_altitude_m:
         raise ConfigError("safety.max_altitude_m", f"the scenario's altitude {scenario.altitude_m} m is outside "
                           f"[{area.min_flight_altitude_m}, {area.max_altitude_m}] m")
+
+
+def _validate_signing(m: MavlinkConfig) -> None:
+    """The key must load (exists, 64 hex characters, owner-only) and the timestamp file's
+    folder be writable, so that a signing setup that cannot work is refused at start."""
+    if not m.signing_key_file:
+        if m.signing_timestamp_file:
+            raise ConfigError("mavlink.signing_timestamp_file", "set without mavlink.signing_key_file")
+        return
+    if m.backend != "pymavlink":
+        raise ConfigError("mavlink.backend", "signing needs the pymavlink backend: the mavsdk 4 binding has no MAVLink "
+                          "signing (mavlink.signing_key_file is set)")
+    try:
+        load_key(m.signing_key_file)
+    except SigningError as err:
+        raise ConfigError("mavlink.signing_key_file", str(err)) from None
+    stamps = m.signing_timestamp_file or str(default_timestamp_path(m.signing_key_file, "service"))
+    folder = os.path.dirname(stamps) or "."
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise ConfigError("mavlink.signing_timestamp_file", f"{stamps}: the folder {folder} is missing or not writable "
+                          "(the signing timestamp is stored there)")
 
 
 def to_toml(c: ServiceConfig) -> str:

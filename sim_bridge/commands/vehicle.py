@@ -33,6 +33,13 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--retries", type=int, default=5, help="re-requests before an upload is abandoned (default 5)")
     parser.add_argument("--fence-margin", type=float, default=100.0,
                         help="geofence: the scenario area grown by this many metres (default 100)")
+    parser.add_argument("--signing-key", default=None, metavar="FILE",
+                        help="enforce MAVLink 2 signing with the key in FILE (64 hex characters, mode 0600; make one "
+                             "with: python -m planner_service keygen FILE): outgoing messages are signed, incoming "
+                             "ones obeyed only if correctly signed (unsigned RADIO_STATUS excepted)")
+    parser.add_argument("--signing-timestamp-file", default=None, metavar="FILE",
+                        help="where the last signing timestamp is kept across restarts "
+                             "(default: beside the key, FILE.vehicle-timestamp)")
     parser.add_argument("--log-level", default="INFO", choices=("DEBUG", "INFO", "WARNING", "ERROR"))
 
 
@@ -42,6 +49,7 @@ def run(args: argparse.Namespace) -> int:
     # Imported here so that `--help` does not pay for numba and pymavlink.
     from planner_service.model import ScenarioError, preset
     from protocol.errors import MissionError
+    from protocol.errors import SigningError
     from protocol.geodesy import GeoOrigin
     from sim_bridge.vehicle import Vehicle, VehicleConfig, VehicleError
 
@@ -52,9 +60,10 @@ def run(args: argparse.Namespace) -> int:
             url=args.mavlink, flavour=args.flavour, scenario=scenario, origin=origin,
             speedup=args.speedup, system_id=args.sysid, item_timeout_s=args.item_timeout,
             max_retries=args.retries, fence_margin_m=args.fence_margin,
+            signing_key_file=args.signing_key, signing_timestamp_file=args.signing_timestamp_file,
         )
         vehicle = Vehicle(config)
-    except (ScenarioError, MissionError, VehicleError) as exc:
+    except (ScenarioError, MissionError, VehicleError, SigningError) as exc:
         print(f"vehicle: {exc}", file=sys.stderr)
         return 2
     stop = threading.Event()
