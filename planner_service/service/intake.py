@@ -86,7 +86,6 @@ class Intake:
                       queue_position=position, client_ref=request.client_ref)
         return Accepted(request_id, request.user_id, request.tasks, tuple(replaced), ack)
 
-
     def _over_limit(self, user_id: str, now_s: float) -> str | None:
         """Why this valid request cannot be taken now, or None. Checked in this order so that
         a refused request costs no rate token."""
