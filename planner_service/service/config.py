@@ -43,6 +43,26 @@ class ZenohConfig:
     """Second chunk: the vehicle id."""
     status_hz: float = 2.0
     """Rate of the status publication (at least 1 Hz)."""
+    max_queries_in_flight: int = 64
+    """Queries handed from zenoh's threads to the event loop and not yet answered; one more
+    is answered at once "busy: ..." from zenoh's thread (bounds the memory a flood takes)."""
+    config_file: str = ""
+    """A zenoh configuration file (JSON5) used as the session's base (TLS, access control,
+    timeouts); mode, listen, connect and multicast_scouting above are applied on top. Empty:
+    zenoh's defaults."""
+
+
+@dataclass(frozen=True)
+class IntakeConfig:
+    max_pending_requests: int = 100
+    """Pending requests the journal holds; beyond it a user without a pending request is
+    refused "busy: ..." (a user replacing its own pending request is still taken)."""
+    max_users: int = 200
+    """Distinct user ids in one sortie; a request from a new id beyond it is refused "full: ..."
+    (bounds the journal's users and the planner's size)."""
+    max_requests_per_s: float = 50.0
+    """Accepted requests per second, over a one-second burst; beyond it "busy: ..." (bounds
+    the journal's growth and the fsyncs a flood costs)."""
 
 
 @dataclass(frozen=True)
@@ -121,6 +141,7 @@ class SafetyConfig:
 @dataclass(frozen=True)
 class ServiceConfig:
     zenoh: ZenohConfig = field(default_factory=ZenohConfig)
+    intake: IntakeConfig = field(default_factory=IntakeConfig)
     mavlink: MavlinkConfig = field(default_factory=MavlinkConfig)
     planner: PlannerConfig = field(default_factory=PlannerConfig)
     journal: JournalConfig = field(default_factory=JournalConfig)
@@ -149,7 +170,7 @@ class ServiceConfig:
         return Keys(self.zenoh.prefix, self.zenoh.vehicle)
 
 
-_SECTIONS = {"zenoh": ZenohConfig, "mavlink": MavlinkConfig, "planner": PlannerConfig,
+_SECTIONS = {"zenoh": ZenohConfig, "intake": IntakeConfig, "mavlink": MavlinkConfig, "planner": PlannerConfig,
              "journal": JournalConfig, "origin": OriginConfig, "safety": SafetyConfig}
 
 
@@ -273,6 +294,15 @@ def validate(c: ServiceConfig) -> None:
         raise ConfigError("zenoh.connect", "client mode needs at least one endpoint to connect to")
     if not z.status_hz >= 1.0:
         raise ConfigError("zenoh.status_hz", f"must be at least 1 Hz, got {z.status_hz}")
+    if z.max_queries_in_flight < 1:
+        raise ConfigError("zenoh.max_queries_in_flight", "must be at least 1")
+    if z.config_file and not Path(z.config_file).is_file():
+        raise ConfigError("zenoh.config_file", f"{z.config_file} is not a readable file")
+    i = c.intake
+    if i.max_pending_requests < 1 or i.max_users < 1:
+        raise ConfigError("intake", "max_pending_requests and max_users must be at least 1")
+    if not i.max_requests_per_s > 0:
+        raise ConfigError("intake.max_requests_per_s", "must be positive")
     try:
         c.keys()
     except ProtocolError as err:
@@ -291,6 +321,9 @@ def validate(c: ServiceConfig) -> None:
         raise ConfigError("planner.budget_ms", "must be positive")
     if p.iterations < 0 or p.min_requests < 1 or p.replan_min_interval_s < 0:
         raise ConfigError("planner", "iterations >= 0, min_requests >= 1, replan_min_interval_s >= 0")
+    if p.min_requests > c.intake.max_pending_requests:
+        raise ConfigError("planner.min_requests", f"{p.min_requests} can never be pending: "
+                          f"intake.max_pending_requests is {c.intake.max_pending_requests}")
     if c.journal.synchronous.upper() not in ("OFF", "NORMAL", "FULL", "EXTRA"):
         raise ConfigError("journal.synchronous", "must be OFF, NORMAL, FULL or EXTRA")
     if not s.energy_margin_j >= 0:
