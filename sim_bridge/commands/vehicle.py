@@ -33,6 +33,10 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--retries", type=int, default=5, help="re-requests before an upload is abandoned (default 5)")
     parser.add_argument("--fence-margin", type=float, default=100.0,
                         help="geofence: the scenario area grown by this many metres (default 100)")
+    parser.add_argument("--state-file", default=None, metavar="PATH",
+                        help="save the flight (position, battery, armed, mode, time, home) here a few times a "
+                             "second and, if the file exists at start, resume from it as after a reboot: in the "
+                             "air it holds position, its mission lost; time_boot_ms restarts from 0")
     parser.add_argument("--log-level", default="INFO", choices=("DEBUG", "INFO", "WARNING", "ERROR"))
 
 
@@ -52,6 +56,7 @@ def run(args: argparse.Namespace) -> int:
             url=args.mavlink, flavour=args.flavour, scenario=scenario, origin=origin,
             speedup=args.speedup, system_id=args.sysid, item_timeout_s=args.item_timeout,
             max_retries=args.retries, fence_margin_m=args.fence_margin,
+            state_file=args.state_file,
         )
         vehicle = Vehicle(config)
     except (ScenarioError, MissionError, VehicleError) as exc:
