@@ -148,6 +148,12 @@ def mission_digest(items: Sequence[MissionItem], flavour: Flavour = "ardupilot")
     return f"{crc:08x}"
 
 
+def same_mission(a: Sequence[MissionItem], b: Sequence[MissionItem], flavour: Flavour = "ardupilot") -> bool:
+    """``a`` and ``b`` fly the same (a mission read back from the vehicle against the one
+    uploaded: ArduPilot's item 0 and ``current`` aside, float32 values as on the wire)."""
+    return len(a) == len(b) and mission_digest(a, flavour) == mission_digest(b, flavour)
+
+
 @dataclass(frozen=True)
 class HoverPoint:
     """A point of the planned path in local metres and how long to hold there."""
