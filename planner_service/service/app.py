@@ -53,7 +53,10 @@ RETRY_S = 1.0
 CONNECT_TIMEOUT_S = 10.0
 UPLOAD_SLACK_S = 0.5
 """Wall time allowed for an upload and the messages around it, when judging whether the
-vehicle may reach its point before a new mission does."""
+vehicle may reach its point before a new mission does (at least; more when uploads have
+been taking longer: see ``_upload_s``)."""
+UPLOAD_HISTORY = 5
+"""Uploads whose wall time is remembered: the longest of them is expected of the next."""
 PROGRESS_WAIT_S = 2.0
 """After the vehicle's mission was read back, wait this long at most for its MISSION_CURRENT
 (streamed at 2 Hz) before planning, so that points flown meanwhile are recorded first."""
@@ -117,6 +120,8 @@ class Service:
         """The vehicle lost its mission in the air: resume (or ask the operator) after the upload."""
         self._progress_after = 0.0
         self._progress_seen = True
+        self._upload_times_s: list[float] = []
+        """Wall time of the last accepted uploads (a lossy link makes them seconds long)."""
         self.plan_msg: Plan | None = None
         self.sortie_over = self.journal.get_meta("sortie_over")
         if self.sortie_over:
@@ -323,7 +328,7 @@ class Service:
             return
         self._progress_seen = True
         # MISSION_CURRENT.total leaves ArduPilot's home out by the spec (the stub counts it);
-        # 0 means the vehicle has no mission. Anything else is a mission we did not upload.
+        # 0: the vehicle has no mission, -1: it does not say. Else a mission we did not upload.
         n = len(held.items)
         if ev.total >= 0 and ev.total not in (n, n - 1 if self.flavour == "ardupilot" else n):
             self._doubt(f"the vehicle reports a mission of {ev.total} items, not the {n} of plan {held.plan_id}")
@@ -480,8 +485,8 @@ class Service:
         self.held, self._held_gen, self._counted, self._unconfirmed = None, None, set(), None
         self._must_upload = t.airborne
         self._resume_pending = t.airborne
-        detail = (f"{why}: the vehicle holds {len(items)} items, not plan {lost.plan_id if lost else '-'}; "
-                  f"re-planning from where it is")
+        ours = f"plan {lost.plan_id}" if lost is not None else "a mission of ours"
+        detail = f"{why}: the vehicle holds {len(items)} items, not {ours}; re-planning from where it is"
         log.warning("%s", detail)
         if not why or "restarted" not in why:
             self._event("vehicle_restarted", detail=detail[:256])
@@ -501,16 +506,23 @@ class Service:
         if point is None:
             return False
         fix = self._fix()
-        age_s = max(time.monotonic() - t.position_at, 0.0) + self.cfg.planner.budget_ms / 1e3 + UPLOAD_SLACK_S
+        age_s = max(time.monotonic() - t.position_at, 0.0) + self.cfg.planner.budget_ms / 1e3 + self._upload_s()
         reach_m = self.scenario.speed_mps * t.time_rate * age_s + HOLD_RADIUS_M
         return math.dist((fix.x_m, fix.y_m, fix.z_m), (point.x_m, point.y_m, point.z_m)) <= reach_m
 
+    def _upload_s(self) -> float:
+        """Wall time the next upload may take: the longest of the last few (seconds on a
+        lossy link, where each lost message waits ``item_timeout_s``), at least
+        ``UPLOAD_SLACK_S``. The vehicle flies the old mission meanwhile."""
+        return max([UPLOAD_SLACK_S, *self._upload_times_s])
+
     def _planning_fix(self) -> VehicleFix:
-        """The vehicle as the planner should see it: a conservative battery."""
+        """The vehicle as the planner should see it: a conservative battery, less what it
+        spends until the plan is flown (the reading's age, the search, the upload)."""
         fix = self._fix()
         t = self.link.telemetry
         stale_wall = max(time.monotonic() - t.battery_at, 0.0) if t.battery_at else 0.0
-        stale_vehicle = t.time_rate * (stale_wall + self.cfg.planner.budget_ms / 1e3 + 0.2)
+        stale_vehicle = t.time_rate * (stale_wall + self.cfg.planner.budget_ms / 1e3 + self._upload_s())
         battery = planning_battery_j(self.scenario, fix.battery_j, stale_vehicle, self.cfg.safety.energy_margin_j)
         return replace(fix, battery_j=battery)
 
@@ -523,8 +535,8 @@ class Service:
         decision, path = await asyncio.get_running_loop().run_in_executor(self.executor, self.planner.decide, assembled)
         planner_ms = (time.perf_counter() - t0) * 1e3
         self._last_plan_t = time.monotonic()
-        if self.stopping.is_set() or self._doubt_reason is not None:
-            self._wake.set()
+        if self.stopping.is_set() or self.sortie_over or self._doubt_reason is not None:
+            self._wake.set()  # the doubt is settled first; a landing or shutdown ends it all
             return None
         if version != self._version:  # a service was recorded meanwhile: plan again from it
             self._urgent.set()
@@ -552,6 +564,7 @@ class Service:
                 self._doubt(f"the outcome of plan {plan_id}'s upload is unknown")
             raise
         upload_ms = (time.perf_counter() - t1) * 1e3
+        self._upload_times_s = [*self._upload_times_s, upload_ms / 1e3][-UPLOAD_HISTORY:]
         self.plan_id = plan_id
         self.journal.record_mission(plan_id, [item_dict(i) for i in items], _points(path), "accepted", self.clock())
         self.held = HeldMission.build(plan_id, items, path.points, self.flavour)

@@ -171,7 +171,8 @@ def mission_current(flight: Flight, seq: int | None = None, state: int | None = 
     seq = min(flight.current if seq is None else seq, last)
     mode = 1 if flight.mode is Mode.AUTO else 2
     state = mission_state(flight) if state is None else state
-    return mavlink.MAVLink_mission_current_message(seq, len(flight.mission), state, mode)
+    total = len(flight.mission) if flight.mission else 0xFFFF  # UINT16_MAX: no mission (MAVLink)
+    return mavlink.MAVLink_mission_current_message(seq, total, state, mode)
 
 
 def home_position(flight: Flight) -> Any:

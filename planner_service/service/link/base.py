@@ -84,7 +84,8 @@ class ClockRate:
 class LinkEvent:
     """Something the vehicle reported: ``kind`` is connected, lost, restored, restarted
     (the vehicle rebooted: its clock went back), reached (``seq``: a mission item
-    completed), current (``seq`` now flown, ``total`` items), mode (``text``: the new mode),
+    completed), current (``seq`` now flown, ``total`` items: 0 none, -1 not said), mode (``text``:
+    the new mode),
     landed, text (a STATUSTEXT).
 
     ``mission`` says which mission a reached or current event is about: the link's

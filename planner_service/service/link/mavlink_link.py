@@ -38,6 +38,7 @@ from protocol import MissionItem, same_mission  # noqa: E402
 
 from ..errors import LinkError  # noqa: E402
 from .base import ClockRate, LinkEvent, LinkSettings, Telemetry, VehicleLink, mode_name  # noqa: E402
+from .rtt import RetryTimer  # noqa: E402
 from .upload import MissionDownload, MissionUpload, cancel_message  # noqa: E402
 
 M = mavutil.mavlink
@@ -81,6 +82,8 @@ class PymavlinkLink(VehicleLink):
         self._command_lock = asyncio.Lock()
         self._tasks: list[asyncio.Task[None]] = []
         self._clock_rate = ClockRate()
+        self.timer = RetryTimer(settings.item_timeout_s)
+        """Wait before repeating a mission message or a command: the measured round trip."""
 
     # --- lifecycle ------------------------------------------------------------------------
     async def connect(self, timeout_s: float) -> None:
@@ -233,8 +236,9 @@ class PymavlinkLink(VehicleLink):
         elif kind == "MISSION_CURRENT":
             if self._commit_possible or not self._fresh(msg):
                 return  # about the mission held before the last upload, or about either
-            total = int(getattr(msg, "total", 0) or 0)
-            total = total if total != 0xFFFF else 0
+            raw = int(getattr(msg, "total", 0) or 0)
+            # MAVLink: 0 when the autopilot does not say, UINT16_MAX when it has no mission.
+            total = -1 if raw == 0 else 0 if raw == 0xFFFF else raw
             changed = (msg.seq, total) != (self.telemetry.mission_seq, self.telemetry.mission_total)
             self._set(mission_seq=int(msg.seq), mission_total=total)
             if changed:
@@ -292,12 +296,18 @@ class PymavlinkLink(VehicleLink):
         self._mission_moved.clear()
         try:
             op.begin()
+            sent_at, repeated = time.monotonic(), False
             while op.done is None:
                 try:
-                    await asyncio.wait_for(self._mission_moved.wait(), self.settings.item_timeout_s)
+                    await asyncio.wait_for(self._mission_moved.wait(), self.timer.timeout_s)
+                    now = time.monotonic()
+                    if not repeated:
+                        self.timer.sample(now - sent_at)
+                    sent_at, repeated = now, False
                 except TimeoutError:
                     op.on_timeout()
                     self._note_commit_possible(op)
+                    sent_at, repeated = time.monotonic(), True
                 self._mission_moved.clear()
             return op.done
         finally:
@@ -363,8 +373,11 @@ class PymavlinkLink(VehicleLink):
                 future: asyncio.Future[int] = self._loop.create_future()
                 self._acks[command] = future
                 try:
+                    sent_at = time.monotonic()
                     self._send(M.MAVLink_command_long_message(*self._target, command, confirmation, *p))
-                    result = await asyncio.wait_for(future, self.settings.item_timeout_s)
+                    result = await asyncio.wait_for(future, self.timer.timeout_s)
+                    if confirmation == 0:
+                        self.timer.sample(time.monotonic() - sent_at)
                 except TimeoutError:
                     continue
                 finally:
