@@ -58,12 +58,13 @@ def test_sortie_over_a_lossy_link(stack: Stack) -> None:
 
 
 @pytest.mark.timeout(150)
-def test_vehicle_restart_mid_sortie(stack: Stack) -> None:
+@pytest.mark.parametrize("backend, flavour", [("pymavlink", "ardupilot"), ("mavsdk", "px4")])
+def test_vehicle_restart_mid_sortie(stack: Stack, backend: str, flavour: str) -> None:
     scenario = field()
     state = stack.tmp / "vehicle-state.json"
-    args = ("--speedup", SPEEDUP, "--state-file", str(state))
+    args = ("--speedup", SPEEDUP, "--state-file", str(state), "--flavour", flavour)
     first = stack.vehicle(*args)
-    service = stack.service(**SERVICE)
+    service = stack.service(mavlink__backend=backend, mavlink__flavour=flavour, **SERVICE)
     users = stack.users("--count", "6", "--speedup", SPEEDUP, "--seed", "3")
     stack.wait_event(lambda e: e.event == "user_served", 60.0, "a first service")
     kill(first)
@@ -79,8 +80,8 @@ def test_vehicle_restart_mid_sortie(stack: Stack) -> None:
 
     kinds = [e.event for e in stack.events]
     assert "vehicle_restarted" in kinds, kinds
-    check_sortie(stack, scenario, "ardupilot", [first.log(), second.log()])
-    print(f"\nvehicle restart: new mission accepted {uploaded.time_s - back_at:.2f} s after the vehicle was started "
+    check_sortie(stack, scenario, flavour, [first.log(), second.log()])
+    print(f"\nvehicle restart ({backend}): new mission accepted {uploaded.time_s - back_at:.2f} s after the vehicle was started "
           f"again, resumed at {resumed.time_s - back_at:.2f} s ({uploaded.detail.split(';')[0]})")
 
 

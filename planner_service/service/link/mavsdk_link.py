@@ -230,7 +230,9 @@ class MavsdkLink(VehicleLink):
             try:
                 raw = await self._raw.download_mission()
             except MissionRawError as err:
-                raise LinkError("download_mission()", _name(err.result)) from None
+                if err.result != MissionRawResult.NO_MISSION_AVAILABLE:
+                    raise LinkError("download_mission()", _name(err.result)) from None
+                raw = []  # the vehicle holds none
             self._expect_total, self._progress = len(raw), None
             self.generation += 1
             return [mission_item(r) for r in raw]
