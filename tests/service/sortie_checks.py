@@ -1,5 +1,5 @@
-"""The checks of a whole sortie, shared by the end-to-end tests (helper of test_sortie.py and
-test_faults.py): the journal against the vehicle stub's own log.
+"""The checks of a whole sortie for the end-to-end fault tests (helper of test_faults.py; it
+repeats test_sortie.py's checks and adds): the journal against the vehicle stub's own log.
 
 The vehicle logs every mission it commits with its digest (``protocol.mission_digest``) and
 every item it reaches; from those and the journal's accepted missions the visits the
