@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import math
 import struct
+import zlib
 from dataclasses import dataclass, field
 from typing import Any, Iterable, Literal, Sequence
 
@@ -128,6 +129,29 @@ def _to_int(value: float, where: str) -> int:
 def same_items(a: Sequence[MissionItem], b: Sequence[MissionItem]) -> bool:
     """Two missions hold the same items (NaN equal to NaN)."""
     return len(a) == len(b) and all(x.same_as(y) for x, y in zip(a, b))
+
+
+def mission_digest(items: Sequence[MissionItem], flavour: Flavour = "ardupilot") -> str:
+    """A short fingerprint (CRC-32, 8 hex digits) of what a mission flies: each item's
+    command, frame, parameters and position as MAVLink carries them (float32), in order.
+    ``current`` is left out (it marks where to start, not what to fly), and so is
+    ArduPilot's item 0, which the autopilot replaces with home. The vehicle stub logs it
+    for every mission it commits, so a test can tell which upload the vehicle holds."""
+    _check_flavour(flavour)
+    start = 1 if flavour == "ardupilot" and items else 0
+    crc = 0
+    for item in items[start:]:
+        params = (item.param1, item.param2, item.param3, item.param4, item.z)
+        crc = zlib.crc32(struct.pack("<3H5f2i", item.command, item.frame, item.autocontinue,
+                                     *(math.nan if math.isnan(v) else f32(v) for v in params),
+                                     item.x, item.y), crc)
+    return f"{crc:08x}"
+
+
+def same_mission(a: Sequence[MissionItem], b: Sequence[MissionItem], flavour: Flavour = "ardupilot") -> bool:
+    """``a`` and ``b`` fly the same (a mission read back from the vehicle against the one
+    uploaded: ArduPilot's item 0 and ``current`` aside, float32 values as on the wire)."""
+    return len(a) == len(b) and mission_digest(a, flavour) == mission_digest(b, flavour)
 
 
 @dataclass(frozen=True)

@@ -78,11 +78,12 @@ class MavlinkConfig:
     """Arm and start the mission once one is uploaded. Off by default: on a real aircraft
     the operator arms; turn it on only where the operator allows it (the stub, SITL)."""
     item_timeout_s: float = 0.5
-    """Wait for the autopilot's next request or ack before repeating the last message."""
+    """Longest wait for the autopilot's next request or ack before repeating the last
+    message (the link waits about four measured round trips when that is shorter)."""
     retries: int = 10
     """Repeats of one message before an upload is given up."""
     link_timeout_s: float = 3.0
-    """Silence after which the link counts as lost (and is reopened)."""
+    """Silence (no message at all) after which the link counts as lost."""
     source_system: int = 255
     source_component: int = 190
     signing_key_file: str = ""

@@ -40,6 +40,10 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--signing-timestamp-file", default=None, metavar="FILE",
                         help="where the last signing timestamp is kept across restarts "
                              "(default: beside the key, FILE.vehicle-timestamp)")
+    parser.add_argument("--state-file", default=None, metavar="PATH",
+                        help="save the flight (position, battery, armed, mode, time, home) here a few times a "
+                             "second and, if the file exists at start, resume from it as after a reboot: in the "
+                             "air it holds position, its mission lost; time_boot_ms restarts from 0")
     parser.add_argument("--log-level", default="INFO", choices=("DEBUG", "INFO", "WARNING", "ERROR"))
 
 
@@ -61,6 +65,7 @@ def run(args: argparse.Namespace) -> int:
             speedup=args.speedup, system_id=args.sysid, item_timeout_s=args.item_timeout,
             max_retries=args.retries, fence_margin_m=args.fence_margin,
             signing_key_file=args.signing_key, signing_timestamp_file=args.signing_timestamp_file,
+            state_file=args.state_file,
         )
         vehicle = Vehicle(config)
     except (ScenarioError, MissionError, VehicleError, SigningError) as exc:

@@ -10,6 +10,7 @@ from __future__ import annotations
 import logging
 import threading
 import time
+from pathlib import Path
 from dataclasses import dataclass, field
 from typing import Any, Callable, Hashable
 
@@ -18,7 +19,7 @@ from pymavlink.dialects.v20 import common as mavlink
 from planner_service.model import Scenario
 from protocol.geodesy import GeoOrigin, local_to_global
 from protocol.errors import SigningError
-from protocol.mission import GLOBAL_FRAMES, NAV_POSITION_COMMANDS, MissionItem, f32, item_local
+from protocol.mission import GLOBAL_FRAMES, NAV_POSITION_COMMANDS, MissionItem, f32, item_local, mission_digest
 from protocol.signing import Signer, TimestampStore, default_timestamp_path, load_key
 
 from . import telemetry as tm
@@ -27,6 +28,7 @@ from .errors import VehicleError
 from .flight import Flight, FlightEvent
 from .link import Link, Received
 from .mission_store import MissionStore
+from .state_file import SAVE_INTERVAL_S, load_state, save_state
 from .modes import mode_from_custom, mode_name
 
 log = logging.getLogger(__name__)
@@ -71,6 +73,9 @@ class VehicleConfig:
     """Enforce MAVLink 2 signing with the key in this file (``protocol.signing.load_key``)."""
     signing_timestamp_file: str | None = None
     """Where the signing timestamp is kept; default beside the key (KEY.vehicle-timestamp)."""
+    state_file: str | None = None
+    """Save the flight here a few times a second and resume from it at start (a restart
+    in the air comes back holding position, its mission lost)."""
 
     def __post_init__(self) -> None:
         if self.flavour not in ("ardupilot", "px4"):
@@ -107,8 +112,18 @@ class Vehicle:
         self._due: dict[int, float] = {}
         self._last_tick = clock()
         self._power_w = 0.0
+        self._state_path = Path(config.state_file) if config.state_file else None
+        self._saved_at = -float("inf")
+        if self._state_path is not None:
+            snap = load_state(self._state_path)
+            if snap is not None:
+                self.flight.resume(snap)
+                f = self.flight
+                log.info("restarted from %s: %s at (%.0f, %.0f, %.0f) m, battery %.1f%%, mode %s, mission lost",
+                         self._state_path, "airborne" if not f.landed else "on the ground", *f.pos,
+                         100 * f.battery_fraction, mode_name(config.flavour, f.mode))
         self._last_mode = self.flight.mode
-        self._last_armed = False
+        self._last_armed = self.flight.armed
         self._signing_due = clock() + SIGNING_TICK_S
 
     @staticmethod
@@ -134,6 +149,7 @@ class Vehicle:
                     self._safely(self.tick)
         finally:
             self.link.close()
+            self._safely(self._save_state, True)
             if self.signer is not None:
                 log.info("signing: %s", self.signer.stats.summary())
                 try:
@@ -174,6 +190,15 @@ class Vehicle:
             except SigningError as err:  # a full disk must not stop the telemetry below
                 log.error("signing timestamp not stored (a restart could reuse timestamps): %s", err)
         self._stream(now)
+        self._save_state()
+
+    def _save_state(self, force: bool = False) -> None:
+        """The flight to the state file, every ``SAVE_INTERVAL_S`` of wall time."""
+        now = self.clock()
+        if self._state_path is None or (not force and now < self._saved_at + SAVE_INTERVAL_S):
+            return
+        self._saved_at = now
+        save_state(self._state_path, self.flight.snapshot())
 
     def _stream(self, now: float) -> None:
         for msg_id, interval in self.intervals.items():
@@ -276,7 +301,7 @@ class Vehicle:
         return True
 
     def _on_commit(self, items: list[MissionItem]) -> list[MissionItem]:
-        log.info("mission of %d items accepted", len(items))
+        log.info("mission of %d items accepted (digest %s)", len(items), mission_digest(items, self.config.flavour))
         if self.config.flavour == "ardupilot" and items:
             # ArduPilot keeps home in item 0 whatever was uploaded there (a download
             # returns home): the pitfall the flavour exists to reproduce.
