@@ -174,3 +174,25 @@ def test_a_state_query_answers_the_same_state_whatever_it_carries(tmp_path: Path
     finally:
         service.executor.shutdown()
         service.journal.close()
+
+
+# --- regressions the fuzzing found in intake.py -------------------------------------------------
+def test_nesting_deeper_than_the_recursion_limit_is_refused(tmp_path: Path) -> None:
+    # Was RecursionError (not a ValueError) from json.loads reading the client_ref.
+    journal = Journal(tmp_path / "journal.sqlite")
+    out = Intake(journal, AREA, clock=lambda: NOW).handle(b"[" * 2000 + b"]" * 2000)
+    assert isinstance(out, Rejected) and out.reply.field == "payload"
+    assert journal.requests() == []
+
+
+def test_a_lone_surrogate_client_ref_is_not_echoed(tmp_path: Path) -> None:
+    # The ref was echoed into the ErrorReply, which then could not be encoded: the service's
+    # handler raised and the client got no answer.
+    intake = Intake(Journal(tmp_path / "journal.sqlite"), AREA, clock=lambda: NOW)
+    out = intake.handle(b'{"kind": "task_request", "user_id": "u", "x_m": 1, "y_m": 1, "tasks": 1, '
+                        b'"client_ref": "\\ud800"}')
+    assert isinstance(out, Rejected) and out.reply.client_ref is None and out.reply.field == "client_ref"
+    assert decode_reply(encode(out.reply)) == out.reply
+    named = intake.handle(b'{"kind": "task_request", "\\udfff": NaN, "client_ref": "mine"}')
+    assert isinstance(named, Rejected) and named.reply.client_ref == "mine"
+    assert decode_reply(encode(named.reply)) == named.reply  # the field is sent as an escape
