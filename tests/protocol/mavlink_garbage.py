@@ -48,6 +48,25 @@ def state_changing(dialect: Any, target: int, target_component: int = 1) -> list
     return messages
 
 
+def telemetry_changing(system: int = 1) -> list[bytes]:
+    """Frames from the autopilot ``system`` that would change what a ground station shows:
+    armed in AUTO, airborne, elsewhere, battery low, at another mission item."""
+    m = v2
+    frames = [
+        m.MAVLink_heartbeat_message(m.MAV_TYPE_QUADROTOR, m.MAV_AUTOPILOT_ARDUPILOTMEGA,
+                                    m.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | m.MAV_MODE_FLAG_SAFETY_ARMED, 3,
+                                    m.MAV_STATE_ACTIVE, 3),
+        m.MAVLink_global_position_int_message(5000, 473990000, 85480000, 588000, 100000, 100, 0, 0, 0),
+        m.MAVLink_extended_sys_state_message(0, m.MAV_LANDED_STATE_IN_AIR),
+        m.MAVLink_sys_status_message(0, 0, 0, 500, 14000, -1, 5, 0, 0, 0, 0, 0, 0),
+        m.MAVLink_battery_status_message(0, 0, 0, 2000, [3500] * 10, -1, 500, -1, 5),
+        m.MAVLink_mission_current_message(4, 9),
+        m.MAVLink_mission_item_reached_message(3),
+        m.MAVLink_statustext_message(m.MAV_SEVERITY_CRITICAL, b"garbage got through"),
+    ]
+    return [_frame(msg, v2, system, 1) for msg in frames]
+
+
 def read_only_frames() -> list[bytes]:
     """Valid MAVLink 2 frames a ground station may send that change nothing."""
     return [
@@ -62,11 +81,12 @@ def _flip(rng: random.Random, frame: bytes, lo: int, hi: int) -> bytes:
     return frame[:i] + bytes([frame[i] ^ (1 << rng.randrange(8))]) + frame[i + 1:]
 
 
-def chunks(seed: int, target: int = 1) -> Iterator[tuple[str, bytes]]:
+def chunks(seed: int, target: int = 1, spoil: list[bytes] | None = None) -> Iterator[tuple[str, bytes]]:
     """(what, bytes) pieces of garbage for the vehicle ``target``, each to be sent alone
-    (a datagram) or concatenated (a TCP stream)."""
+    (a datagram) or concatenated (a TCP stream). The frames spoiled are ``spoil``
+    (default: commands and mission messages to ``target``)."""
     rng = random.Random(seed)
-    ours = [_frame(msg, v2) for msg in state_changing(v2, target)]
+    ours = spoil if spoil is not None else [_frame(msg, v2) for msg in state_changing(v2, target)]
     for size in (0, 1, 2, 7, 11, 12, 280, 281, 1500, 4096):
         yield "random", rng.randbytes(size)
     yield "start bytes", bytes(rng.choice((0xFD, 0xFE)) for _ in range(600))
@@ -98,11 +118,11 @@ def chunks(seed: int, target: int = 1) -> Iterator[tuple[str, bytes]]:
     yield "valid between garbage", mixed
 
 
-def random_frames(seed: int, count: int, target: int = 1) -> Iterator[bytes]:
-    """``count`` spoiled copies of state-changing frames, each with 1-3 random byte edits
-    (the CRC covers every byte after the start byte, so each edit is detectable)."""
+def random_frames(seed: int, count: int, target: int = 1, spoil: list[bytes] | None = None) -> Iterator[bytes]:
+    """``count`` spoiled copies of state-changing frames (``spoil``, as in ``chunks``), each
+    with 1-3 random byte edits (the CRC covers every byte after the start byte)."""
     rng = random.Random(seed)
-    ours = [_frame(msg, v2) for msg in state_changing(v2, target)]
+    ours = spoil if spoil is not None else [_frame(msg, v2) for msg in state_changing(v2, target)]
     for _ in range(count):
         frame = bytearray(rng.choice(ours))
         for _ in range(rng.randint(1, 3)):
