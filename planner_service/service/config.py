@@ -62,6 +62,10 @@ class MavlinkConfig:
     """Silence after which the link counts as lost (and is reopened)."""
     source_system: int = 255
     source_component: int = 190
+    max_mission_items: int = 512
+    """The autopilot's mission capacity: a plan of more items is refused before upload
+    (``protocol.validate_mission``). ArduPilot's depends on its storage; the stub's is
+    ``--max-mission-items``."""
 
 
 @dataclass(frozen=True)
@@ -276,6 +280,8 @@ def validate(c: ServiceConfig) -> None:
             raise ConfigError(f"mavlink.{key}", "must be positive")
     if m.retries < 1:
         raise ConfigError("mavlink.retries", "must be at least 1")
+    if not 3 <= m.max_mission_items <= 65535:  # home, takeoff and RTL; MISSION_COUNT is uint16
+        raise ConfigError("mavlink.max_mission_items", f"must lie in 3..65535, got {m.max_mission_items}")
     if not p.budget_ms > 0:
         raise ConfigError("planner.budget_ms", "must be positive")
     if p.iterations < 0 or p.min_requests < 1 or p.replan_min_interval_s < 0:
