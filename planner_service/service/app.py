@@ -42,6 +42,7 @@ from .link.base import MISSION_MODES, RETURNING_MODES
 from .planning import (PlannedPath, Planner, VehicleFix, assemble, check_path, not_served_reason, planning_battery_j,
                        should_return)
 from .progress import HOLD_RADIUS_M, HeldMission, item_dict, item_from_dict
+from .throttle import RateLimit
 from .zenoh_io import ZenohIO, reply_and_drop
 
 log = logging.getLogger("planner_service")
@@ -51,6 +52,11 @@ GRACE_S = 5.0
 RETRY_S = 1.0
 """Wait before re-trying a failed plan, upload or start."""
 CONNECT_TIMEOUT_S = 10.0
+REFUSAL_EVENTS_PER_S = 5.0
+"""At most this many ``request_rejected`` events a second for refused requests (a flood of
+bad requests must not become a flood of events); the rest are counted in the next one."""
+BUSY_LOG_EVERY_S = 10.0
+"""Period of the warning that counts queries answered busy."""
 UPLOAD_SLACK_S = 0.5
 """Wall time allowed for an upload and the messages around it, when judging whether the
 vehicle may reach its point before a new mission does."""
@@ -77,14 +83,20 @@ class Service:
         self.keys = config.keys()
         self.flavour = config.mavlink.flavour
         self.journal = Journal(config.journal.path, config.journal.synchronous)
-        self.intake = Intake(self.journal, self.area, clock)
+        self.intake = Intake(self.journal, self.area, clock, config.intake)
+        self._refusal_events = RateLimit(REFUSAL_EVENTS_PER_S, time.monotonic())
+        self._refusals_unreported = 0
+        self._busy_logged = (time.monotonic(), 0)
         budget = config.planner.budget_ms
         self.planner = Planner(self.scenario, MctsConfig(iterations=config.planner.iterations or None, budget_ms=budget),
                                config.planner.seed)
         self.zio = ZenohIO(config.zenoh, self.keys)
         m = config.mavlink
         self.link = open_link(m.backend, LinkSettings(m.url, m.flavour, m.item_timeout_s, m.retries, m.link_timeout_s,
-                                                      m.source_system, m.source_component), self._on_link_event)
+                                                      m.source_system, m.source_component,
+                                                      signing_key_file=m.signing_key_file,
+                                                      signing_timestamp_file=m.signing_timestamp_file),
+                              self._on_link_event)
         self.executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix="planner")
         self.stopping = asyncio.Event()
         self._wake = asyncio.Event()
@@ -121,17 +133,27 @@ class Service:
                 loop.add_signal_handler(sig, self.stopping.set)
             except (NotImplementedError, RuntimeError):  # not the main thread (tests)
                 pass
-        self.zio.open(loop, self._on_request, self._on_state)
-        log.info("zenoh %s session on %s (connect %s); keys %s/**", self.cfg.zenoh.mode, list(self.cfg.zenoh.listen),
-                 list(self.cfg.zenoh.connect), f"{self.keys.prefix}/{self.keys.vehicle}")
         self._tasks = [
             asyncio.create_task(self._connect_loop(), name="connect"),
             asyncio.create_task(self._status_loop(), name="status"),
             asyncio.create_task(self._planning_loop(), name="planning"),
             asyncio.create_task(self._warm_up(), name="warm-up"),
         ]
-        log.info("ready: %d pending requests, %d services in the journal %s", len(self.journal.pending()),
-                 len(self.journal.services()), self.cfg.journal.path)
+        z = self.cfg.zenoh
+        try:
+            opened = await self.zio.open(loop, self._on_request, self._on_state, self.stopping)
+        except BaseException:
+            for task in self._tasks:
+                task.cancel()
+            await asyncio.gather(*self._tasks, return_exceptions=True)
+            await self.link.close()
+            self.journal.close()
+            raise
+        if opened:
+            log.info("zenoh %s session on %s (connect %s%s); keys %s/**", z.mode, list(z.listen), list(z.connect),
+                     f"; base {z.config_file}" if z.config_file else "", f"{self.keys.prefix}/{self.keys.vehicle}")
+            log.info("ready: %d pending requests, %d services in the journal %s", len(self.journal.pending()),
+                     len(self.journal.services()), self.cfg.journal.path)
         await self.stopping.wait()
         await self._shutdown()
         return 0
@@ -183,8 +205,12 @@ class Service:
             detail = f"{outcome.tasks} tasks" + (f"; replaces {list(outcome.replaced)}" if outcome.replaced else "")
             self._event("request_accepted", user_id=outcome.user_id, request_id=outcome.request_id, detail=detail)
             self._wake.set()
+        elif self._refusal_events.take(time.monotonic()):
+            unreported = f"[{self._refusals_unreported} more refused, not reported] " if self._refusals_unreported else ""
+            self._refusals_unreported = 0
+            self._event("request_rejected", detail=f"{unreported}{outcome.reply.field}: {outcome.reply.message}"[:256])
         else:
-            self._event("request_rejected", detail=f"{outcome.reply.field}: {outcome.reply.message}"[:256])
+            self._refusals_unreported += 1
 
     def _on_state(self, query: Any) -> None:
         pending = [PendingRequest(request_id=r.request_id, user_id=r.user_id, x_m=r.x_m, y_m=r.y_m, z_m=r.z_m,
@@ -234,8 +260,20 @@ class Service:
             if self.link.telemetry.airborne:
                 self.flown = True
             self.zio.publish("status", encode(self._status()))
+            self._log_busy()
             await self._safety_check()
             await asyncio.sleep(period)
+
+    def _log_busy(self) -> None:
+        """Say how many queries were answered busy (they never reach the loop otherwise)."""
+        since, seen = self._busy_logged
+        now, refused = time.monotonic(), self.zio.in_flight.refused
+        if refused > seen and now - since >= BUSY_LOG_EVERY_S:
+            log.warning("%d queries answered busy in the last %.0f s (zenoh.max_queries_in_flight = %d)",
+                        refused - seen, now - since, self.zio.in_flight.limit)
+            self._busy_logged = (now, refused)
+        elif refused == seen:
+            self._busy_logged = (now, refused)
 
     async def _safety_check(self) -> None:
         """Return to launch when the battery reaches the threshold (the planner should never

@@ -34,6 +34,8 @@ CREATE TABLE IF NOT EXISTS requests (
     closed_at_s REAL
 );
 CREATE INDEX IF NOT EXISTS requests_by_user ON requests (user_id, status);
+-- pending() runs for every request and status: without it a long journal is scanned each time
+CREATE INDEX IF NOT EXISTS requests_by_status ON requests (status);
 CREATE TABLE IF NOT EXISTS services (
     service_id INTEGER PRIMARY KEY AUTOINCREMENT,
     request_id INTEGER NOT NULL REFERENCES requests (request_id),
@@ -213,6 +215,13 @@ class Journal:
         """Pending requests in arrival order (at most one per user)."""
         return [RequestRow(*r) for r in self._rows(
             f"SELECT {_REQ} FROM requests WHERE status = 'pending' ORDER BY request_id")]
+
+    def pending_count(self) -> int:
+        return int(self._rows("SELECT COUNT(*) FROM requests WHERE status = 'pending'")[0][0])
+
+    def user_ids(self) -> set[str]:
+        """Every user id that has a request in the journal."""
+        return {r[0] for r in self._rows("SELECT DISTINCT user_id FROM requests")}
 
     def users(self) -> list[UserRow]:
         """Every user heard from, in order of first request; position from its latest."""

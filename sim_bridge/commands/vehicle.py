@@ -35,6 +35,13 @@ def configure(parser: argparse.ArgumentParser) -> None:
                         help="geofence: the scenario area grown by this many metres (default 100)")
     parser.add_argument("--max-mission-items", type=int, default=512,
                         help="mission capacity: a larger upload is answered NO_SPACE (default 512)")
+    parser.add_argument("--signing-key", default=None, metavar="FILE",
+                        help="enforce MAVLink 2 signing with the key in FILE (64 hex characters, mode 0600; make one "
+                             "with: python -m planner_service keygen FILE): outgoing messages are signed, incoming "
+                             "ones obeyed only if correctly signed (unsigned RADIO_STATUS excepted)")
+    parser.add_argument("--signing-timestamp-file", default=None, metavar="FILE",
+                        help="where the last signing timestamp is kept across restarts "
+                             "(default: beside the key, FILE.vehicle-timestamp)")
     parser.add_argument("--log-level", default="INFO", choices=("DEBUG", "INFO", "WARNING", "ERROR"))
 
 
@@ -44,6 +51,7 @@ def run(args: argparse.Namespace) -> int:
     # Imported here so that `--help` does not pay for numba and pymavlink.
     from planner_service.model import ScenarioError, preset
     from protocol.errors import MissionError
+    from protocol.errors import SigningError
     from protocol.geodesy import GeoOrigin
     from sim_bridge.vehicle import Vehicle, VehicleConfig, VehicleError
 
@@ -55,9 +63,10 @@ def run(args: argparse.Namespace) -> int:
             speedup=args.speedup, system_id=args.sysid, item_timeout_s=args.item_timeout,
             max_retries=args.retries, fence_margin_m=args.fence_margin,
             max_mission_items=args.max_mission_items,
+            signing_key_file=args.signing_key, signing_timestamp_file=args.signing_timestamp_file,
         )
         vehicle = Vehicle(config)
-    except (ScenarioError, MissionError, VehicleError) as exc:
+    except (ScenarioError, MissionError, VehicleError, SigningError) as exc:
         print(f"vehicle: {exc}", file=sys.stderr)
         return 2
     stop = threading.Event()

@@ -17,7 +17,9 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from planner_service.model import Scenario
 from protocol.geodesy import GeoOrigin, local_to_global
+from protocol.errors import SigningError
 from protocol.mission import GLOBAL_FRAMES, NAV_POSITION_COMMANDS, MissionItem, f32, item_local
+from protocol.signing import Signer, TimestampStore, default_timestamp_path, load_key
 
 from . import telemetry as tm
 from .commands import Commands
@@ -44,6 +46,8 @@ DEFAULT_INTERVALS_S: dict[int, float] = {
 }
 MIN_INTERVAL_S = 0.02
 MAX_STEP_TICKS = 5
+SIGNING_TICK_S = 1.0
+"""How often the signing timestamp is brought up to the clock (and its reservation stored)."""
 
 
 @dataclass(frozen=True)
@@ -65,6 +69,10 @@ class VehicleConfig:
     max_altitude_m: float = 150.0
     max_mission_items: int = 512
     """Mission capacity: a MISSION_COUNT above it is answered MAV_MISSION_NO_SPACE."""
+    signing_key_file: str | None = None
+    """Enforce MAVLink 2 signing with the key in this file (``protocol.signing.load_key``)."""
+    signing_timestamp_file: str | None = None
+    """Where the signing timestamp is kept; default beside the key (KEY.vehicle-timestamp)."""
 
     def __post_init__(self) -> None:
         if self.flavour not in ("ardupilot", "px4"):
@@ -86,7 +94,13 @@ class Vehicle:
         self.config = config
         self.clock = clock
         self.flight = Flight(config.scenario, config.origin, config.flavour)
-        self.link = Link(config.url, config.system_id, config.component_id, clock)
+        self.signer = self._signer(config)
+        try:
+            self.link = Link(config.url, config.system_id, config.component_id, clock, self.signer)
+        except VehicleError:
+            if self.signer is not None:
+                self.signer.close()
+            raise
         self.store = MissionStore(
             self._send_to, clock, check=self._check_mission, on_commit=self._on_commit,
             on_set_current=self._on_set_current, item_timeout_s=config.item_timeout_s,
@@ -99,11 +113,22 @@ class Vehicle:
         self._power_w = 0.0
         self._last_mode = self.flight.mode
         self._last_armed = False
+        self._signing_due = clock() + SIGNING_TICK_S
+
+    @staticmethod
+    def _signer(config: VehicleConfig) -> Signer | None:
+        """The signing state, or None without a key (``SigningError`` names a bad file)."""
+        if not config.signing_key_file:
+            return None
+        key = load_key(config.signing_key_file)
+        stamps = config.signing_timestamp_file or default_timestamp_path(config.signing_key_file, "vehicle")
+        return Signer(key, TimestampStore(stamps))
 
     # --- loop ------------------------------------------------------------------------------
     def run(self, stop: threading.Event) -> None:
         """Serve until ``stop`` is set."""
-        log.info("vehicle (%s) listening on %s, speed-up %g", self.config.flavour, self.config.url, self.config.speedup)
+        log.info("vehicle (%s) listening on %s, speed-up %g%s", self.config.flavour, self.config.url,
+                 self.config.speedup, ", signing enforced" if self.signer is not None else "")
         try:
             while not stop.is_set():
                 wait = self._last_tick + self.config.tick_s - self.clock()
@@ -113,6 +138,12 @@ class Vehicle:
                     self._safely(self.tick)
         finally:
             self.link.close()
+            if self.signer is not None:
+                log.info("signing: %s", self.signer.stats.summary())
+                try:
+                    self.signer.close()
+                except SigningError as err:
+                    log.error("signing timestamp not stored: %s", err)
 
     def _safely(self, fn: Callable[..., None], *args: Any) -> None:
         try:
@@ -140,6 +171,12 @@ class Vehicle:
             self._last_mode, self._last_armed = self.flight.mode, self.flight.armed
             self._send_to(tm.heartbeat(self.flight), None)
         self.store.tick()
+        if self.signer is not None and now >= self._signing_due:
+            self._signing_due = now + SIGNING_TICK_S
+            try:
+                self.signer.tick()
+            except SigningError as err:  # a full disk must not stop the telemetry below
+                log.error("signing timestamp not stored (a restart could reuse timestamps): %s", err)
         self._stream(now)
 
     def _stream(self, now: float) -> None:

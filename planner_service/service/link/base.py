@@ -101,6 +101,10 @@ class LinkSettings:
     source_system: int = 255
     source_component: int = 190
     extra: dict = field(default_factory=dict)
+    signing_key_file: str = ""
+    """Sign with the key in this file (pymavlink backend; empty: no signing)."""
+    signing_timestamp_file: str = ""
+    """The signing timestamp's file (empty: beside the key)."""
 
 
 class VehicleLink(abc.ABC):

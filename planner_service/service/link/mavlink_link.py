@@ -6,11 +6,17 @@ mission protocol waits with ``asyncio.wait_for`` on a queue.
 Reconnect: the reader reopens the connection after a socket error (TCP); over UDP a
 silent vehicle is "lost" after ``link_timeout_s`` and "restored" on its next heartbeat
 (our heartbeats keep going, so a ``udpin`` vehicle learns our address again).
+
+Signing (``signing_key_file``): one ``protocol.signing.Signer`` for the link's life, attached
+to every connection it opens, so the timestamp keeps growing across reopens and restarts;
+messages from the vehicle that are unsigned or wrongly signed are dropped, counted, and
+named in the errors when the vehicle does not answer.
 """
 
 from __future__ import annotations
 
 import asyncio
+import logging
 import os
 import threading
 import time
@@ -20,14 +26,19 @@ os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavutil  # noqa: E402
 
 from protocol import MissionItem  # noqa: E402
+from protocol.errors import SigningError  # noqa: E402
+from protocol.signing import Signer, TimestampStore, default_timestamp_path, load_key  # noqa: E402
 
 from ..errors import LinkError  # noqa: E402
 from .base import ClockRate, LinkEvent, LinkSettings, Telemetry, VehicleLink, mode_name  # noqa: E402
 from .upload import MissionUpload  # noqa: E402
 
 M = mavutil.mavlink
+log = logging.getLogger(__name__)
 AIRBORNE_STATES = frozenset({M.MAV_LANDED_STATE_IN_AIR, M.MAV_LANDED_STATE_TAKEOFF, M.MAV_LANDED_STATE_LANDING})
 MISSION_REPLIES = frozenset({"MISSION_REQUEST_INT", "MISSION_REQUEST", "MISSION_ACK"})
+SIGNING_WARN_S = 10.0
+"""Least time between two warnings about dropped (wrongly signed or unsigned) messages."""
 
 
 def result_name(code: int) -> str:
@@ -52,17 +63,23 @@ class PymavlinkLink(VehicleLink):
         self._command_lock = asyncio.Lock()
         self._tasks: list[asyncio.Task[None]] = []
         self._clock_rate = ClockRate()
+        self._signer: Signer | None = None
+        self._warned_drops = 0
+        self._warned_at = -SIGNING_WARN_S
 
     # --- lifecycle ------------------------------------------------------------------------
     async def connect(self, timeout_s: float) -> None:
         self._loop = asyncio.get_running_loop()
+        if self.settings.signing_key_file and self._signer is None:
+            self._signer = self._open_signer()
         self._thread = threading.Thread(target=self._reader, name="mavlink-reader", daemon=True)
         self._thread.start()
         self._tasks.append(asyncio.create_task(self._heartbeats(), name="mavlink-heartbeats"))
         try:
             await asyncio.wait_for(self._connected.wait(), timeout_s)
         except TimeoutError:
-            raise LinkError("connect", f"no autopilot heartbeat at {self.settings.url} within {timeout_s:g} s") from None
+            raise LinkError("connect", f"no autopilot heartbeat at {self.settings.url} within {timeout_s:g} s"
+                            f"{self.signing_hint()}") from None
 
     async def close(self) -> None:
         self._stop.set()
@@ -74,13 +91,48 @@ class PymavlinkLink(VehicleLink):
         conn, self._conn = self._conn, None
         if conn is not None:
             conn.close()
+        signer, self._signer = self._signer, None
+        if signer is not None:
+            try:
+                signer.close()
+            except SigningError as err:
+                log.error("signing timestamp not stored: %s", err)
+            log.info("signing: %s", signer.stats.summary())
+
+    def _open_signer(self) -> Signer:
+        s = self.settings
+        try:
+            key = load_key(s.signing_key_file)
+            stamps = s.signing_timestamp_file or default_timestamp_path(s.signing_key_file, "service")
+            return Signer(key, TimestampStore(stamps))
+        except SigningError as err:
+            raise LinkError("connect", f"signing: {err}") from None
 
     def _open(self) -> Any:
         s = self.settings
         kwargs: dict[str, Any] = {"source_system": s.source_system, "source_component": s.source_component}
         if s.url.startswith("tcp:"):
             kwargs["autoreconnect"] = True
-        return mavutil.mavlink_connection(s.url, **kwargs)
+        conn = mavutil.mavlink_connection(s.url, **kwargs)
+        if self._signer is not None:
+            self._signer.attach(conn.mav)  # before anything is sent on it
+        return conn
+
+    def signing_hint(self) -> str:
+        """Why the vehicle may be silent or deaf, as far as signing tells ('' without signing)."""
+        signer = self._signer
+        if signer is None:
+            return ""
+        dropped = signer.stats.dropped
+        bad = dropped.get("bad signature", 0)
+        if bad:
+            return (f" (signing: {bad} messages with a bad signature dropped, the last {signer.last_drop}: the vehicle "
+                    f"signs with another key than {self.settings.signing_key_file})")
+        if dropped.get("unsigned", 0):
+            return (f" (signing: {dropped['unsigned']} unsigned messages dropped: the vehicle does not sign; give it "
+                    f"the key in {self.settings.signing_key_file})")
+        return (" (signing is on: a vehicle with another key or without signing ignores our messages; check that it "
+                f"holds the key in {self.settings.signing_key_file})")
 
     def _reader(self) -> None:
         """Reader thread: messages to the loop; reopen the connection after an error."""
@@ -121,9 +173,10 @@ class PymavlinkLink(VehicleLink):
             raise LinkError("send", f"{msg.get_type()}: {err}") from None
 
     async def _heartbeats(self) -> None:
-        """Our heartbeat at 1 Hz (a udpin vehicle answers the last peer heard) and the
-        link watchdog."""
+        """Our heartbeat at 1 Hz (a udpin vehicle answers the last peer heard), the link
+        watchdog, and the signing timestamp's upkeep."""
         while True:
+            self._signing_upkeep()
             if self._conn is not None:
                 try:
                     self._conn.mav.heartbeat_send(M.MAV_TYPE_GCS, M.MAV_AUTOPILOT_INVALID, 0, 0, 0)
@@ -135,6 +188,23 @@ class PymavlinkLink(VehicleLink):
                 self._set(connected=False)
                 self.on_event(LinkEvent("lost", text=f"no heartbeat for {silent:.1f} s"))
             await asyncio.sleep(0.5 if not self._connected.is_set() else 1.0)
+
+    def _signing_upkeep(self) -> None:
+        """On the loop's thread, the one that signs: advance the timestamp (and its stored
+        reservation); warn when messages are being dropped for their signature."""
+        signer = self._signer
+        if signer is None:
+            return
+        try:
+            signer.tick()
+        except SigningError as err:
+            log.error("signing timestamp not stored (a restart could reuse timestamps): %s", err)
+        total = signer.stats.dropped_total
+        now = time.monotonic()
+        if total > self._warned_drops and now - self._warned_at >= SIGNING_WARN_S:
+            log.warning("%d messages from the link dropped for their signature%s", total - self._warned_drops,
+                        self.signing_hint())
+            self._warned_drops, self._warned_at = total, now
 
     # --- incoming -------------------------------------------------------------------------
     def _set(self, **changes: Any) -> None:
@@ -209,7 +279,7 @@ class PymavlinkLink(VehicleLink):
     async def upload(self, items: Sequence[MissionItem]) -> None:
         async with self._upload_lock:
             if not self._connected.is_set() or self._lost:
-                raise LinkError("upload_mission()", "NO_LINK: the autopilot is not connected")
+                raise LinkError("upload_mission()", f"NO_LINK: the autopilot is not connected{self.signing_hint()}")
             queue: asyncio.Queue[Any] = asyncio.Queue()
             self._mission_queue = queue
             machine = MissionUpload(items, self._send, self._target, self.settings.retries)
@@ -226,7 +296,8 @@ class PymavlinkLink(VehicleLink):
             finally:
                 self._mission_queue = None
             if not done.accepted:
-                raise LinkError("upload_mission()", done.result)
+                hint = self.signing_hint() if done.result.startswith("NO_ANSWER") else ""
+                raise LinkError("upload_mission()", done.result + hint)
 
     async def command(self, command: int, *params: float, what: str) -> None:
         """COMMAND_LONG with the confirmation counting up on each repeat."""
@@ -246,7 +317,7 @@ class PymavlinkLink(VehicleLink):
                 if result in (M.MAV_RESULT_ACCEPTED, M.MAV_RESULT_IN_PROGRESS):
                     return
                 raise LinkError(what, result_name(result))
-            raise LinkError(what, f"NO_ANSWER after {self.settings.retries} tries")
+            raise LinkError(what, f"NO_ANSWER after {self.settings.retries} tries{self.signing_hint()}")
 
     async def start(self) -> None:
         await self.command(M.MAV_CMD_COMPONENT_ARM_DISARM, 1, what="arm()")
