@@ -259,8 +259,9 @@ class _Pairs(list):  # type: ignore[type-arg]
 
 def _first_unwritable(value: Any) -> tuple[str, str] | None:
     """(path, why) of the first non-finite number or lone surrogate, depth first, without
-    recursion (the value may be nested as deep as json.loads allows)."""
-    stack: list[tuple[str, Any]] = [("", value)]
+    recursion (the value may be nested as deep as json.loads allows). The root's path is
+    None, so that an empty key still shows in the path (``{"": {"a": NaN}}`` -> ``.a``)."""
+    stack: list[tuple[str | None, Any]] = [(None, value)]
     while stack:
         path, item = stack.pop()
         if isinstance(item, float) and not math.isfinite(item):
@@ -268,14 +269,15 @@ def _first_unwritable(value: Any) -> tuple[str, str] | None:
         if isinstance(item, str) and not _is_unicode(item):
             return path or "payload", "is not valid Unicode (a lone surrogate escape)"
         if isinstance(item, _Pairs):
-            children: list[tuple[str, Any]] = []
+            children: list[tuple[str | None, Any]] = []
             for key, child in item:
+                child_path = key if path is None else f"{path}.{key}"
                 if not _is_unicode(key):
-                    return _printable(f"{path}.{key}" if path else key), "is not valid Unicode (a lone surrogate escape)"
-                children.append((f"{path}.{key}" if path else key, child))
+                    return _printable(child_path), "is not valid Unicode (a lone surrogate escape)"
+                children.append((child_path, child))
             stack.extend(reversed(children))
         elif isinstance(item, list):
-            stack.extend(reversed([(f"{path}[{i}]", child) for i, child in enumerate(item)]))
+            stack.extend(reversed([(f"{path or ''}[{i}]", child) for i, child in enumerate(item)]))
     return None
 
 

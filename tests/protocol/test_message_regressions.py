@@ -81,3 +81,9 @@ def test_a_duplicated_key_does_not_hide_a_nan() -> None:
     # The fallback parser kept the last of two equal keys, lost the NaN, and named no field.
     err = refused(b'{"kind": {"": NaN, "": null}}', State)
     assert (err.field, err.message) == ("kind.", "must be a finite number (NaN and Infinity are not allowed)")
+
+
+def test_an_empty_key_keeps_its_place_in_the_path() -> None:
+    # {"": {"0": NaN}} was named "0", as if "0" were a top-level field.
+    err = refused(b'{"client_ref": null, "": {"0": NaN}}')
+    assert err.field == ".0"
