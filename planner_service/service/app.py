@@ -587,7 +587,8 @@ class Service:
         check_path(path, self.area, self.scenario, fix.battery_j)
         items = encode_path([HoverPoint(p.x_m, p.y_m, p.z_m, p.hold_s) for p in path.points], self.origin,
                             self.flavour)  # type: ignore[arg-type]
-        validate_mission(items, self.origin, self.area, self.flavour)  # type: ignore[arg-type]
+        validate_mission(items, self.origin, self.area, self.flavour,  # type: ignore[arg-type]
+                         max_items=self.cfg.mavlink.max_mission_items)
         plan_id = self.plan_id + 1
         t1 = time.perf_counter()
         try:

@@ -86,6 +86,10 @@ class MavlinkConfig:
     """Silence (no message at all) after which the link counts as lost."""
     source_system: int = 255
     source_component: int = 190
+    max_mission_items: int = 512
+    """The autopilot's mission capacity: a plan of more items is refused before upload
+    (``protocol.validate_mission``). ArduPilot's depends on its storage; the stub's is
+    ``--max-mission-items``."""
     signing_key_file: str = ""
     """MAVLink 2 signing: sign every message with the key in this file (64 hex characters,
     mode 0600; ``keygen`` makes one) and accept only correctly signed ones. Empty: off.
@@ -317,6 +321,8 @@ def validate(c: ServiceConfig) -> None:
             raise ConfigError(f"mavlink.{key}", "must be positive")
     if m.retries < 1:
         raise ConfigError("mavlink.retries", "must be at least 1")
+    if not 3 <= m.max_mission_items <= 65535:  # home, takeoff and RTL; MISSION_COUNT is uint16
+        raise ConfigError("mavlink.max_mission_items", f"must lie in 3..65535, got {m.max_mission_items}")
     _validate_signing(m)
     if not p.budget_ms > 0:
         raise ConfigError("planner.budget_ms", "must be positive")

@@ -16,7 +16,7 @@ import json
 from dataclasses import dataclass
 from typing import Callable
 
-from protocol import Area, ErrorReply, ProtocolError, TaskAck, decode_request
+from protocol import MAX_PAYLOAD_BYTES, Area, ErrorReply, ProtocolError, TaskAck, decode_request
 
 from .config import IntakeConfig
 from .errors import JournalError
@@ -70,7 +70,7 @@ class Intake:
         try:
             request = decode_request(payload, self.area)
         except ProtocolError as err:
-            return Rejected(ErrorReply(field=err.field[:256], message=err.message[:256], client_ref=ref))
+            return Rejected(ErrorReply(field=_sendable(err.field), message=_sendable(err.message), client_ref=ref))
         now = self.clock()
         refusal = self._over_limit(request.user_id, now)
         if refusal is not None:
@@ -80,7 +80,7 @@ class Intake:
                 request.user_id, request.x_m, request.y_m, request.z_m, request.tasks, request.client_ref, now)
             position = len(self.journal.pending())
         except JournalError as err:
-            return Rejected(ErrorReply(field="journal", message=str(err)[:256], client_ref=request.client_ref))
+            return Rejected(ErrorReply(field="journal", message=_sendable(str(err)), client_ref=request.client_ref))
         self._users.add(request.user_id)
         ack = TaskAck(request_id=request_id, user_id=request.user_id, accepted_at_s=now,
                       queue_position=position, client_ref=request.client_ref)
@@ -104,12 +104,26 @@ class Intake:
 
 
 def client_ref(payload: bytes | None) -> str | None:
-    """The client's correlation id, echoed even in an error reply when it can be read."""
-    if payload is None or len(payload) > 4096:
+    """The client's correlation id, echoed even in an error reply when it can be read.
+
+    Read loosely (json.loads takes NaN, which msgspec refuses), so it guards against what
+    json.loads lets through: nesting deeper than the interpreter's recursion limit raises
+    RecursionError (not a ValueError), and a lone surrogate escape gives a str that cannot
+    be encoded back into the reply.
+    """
+    if payload is None or len(payload) > MAX_PAYLOAD_BYTES:
         return None
     try:
         data = json.loads(payload)
-    except (ValueError, UnicodeDecodeError):
+    except (ValueError, RecursionError):  # UnicodeDecodeError is a ValueError
         return None
     ref = data.get("client_ref") if isinstance(data, dict) else None
-    return ref if isinstance(ref, str) and len(ref) <= 64 else None
+    if not isinstance(ref, str) or len(ref) > 64 or _sendable(ref) != ref:
+        return None
+    return ref
+
+
+def _sendable(text: str, limit: int = 256) -> str:
+    """``text`` cut to ``limit`` characters, lone surrogates written as escapes: an error
+    reply must always encode, and decode within the ``ErrorReply`` limits."""
+    return text.encode("utf-8", "backslashreplace").decode("utf-8")[:limit]

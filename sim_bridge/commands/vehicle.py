@@ -33,6 +33,8 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--retries", type=int, default=5, help="re-requests before an upload is abandoned (default 5)")
     parser.add_argument("--fence-margin", type=float, default=100.0,
                         help="geofence: the scenario area grown by this many metres (default 100)")
+    parser.add_argument("--max-mission-items", type=int, default=512,
+                        help="mission capacity: a larger upload is answered NO_SPACE (default 512)")
     parser.add_argument("--signing-key", default=None, metavar="FILE",
                         help="enforce MAVLink 2 signing with the key in FILE (64 hex characters, mode 0600; make one "
                              "with: python -m planner_service keygen FILE): outgoing messages are signed, incoming "
@@ -64,6 +66,7 @@ def run(args: argparse.Namespace) -> int:
             url=args.mavlink, flavour=args.flavour, scenario=scenario, origin=origin,
             speedup=args.speedup, system_id=args.sysid, item_timeout_s=args.item_timeout,
             max_retries=args.retries, fence_margin_m=args.fence_margin,
+            max_mission_items=args.max_mission_items,
             signing_key_file=args.signing_key, signing_timestamp_file=args.signing_timestamp_file,
             state_file=args.state_file,
         )

@@ -198,8 +198,12 @@ class Link:
             log.debug("dropped %d message(s) from %s, the last %s", self.signer.stats.dropped_total - dropped, peer,
                       self.signer.last_drop)
             messages = [m for m in messages if not _signature_refused(m)]
-        good = [m for m in messages if m.get_type() != "BAD_DATA"]
-        self.bad_bytes += sum(len(m.get_msgbuf()) for m in messages if m.get_type() == "BAD_DATA")
+        # A frame with a message id the dialect does not know cannot have its CRC checked
+        # (the CRC seed is per message), so pymavlink passes it on as MAVLink_unknown: one
+        # byte edited in a frame's id is enough. It is noise, like BAD_DATA.
+        good = [m for m in messages if m.get_type() != "BAD_DATA" and not isinstance(m, mavlink.MAVLink_unknown)]
+        self.bad_bytes += sum(len(m.get_msgbuf()) for m in messages if m.get_type() == "BAD_DATA"
+                              or isinstance(m, mavlink.MAVLink_unknown))
         if not good:
             return  # noise is not a peer: it is neither greeted nor sent telemetry
         new = peer not in self._peers

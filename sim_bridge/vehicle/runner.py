@@ -69,6 +69,8 @@ class VehicleConfig:
     fence_margin_m: float = 100.0
     """Geofence: the scenario's area grown by this margin; waypoints outside are refused."""
     max_altitude_m: float = 150.0
+    max_mission_items: int = 512
+    """Mission capacity: a MISSION_COUNT above it is answered MAV_MISSION_NO_SPACE."""
     signing_key_file: str | None = None
     """Enforce MAVLink 2 signing with the key in this file (``protocol.signing.load_key``)."""
     signing_timestamp_file: str | None = None
@@ -86,6 +88,8 @@ class VehicleConfig:
             raise VehicleError("system_id", "must lie in 1..255")
         if not self.tick_s > 0 or not self.item_timeout_s > 0 or self.max_retries < 0:
             raise VehicleError("timing", "tick_s and item_timeout_s must be positive, max_retries >= 0")
+        if not 1 <= self.max_mission_items <= 65535:
+            raise VehicleError("max_mission_items", f"must lie in 1..65535, got {self.max_mission_items}")
 
 
 class Vehicle:
@@ -105,7 +109,7 @@ class Vehicle:
         self.store = MissionStore(
             self._send_to, clock, check=self._check_mission, on_commit=self._on_commit,
             on_set_current=self._on_set_current, item_timeout_s=config.item_timeout_s,
-            max_retries=config.max_retries,
+            max_retries=config.max_retries, capacity=config.max_mission_items,
         )
         self.commands = Commands(self.flight, self._message_for, self._set_interval)
         self.intervals = dict(DEFAULT_INTERVALS_S)

@@ -261,7 +261,13 @@ class PymavlinkLink(VehicleLink):
         if kind == "HEARTBEAT":
             if msg.autopilot == M.MAV_AUTOPILOT_INVALID or msg.get_srcComponent() != 1:
                 return  # another ground station or a component that is not the autopilot
-            self._target = (msg.get_srcSystem(), msg.get_srcComponent())
+            source = (msg.get_srcSystem(), msg.get_srcComponent())
+            if self._connected.is_set() and source != self._target:
+                # Another vehicle on the same network: the link stays with the first
+                # autopilot heard. Following it would show that vehicle's state as ours,
+                # and its landing would end our sortie.
+                return
+            self._target = source
             armed = bool(msg.base_mode & M.MAV_MODE_FLAG_SAFETY_ARMED)
             mode = mode_name(self.settings.flavour, msg.custom_mode)
             old_mode = self.telemetry.mode
