@@ -93,7 +93,6 @@ def test_flood_gets_an_answer_for_every_query_and_bounded_memory(stack: Stack) -
     client.submit("warm", 100.0, 100.0, 5)
     stack.wait_event(lambda e: e.event == "mission_uploaded", 30.0, "the first mission (the planner warmed up)")
     pid = service.proc.pid
-    rss_before = rss_kib(pid)
 
     tally: Counter[str] = Counter()
     acked: list[tuple[int, str]] = []
