@@ -11,6 +11,7 @@ from pathlib import Path
 from typing import Callable, Iterator
 
 import pytest
+from gcs import GroundStation
 
 from planner_service.service.processes import free_port
 
@@ -79,3 +80,18 @@ def vehicle(spawn: Callable[..., Process]) -> Callable[..., tuple[Process, int]]
         return process, port
 
     return start
+
+
+@pytest.fixture
+def gcs_factory() -> Iterator[Callable[..., GroundStation]]:
+    """Ground stations (gcs.py) closed when the test ends."""
+    stations: list[GroundStation] = []
+
+    def make(url: str, **kwargs: object) -> GroundStation:
+        station = GroundStation(url, **kwargs)  # type: ignore[arg-type]
+        stations.append(station)
+        return station
+
+    yield make
+    for station in stations:
+        station.close()

@@ -51,24 +51,10 @@ def quiet(sock: socket.socket, seconds: float) -> bool:
     return False
 
 
-@pytest.fixture
-def ground_station():
-    stations: list[GroundStation] = []
-
-    def make(url: str) -> GroundStation:
-        station = GroundStation(url)
-        stations.append(station)
-        return station
-
-    yield make
-    for station in stations:
-        station.close()
-
-
 @pytest.mark.timeout(60)
-def test_udp_garbage_changes_nothing(vehicle, ground_station) -> None:
+def test_udp_garbage_changes_nothing(vehicle, gcs_factory) -> None:
     process, port = vehicle()
-    gcs = ground_station(f"udpout:127.0.0.1:{port}")
+    gcs = gcs_factory(f"udpout:127.0.0.1:{port}")
     gcs.wait_vehicle()
     assert gcs.upload(mission()) == M.MAV_MISSION_ACCEPTED
     before = snapshot(gcs)
@@ -97,10 +83,10 @@ def test_udp_garbage_changes_nothing(vehicle, ground_station) -> None:
 
 
 @pytest.mark.timeout(60)
-def test_tcp_garbage_changes_nothing_and_the_stream_recovers(spawn, ground_station) -> None:
+def test_tcp_garbage_changes_nothing_and_the_stream_recovers(spawn, gcs_factory) -> None:
     port = free_port()
     process = spawn(["vehicle", "--mavlink", f"tcpin:127.0.0.1:{port}"], "listening")
-    gcs = ground_station(f"tcp:127.0.0.1:{port}")
+    gcs = gcs_factory(f"tcp:127.0.0.1:{port}")
     gcs.wait_vehicle()
     items = mission()
     assert gcs.upload(items) == M.MAV_MISSION_ACCEPTED

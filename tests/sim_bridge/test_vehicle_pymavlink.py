@@ -7,7 +7,7 @@ import socket
 
 import pytest
 
-from gcs import M, GroundStation
+from gcs import M
 from planner_service.service.processes import free_port
 from protocol.geodesy import GeoOrigin
 from protocol.mission import HoverPoint, MissionItem, encode_path, same_items
@@ -22,20 +22,6 @@ def ten_items(flavour: str = "ardupilot") -> list[MissionItem]:
     items = encode_path(points, ORIGIN, flavour)
     assert len(items) == 10
     return items
-
-
-@pytest.fixture
-def gcs_factory():
-    stations: list[GroundStation] = []
-
-    def make(url: str, **kwargs) -> GroundStation:
-        station = GroundStation(url, **kwargs)
-        stations.append(station)
-        return station
-
-    yield make
-    for station in stations:
-        station.close()
 
 
 @pytest.mark.timeout(60)
