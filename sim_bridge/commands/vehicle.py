@@ -33,6 +33,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--retries", type=int, default=5, help="re-requests before an upload is abandoned (default 5)")
     parser.add_argument("--fence-margin", type=float, default=100.0,
                         help="geofence: the scenario area grown by this many metres (default 100)")
+    parser.add_argument("--recharge-s", type=float, default=None, metavar="SECONDS",
+                        help="battery swap: SECONDS of simulated time after landing and disarming, the battery "
+                             "is full again (default: never)")
     parser.add_argument("--log-level", default="INFO", choices=("DEBUG", "INFO", "WARNING", "ERROR"))
 
 
@@ -51,7 +54,7 @@ def run(args: argparse.Namespace) -> int:
         config = VehicleConfig(
             url=args.mavlink, flavour=args.flavour, scenario=scenario, origin=origin,
             speedup=args.speedup, system_id=args.sysid, item_timeout_s=args.item_timeout,
-            max_retries=args.retries, fence_margin_m=args.fence_margin,
+            max_retries=args.retries, fence_margin_m=args.fence_margin, recharge_s=args.recharge_s,
         )
         vehicle = Vehicle(config)
     except (ScenarioError, MissionError, VehicleError) as exc:

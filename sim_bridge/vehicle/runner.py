@@ -8,6 +8,7 @@ run on wall time, since they concern the link, not the flight.
 from __future__ import annotations
 
 import logging
+import math
 import threading
 import time
 from dataclasses import dataclass, field
@@ -63,6 +64,9 @@ class VehicleConfig:
     fence_margin_m: float = 100.0
     """Geofence: the scenario's area grown by this margin; waypoints outside are refused."""
     max_altitude_m: float = 150.0
+    recharge_s: float | None = None
+    """Battery swap: simulated seconds on the ground, disarmed, until the battery is full
+    again; None: never (one sortie's battery)."""
 
     def __post_init__(self) -> None:
         if self.flavour not in ("ardupilot", "px4"):
@@ -73,6 +77,8 @@ class VehicleConfig:
             raise VehicleError("system_id", "must lie in 1..255")
         if not self.tick_s > 0 or not self.item_timeout_s > 0 or self.max_retries < 0:
             raise VehicleError("timing", "tick_s and item_timeout_s must be positive, max_retries >= 0")
+        if self.recharge_s is not None and not (math.isfinite(self.recharge_s) and self.recharge_s >= 0):
+            raise VehicleError("recharge_s", f"must be a finite number of seconds >= 0, got {self.recharge_s}")
 
 
 class Vehicle:
@@ -81,7 +87,7 @@ class Vehicle:
     def __init__(self, config: VehicleConfig, clock: Callable[[], float] = time.monotonic) -> None:
         self.config = config
         self.clock = clock
-        self.flight = Flight(config.scenario, config.origin, config.flavour)
+        self.flight = Flight(config.scenario, config.origin, config.flavour, recharge_s=config.recharge_s)
         self.link = Link(config.url, config.system_id, config.component_id, clock)
         self.store = MissionStore(
             self._send_to, clock, check=self._check_mission, on_commit=self._on_commit,
@@ -156,6 +162,11 @@ class Vehicle:
         elif event.kind == "mission_done":
             self._send_to(tm.mission_current(self.flight, event.seq, M.MISSION_STATE_COMPLETE), None)
             self._send_to(tm.statustext(M.MAV_SEVERITY_INFO, "Mission complete"), None)
+        elif event.kind == "battery_swapped":
+            log.info("%s at t=%.1f s (sim): battery %.1f%%", event.text, self.flight.time_s,
+                     100 * self.flight.battery_fraction)
+            self._send_to(tm.statustext(M.MAV_SEVERITY_INFO, "Battery swapped: full"), None)
+            self._send_to(tm.battery_status(self.flight, 0.0), None)
         elif event.kind == "battery_low":
             log.warning("%s", event.text)
             self._send_to(tm.statustext(M.MAV_SEVERITY_CRITICAL, event.text), None)
