@@ -132,10 +132,15 @@ class Vehicle:
             log.debug("late tick: %.3f s of wall time; simulating %.3f", dt_wall, MAX_STEP_TICKS * self.config.tick_s)
             dt_wall = MAX_STEP_TICKS * self.config.tick_s
         before = self.flight.energy_j
+        was_landed = self.flight.landed
         dt_sim = dt_wall * self.config.speedup
         events = self.flight.step(dt_sim)
         if dt_sim > 0:
             self._power_w = (before - self.flight.energy_j) / dt_sim
+        if was_landed and not self.flight.landed:
+            # Report the takeoff at once, as the landing is: at a high speed-up a short
+            # flight can begin and end between two periodic reports.
+            self._send_to(tm.extended_sys_state(self.flight), None)
         for event in events:
             self._report(event)
         if self.flight.mode is not self._last_mode or self.flight.armed != self._last_armed:
