@@ -174,3 +174,57 @@ def _sample(pid: int) -> tuple[float, int]:
     with open(f"/proc/{pid}/status") as status:
         rss_kb = next(int(line.split()[1]) for line in status if line.startswith("VmRSS:"))
     return rss_kb / 1024.0, len(os.listdir(f"/proc/{pid}/fd"))
+
+
+SOAK_SORTIES = int(os.environ.get("SOAK_SORTIES", "100"))
+SOAK_SPEEDUP = os.environ.get("SOAK_SPEEDUP", "160")
+"""The fastest speed-up at which the service still flies as it does at x40 (every user
+served about once a sortie, about 4 missions a sortie: re-plans at the points). Faster,
+the limits still hold but the plans are made too slowly to be flown: x320 about 5
+services and 2.4 missions a sortie, x640 about 2 and 1.1 (docs/SERVICE.md, "Known limits")."""
+RSS_GROWTH_MB = 4.0
+"""Allowed growth of the median RSS from sorties 6-15 to the last ten: SQLite's page cache
+for the journal (its default, 2000 KiB) fills as the file grows and then stays (measured
+on the journal alone: RSS follows the file to about 2 MB, then is flat over 400 sorties),
+plus 2 MB. A sortie journals about 60 requests and a few services and missions: keeping a
+record of each (about 0.5 kB) would leak 30 kB a sortie, 2.7 MB over 90 sorties; keeping a
+planner tree (about 1 MB) far more."""
+
+
+@pytest.mark.soak
+@pytest.mark.timeout(3600)
+def test_soak(stack: Stack) -> None:
+    assert SOAK_SORTIES >= 100, "the soak flies at least 100 sorties (SOAK_SORTIES)"
+    scenario = field()
+    vehicle = stack.vehicle("--speedup", SOAK_SPEEDUP, "--recharge-s", "60")
+    service = stack.service(mavlink__start_mission="true", planner__min_requests="3")
+    stack.users("--count", "6", "--speedup", SOAK_SPEEDUP, "--seed", "11", "--log-level", "WARNING")
+    samples: dict[int, tuple[float, float, int, float, int]] = {}
+    t0 = time.monotonic()
+    for n in range(1, SOAK_SORTIES + 1):
+        if n > 1:
+            stack.wait_event(started(n), 60.0, f"the start of sortie {n}")
+        stack.wait_event(landed(n), 120.0, f"the end of sortie {n}")
+        samples[n] = (time.monotonic() - t0, *_sample(service.proc.pid), *_sample(vehicle.proc.pid))
+    wall = time.monotonic() - t0
+    journal_mb = stack.journal_path.stat().st_size / 2**20
+    (requests,) = stack.rows("SELECT COUNT(*) FROM requests")[0]
+    assert service.stop() == 0
+
+    print(f"\n{SOAK_SORTIES} sorties at x{SOAK_SPEEDUP} in {wall:.0f} s wall: {60 * SOAK_SORTIES / wall:.1f} "
+          f"sorties/min; {requests} requests; journal {journal_mb:.1f} MB")
+    print("sortie  wall_s  service_rss_mb  service_fds  vehicle_rss_mb  vehicle_fds")
+    for n, (t, srss, sfd, vrss, vfd) in samples.items():
+        if n in (1, 2, 3) or n % 5 == 0:
+            print(f"{n:6d}  {t:6.0f}  {srss:14.1f}  {sfd:11d}  {vrss:14.1f}  {vfd:11d}")
+
+    early = [samples[n] for n in range(6, 16)]
+    late = [samples[n] for n in range(SOAK_SORTIES - 9, SOAK_SORTIES + 1)]
+    for name, rss, fds in (("service", 1, 2), ("vehicle", 3, 4)):
+        growth = statistics.median(s[rss] for s in late) - statistics.median(s[rss] for s in early)
+        print(f"{name}: RSS growth {growth:+.2f} MB (median of sorties 6-15 to the last ten), "
+              f"FDs {max(s[fds] for s in early)} -> {max(s[fds] for s in late)}")
+        assert growth <= RSS_GROWTH_MB, f"{name} RSS grew {growth:.1f} MB over {SOAK_SORTIES - 10} sorties"
+        # a descriptor kept per sortie would add 90; none may be added once running
+        assert max(s[fds] for s in late) <= max(s[fds] for s in early), f"{name} file descriptors grew"
+    check_sorties(stack, scenario, vehicle, SOAK_SORTIES)
