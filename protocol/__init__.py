@@ -1,7 +1,7 @@
 """The wire contracts: zenoh keys, JSON messages, the MAVLink mission encoding, mission files."""
 
 from .area import Area
-from .errors import MissionError, ProtocolError
+from .errors import MissionError, ProtocolError, SigningError
 from .geodesy import GeoOrigin, global_to_local, local_to_global
 from .keys import DEFAULT_PREFIX, Keys
 from .messages import (
@@ -9,16 +9,16 @@ from .messages import (
     Status, TaskAck, TaskRequest, decode, decode_reply, decode_request, encode,
 )
 from .mission import (
-    FLAVOURS, Flavour, HoverPoint, MissionItem, MissionPlan, decode_path, encode_path, same_items,
-    validate_mission,
+    FLAVOURS, Flavour, HoverPoint, MissionItem, MissionPlan, decode_path, encode_path, mission_digest,
+    same_items, same_mission, validate_mission,
 )
 from .mission_files import read_plan, read_wpl, write_plan, write_wpl
 
 __all__ = [
     "Area", "DEFAULT_PREFIX", "ErrorReply", "Event", "FLAVOURS", "Flavour", "GeoOrigin",
     "HoverPoint", "Keys", "MAX_PAYLOAD_BYTES", "MissionError", "MissionItem", "MissionPlan",
-    "PendingRequest", "Plan", "PlanPoint", "ProtocolError", "SCHEMA_VERSION", "State", "Status",
+    "PendingRequest", "Plan", "PlanPoint", "ProtocolError", "SCHEMA_VERSION", "SigningError", "State", "Status",
     "TaskAck", "TaskRequest", "decode", "decode_path", "decode_reply", "decode_request", "encode",
-    "encode_path", "global_to_local", "local_to_global", "read_plan", "read_wpl", "same_items",
-    "validate_mission", "write_plan", "write_wpl",
+    "encode_path", "global_to_local", "local_to_global", "mission_digest", "read_plan", "read_wpl",
+    "same_items", "same_mission", "validate_mission", "write_plan", "write_wpl",
 ]

@@ -7,8 +7,8 @@ asyncio program can run ``submit`` in a thread (``asyncio.to_thread``).
 
 from __future__ import annotations
 
-import json
 import time
+from pathlib import Path
 from typing import Any, Callable
 
 import zenoh
@@ -16,32 +16,45 @@ import zenoh
 from .errors import ProtocolError
 from .keys import Keys
 from .messages import ErrorReply, Event, Plan, State, Status, TaskAck, TaskRequest, decode, decode_reply, encode
+from .zenoh_config import error_text, session_config
 
 
 class ClientError(ProtocolError):
     """The service refused a request (``field`` names why) or did not answer
     (``field`` is ``service``)."""
 
+    @property
+    def busy(self) -> bool:
+        """The service was too busy to take it: the same request may succeed later."""
+        return self.field == "service" and self.message.startswith("busy:")
 
-def client_config(connect: list[str] | tuple[str, ...], mode: str = "peer", multicast_scouting: bool = False) -> zenoh.Config:
-    """A zenoh Config that reaches the service through explicit endpoints."""
-    conf = zenoh.Config()
-    conf.insert_json5("mode", json.dumps(mode))
-    conf.insert_json5("scouting/multicast/enabled", "true" if multicast_scouting else "false")
-    conf.insert_json5("listen/endpoints", "[]")
-    conf.insert_json5("connect/endpoints", json.dumps(list(connect)))
-    return conf
+
+def client_config(connect: list[str] | tuple[str, ...], mode: str = "peer", multicast_scouting: bool = False,
+                  config_file: str | Path | None = None) -> zenoh.Config:
+    """A zenoh Config that reaches the service through explicit endpoints, listening on
+    none; ``config_file`` (JSON5: TLS certificates, ...) is the base under them."""
+    return session_config(mode, (), connect, multicast_scouting, config_file)
 
 
 class PlannerClient:
     """One zenoh session talking to one vehicle's service."""
 
     def __init__(self, connect: list[str] | tuple[str, ...] = ("tcp/127.0.0.1:7447",), keys: Keys | None = None,
-                 *, session: Any = None, mode: str = "peer", timeout_s: float = 5.0) -> None:
+                 *, session: Any = None, mode: str = "peer", timeout_s: float = 5.0,
+                 config_file: str | Path | None = None) -> None:
+        """``ClientError("service", ...)`` if no session can be opened (nothing listening,
+        or a TLS handshake refused); ``ProtocolError("config_file", ...)`` for a bad file."""
         self.keys = keys or Keys()
         self.timeout_s = timeout_s
         self._own = session is None
-        self.session = session if session is not None else zenoh.open(client_config(connect, mode))
+        if session is None:
+            conf = client_config(connect, mode, config_file=config_file)
+            try:
+                session = zenoh.open(conf)
+            except zenoh.ZError as err:
+                raise ClientError("service", f"cannot open a zenoh session to {list(connect)}: "
+                                  f"{error_text(err)}") from None
+        self.session = session
         self._subs: list[Any] = []
 
     def close(self) -> None:
@@ -95,10 +108,16 @@ class PlannerClient:
         return reply
 
     def state(self, timeout_s: float | None = None) -> State:
+        """The service's snapshot; ``ClientError`` if it did not answer or answered an error
+        (``busy: ...`` under load)."""
         data = self._query(self.keys.state, None, timeout_s)
         if data is None:
             raise ClientError("service", f"no reply on {self.keys.state}")
-        return decode(data, State)
+        try:
+            return decode(data, State)
+        except ProtocolError:
+            error = decode(data, ErrorReply)  # raises the ProtocolError if it is not one either
+            raise ClientError(error.field, error.message) from None
 
     # --- following ---------------------------------------------------------------------------------
     def _follow(self, key: str, kind: Any, callback: Callable[[Any], None]) -> None:

@@ -12,6 +12,15 @@ class ProtocolError(ValueError):
         self.message = message
 
 
+class SigningError(ValueError):
+    """A signing key or timestamp file was refused; ``path`` names the file."""
+
+    def __init__(self, path: str, message: str) -> None:
+        super().__init__(f"{path}: {message}")
+        self.path = path
+        self.message = message
+
+
 class MissionError(ValueError):
     """A mission (items, encoding or file) was refused; ``where`` names the item or field."""
 

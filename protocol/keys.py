@@ -12,11 +12,12 @@ DEFAULT_VEHICLE = "uav1"
 
 # A key chunk must not contain zenoh's separators or wildcards, or a vehicle id
 # like "a/*" would silently subscribe to every vehicle.
-_CHUNK = re.compile(r"^[A-Za-z0-9_.\-]{1,64}$")
+# fullmatch, not match with "$", which accepts a trailing newline ("uav1\n").
+_CHUNK = re.compile(r"[A-Za-z0-9_.\-]{1,64}")
 
 
 def _check_chunk(field: str, value: str) -> str:
-    if not isinstance(value, str) or not _CHUNK.match(value):
+    if not isinstance(value, str) or not _CHUNK.fullmatch(value):
         raise ProtocolError(field, f"{value!r} is not a key chunk (1-64 of A-Z a-z 0-9 _ . -)")
     return value
 

@@ -29,7 +29,9 @@ MAX_TASKS = 1000
 """Upper bound of a request's task count (the model's u_max is 20; this is a sanity cap)."""
 MAX_PLAN_POINTS = 200
 
-UserId = Annotated[str, msgspec.Meta(min_length=1, max_length=64, pattern=r"^[A-Za-z0-9_.:\-]+$")]
+# \A...\Z, not ^...$: msgspec matches with re.search, where "$" also matches before a
+# trailing newline, so "u-1\n" would pass as a user id.
+UserId = Annotated[str, msgspec.Meta(min_length=1, max_length=64, pattern=r"\A[A-Za-z0-9_.:\-]+\Z")]
 ShortText = Annotated[str, msgspec.Meta(max_length=256)]
 Tasks = Annotated[int, msgspec.Meta(ge=0, le=MAX_TASKS)]
 Count = Annotated[int, msgspec.Meta(ge=0)]
@@ -38,7 +40,7 @@ Fraction = Annotated[float, msgspec.Meta(ge=0.0, le=1.0)]
 EventKind = Literal[
     "request_accepted", "request_rejected", "plan_updated", "mission_uploaded",
     "upload_failed", "user_served", "waypoint_reached", "returning", "landed", "link_lost",
-    "link_restored", "sortie_started",
+    "link_restored", "vehicle_restarted", "mission_resumed", "resume_needed", "sortie_started",
 ]
 
 
@@ -145,6 +147,12 @@ class State(_Message, tag="state"):
     pending: Annotated[list[PendingRequest], msgspec.Meta(max_length=10_000)] = []
 
 
+class _NoMessage(_Message, tag="-"):
+    """Never valid. Decoding a single type as ``Union[Type, _NoMessage]`` makes msgspec
+    require the ``kind`` tag, which it does not for a lone tagged type: without it ``{}``
+    would read as a default Status, Plan, Event or State."""
+
+
 Message = Union[TaskRequest, TaskAck, ErrorReply, Status, Plan, Event, State]
 Reply = Union[TaskAck, ErrorReply]
 """What the request queryable answers."""
@@ -165,16 +173,26 @@ def decode(payload: bytes | bytearray | memoryview | str, kind: Any, area: Area 
     ``[0, area.max_altitude_m]``. Raises ``ProtocolError`` naming the first bad field.
     """
     if isinstance(payload, str):
-        payload = payload.encode("utf-8")
+        try:
+            payload = payload.encode("utf-8")
+        except UnicodeEncodeError:
+            raise ProtocolError("payload", "is not valid Unicode (a lone surrogate)") from None
     data = bytes(payload)
     if len(data) > MAX_PAYLOAD_BYTES:
         raise ProtocolError("payload", f"{len(data)} bytes exceeds the limit of {MAX_PAYLOAD_BYTES}")
+    tagged = Union[kind, _NoMessage] if isinstance(kind, type) and issubclass(kind, _Message) else kind
     try:
-        message = msgspec.json.decode(data, type=kind)
+        message = msgspec.json.decode(data, type=tagged)
     except msgspec.ValidationError as exc:
-        raise ProtocolError(*_explain(str(exc))) from None
+        raise ProtocolError(*_explain(str(exc), data)) from None
     except msgspec.DecodeError as exc:
         raise ProtocolError(*_explain_malformed(data, str(exc))) from None
+    except UnicodeDecodeError:  # msgspec raises it (not a DecodeError) for some invalid UTF-8
+        raise ProtocolError("payload", "is not valid UTF-8") from None
+    except RecursionError:  # msgspec skipping a deeply nested value (to find the tag) recurses
+        raise ProtocolError("payload", "nested too deeply") from None
+    if isinstance(message, _NoMessage):
+        raise ProtocolError("kind", "'-' is not a message kind")
     _check_values(message, area, "")
     return message
 
@@ -189,50 +207,91 @@ def decode_reply(payload: bytes | bytearray | memoryview | str) -> TaskAck | Err
     return decode(payload, Reply)
 
 
-_AT = re.compile(r" - at `\$\.?(?P<path>[^`]*)`$")
-_UNKNOWN = re.compile(r"unknown field `(?P<name>[^`]+)`")
-_MISSING = re.compile(r"missing required field `(?P<name>[^`]+)`")
+_AT = re.compile(r" - at `\$\.?(?P<path>[^`]*)`\Z")
+# An unknown field's name is the sender's text and may hold backticks and newlines, and
+# even look like the " - at `$.path`" suffix: match it greedily, to the end.
+_UNKNOWN = re.compile(r"Object contains unknown field `(?P<name>.*)`\Z", re.S)
+_MISSING = re.compile(r"Object missing required field `(?P<name>[^`]+)`\Z")
 
 
-def _explain(text: str) -> tuple[str, str]:
+def _explain(text: str, data: bytes) -> tuple[str, str]:
     """(field path, message) from a msgspec validation message."""
+    whole = _UNKNOWN.match(text)
+    if whole and whole.group("name") == "" and "" in _top_level_keys(data):
+        return "payload", "an object has a field with an empty name"
+    if whole and whole.group("name") in _top_level_keys(data):
+        # A top-level unknown field, whatever its name looks like.
+        return whole.group("name"), text
     at = _AT.search(text)
     prefix = at.group("path") if at else ""
     message = _AT.sub("", text)
     for pattern in (_UNKNOWN, _MISSING):
-        named = pattern.search(message)
+        named = pattern.match(message)
         if named:
             name = named.group("name")
             return (f"{prefix}.{name}" if prefix else name), message
     return (prefix or "payload"), message
 
 
-def _explain_malformed(data: bytes, text: str) -> tuple[str, str]:
-    """msgspec refuses NaN and Infinity as malformed JSON; name the field that holds one."""
+def _top_level_keys(data: bytes) -> set[str]:
     try:
-        loose = json.loads(data)
-    except (ValueError, UnicodeDecodeError):
+        loose = json.loads(data.decode("utf-8"))
+    except (ValueError, RecursionError):
+        return set()
+    return set(loose) if isinstance(loose, dict) else set()
+
+
+def _explain_malformed(data: bytes, text: str) -> tuple[str, str]:
+    """msgspec refuses NaN, Infinity and lone surrogate escapes (``"\\ud800"``) as malformed
+    JSON, which Python's json module reads: name the field that holds one."""
+    try:
+        # Strict UTF-8 first: json.loads would also guess UTF-16 and UTF-32. Objects as
+        # lists of pairs: with a duplicated key a dict would hide the first value.
+        loose = json.loads(data.decode("utf-8"), object_pairs_hook=_Pairs)
+    except (ValueError, RecursionError):  # UnicodeDecodeError is a ValueError
         return "payload", text
-    path = _first_non_finite(loose, "")
-    if path is not None:
-        return path, "must be a finite number (NaN and Infinity are not allowed)"
-    return "payload", text
+    return _first_unwritable(loose) or ("payload", text)
 
 
-def _first_non_finite(value: Any, path: str) -> str | None:
-    if isinstance(value, float) and not math.isfinite(value):
-        return path or "payload"
-    if isinstance(value, dict):
-        for key, item in value.items():
-            found = _first_non_finite(item, f"{path}.{key}" if path else str(key))
-            if found:
-                return found
-    if isinstance(value, list):
-        for i, item in enumerate(value):
-            found = _first_non_finite(item, f"{path}[{i}]")
-            if found:
-                return found
+class _Pairs(list):  # type: ignore[type-arg]
+    """A JSON object as its (key, value) pairs, in order, duplicates kept."""
+
+
+def _first_unwritable(value: Any) -> tuple[str, str] | None:
+    """(path, why) of the first non-finite number or lone surrogate, depth first, without
+    recursion (the value may be nested as deep as json.loads allows). The root's path is
+    None, so that an empty key still shows in the path (``{"": {"a": NaN}}`` -> ``.a``)."""
+    stack: list[tuple[str | None, Any]] = [(None, value)]
+    while stack:
+        path, item = stack.pop()
+        if isinstance(item, float) and not math.isfinite(item):
+            return path or "payload", "must be a finite number (NaN and Infinity are not allowed)"
+        if isinstance(item, str) and not _is_unicode(item):
+            return path or "payload", "is not valid Unicode (a lone surrogate escape)"
+        if isinstance(item, _Pairs):
+            children: list[tuple[str | None, Any]] = []
+            for key, child in item:
+                child_path = key if path is None else f"{path}.{key}"
+                if not _is_unicode(key):
+                    return _printable(child_path), "is not valid Unicode (a lone surrogate escape)"
+                children.append((child_path, child))
+            stack.extend(reversed(children))
+        elif isinstance(item, list):
+            stack.extend(reversed([(f"{path or ''}[{i}]", child) for i, child in enumerate(item)]))
     return None
+
+
+def _is_unicode(text: str) -> bool:
+    try:
+        text.encode("utf-8")
+    except UnicodeEncodeError:
+        return False
+    return True
+
+
+def _printable(text: str) -> str:
+    """``text`` with lone surrogates written as escapes, so that it can be sent back."""
+    return text.encode("utf-8", "backslashreplace").decode("utf-8")
 
 
 def _check_values(message: Any, area: Area | None, path: str) -> None:

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import math
 import struct
+import zlib
 from dataclasses import dataclass, field
 from typing import Any, Iterable, Literal, Sequence
 
@@ -30,6 +31,9 @@ MAX_HOLD_S = 3600.0
 E7 = 1e7
 XY_TOLERANCE_M = 0.5
 """Slack on the area test: 1e-7 degree rounding moves a point by about a centimetre."""
+MAX_LOCAL_M = 1e6
+"""No local coordinate lies farther than this from the origin: the tangent plane means
+nothing beyond, a float32 altitude overflows, and the geodesy returns NaN."""
 
 NAV_WAYPOINT = mavlink.MAV_CMD_NAV_WAYPOINT
 NAV_TAKEOFF = mavlink.MAV_CMD_NAV_TAKEOFF
@@ -130,6 +134,29 @@ def same_items(a: Sequence[MissionItem], b: Sequence[MissionItem]) -> bool:
     return len(a) == len(b) and all(x.same_as(y) for x, y in zip(a, b))
 
 
+def mission_digest(items: Sequence[MissionItem], flavour: Flavour = "ardupilot") -> str:
+    """A short fingerprint (CRC-32, 8 hex digits) of what a mission flies: each item's
+    command, frame, parameters and position as MAVLink carries them (float32), in order.
+    ``current`` is left out (it marks where to start, not what to fly), and so is
+    ArduPilot's item 0, which the autopilot replaces with home. The vehicle stub logs it
+    for every mission it commits, so a test can tell which upload the vehicle holds."""
+    _check_flavour(flavour)
+    start = 1 if flavour == "ardupilot" and items else 0
+    crc = 0
+    for item in items[start:]:
+        params = (item.param1, item.param2, item.param3, item.param4, item.z)
+        crc = zlib.crc32(struct.pack("<3H5f2i", item.command, item.frame, item.autocontinue,
+                                     *(math.nan if math.isnan(v) else f32(v) for v in params),
+                                     item.x, item.y), crc)
+    return f"{crc:08x}"
+
+
+def same_mission(a: Sequence[MissionItem], b: Sequence[MissionItem], flavour: Flavour = "ardupilot") -> bool:
+    """``a`` and ``b`` fly the same (a mission read back from the vehicle against the one
+    uploaded: ArduPilot's item 0 and ``current`` aside, float32 values as on the wire)."""
+    return len(a) == len(b) and mission_digest(a, flavour) == mission_digest(b, flavour)
+
+
 @dataclass(frozen=True)
 class HoverPoint:
     """A point of the planned path in local metres and how long to hold there."""
@@ -177,6 +204,8 @@ def encode_path(
     """
     _check_flavour(flavour)
     points = list(points)
+    for i, point in enumerate(points):
+        _check_point(f"points[{i}]", point)
     items: list[MissionItem] = []
     if flavour == "ardupilot":
         items.append(home_item(origin))
@@ -188,11 +217,6 @@ def encode_path(
         ))
     for i, point in enumerate(points):
         where = f"points[{i}]"
-        for name in ("x_m", "y_m", "z_m", "hold_s"):
-            if not math.isfinite(getattr(point, name)):
-                raise MissionError(f"{where}.{name}", "must be finite")
-        if not 0.0 <= point.hold_s <= MAX_HOLD_S:
-            raise MissionError(f"{where}.hold_s", f"{point.hold_s} s is outside [0, {MAX_HOLD_S}]")
         lat, lon, _ = local_to_global(origin, point.x_m, point.y_m, point.z_m)
         items.append(MissionItem(
             seq=len(items), frame=FRAME_RELATIVE_INT, command=NAV_WAYPOINT,
@@ -205,6 +229,21 @@ def encode_path(
     # (MAVSDK refuses an upload with none: CURRENT_INVALID).
     items[0] = MissionItem(**{**items[0].__dict__, "current": 1})
     return items
+
+
+def _check_point(where: str, point: HoverPoint) -> None:
+    """Refuse what cannot be encoded at all (the area and altitude limits are
+    ``validate_mission``'s): non-finite values, a hold out of range, a point beyond
+    ``MAX_LOCAL_M``. Done for every point before any item is built: the takeoff item takes
+    the first point's altitude."""
+    for name in ("x_m", "y_m", "z_m", "hold_s"):
+        if not math.isfinite(getattr(point, name)):
+            raise MissionError(f"{where}.{name}", "must be finite")
+    if not 0.0 <= point.hold_s <= MAX_HOLD_S:
+        raise MissionError(f"{where}.hold_s", f"{point.hold_s} s is outside [0, {MAX_HOLD_S}]")
+    for name in ("x_m", "y_m", "z_m"):
+        if abs(getattr(point, name)) > MAX_LOCAL_M:
+            raise MissionError(f"{where}.{name}", f"{getattr(point, name)} m lies over {MAX_LOCAL_M:g} m from the origin")
 
 
 def item_local(item: MissionItem, origin: GeoOrigin) -> tuple[float, float, float]:

@@ -10,6 +10,7 @@ COMMANDS = {
     "vehicle": "sim_bridge.commands.vehicle",
     "users": "sim_bridge.commands.users",
     "lossy-proxy": "sim_bridge.commands.lossy_proxy",
+    "router": "sim_bridge.commands.router",
 }
 
 
@@ -17,7 +18,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="python -m sim_bridge",
         description="Simulated counterparts of the planner: a MAVLink vehicle (SITL-stub), "
-        "ground users over zenoh, and a lossy UDP link.",
+        "ground users over zenoh, a lossy UDP link, and a zenoh router.",
     )
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     for name, path in COMMANDS.items():

@@ -12,10 +12,10 @@ def run(python, env, *args, check=True):
 
 def test_help_lists_the_commands(python, python_env):
     out = run(python, python_env, "-m", "planner_service", "--help").stdout
-    for name in ("serve", "demo", "plan", "experiment", "bench", "submit"):
+    for name in ("serve", "demo", "plan", "experiment", "bench", "submit", "keygen"):
         assert name in out
     out = run(python, python_env, "-m", "sim_bridge", "--help").stdout
-    for name in ("vehicle", "users", "lossy-proxy"):
+    for name in ("vehicle", "users", "lossy-proxy", "router"):
         assert name in out
 
 

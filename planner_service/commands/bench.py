@@ -22,11 +22,19 @@ def configure(parser: argparse.ArgumentParser) -> None:
                              "(real service and stub processes; the planner's time excluded)")
     parser.add_argument("--e2e-requests", type=int, default=200, help="requests timed with --e2e (default: 200)")
     parser.add_argument("--e2e-budget-ms", type=float, default=20.0, help="planner budget with --e2e (default: 20)")
+    parser.add_argument("--link", action="store_true",
+                        help="instead: mission upload time over a lossy MAVLink link at 0, 5 and 20 %% loss each way "
+                             "(the service's link -> sim_bridge lossy-proxy -> vehicle stub; median, p90, failures, "
+                             "ratio to the clean link); with --quick 10 uploads per rate (about 30 s), else "
+                             "--link-uploads")
+    parser.add_argument("--link-uploads", type=int, default=50, help="uploads per loss rate with --link (default: 50)")
 
 
 def run(args: argparse.Namespace) -> int:
     if args.e2e:
         return _run_e2e(args)
+    if args.link:
+        return _run_link(args)
     from ..bench.run import SIZES, format_table, run_bench
 
     if args.decisions < 1 or args.iterations < 1 or args.reference_decisions < 0:
@@ -47,4 +55,16 @@ def _run_e2e(args: argparse.Namespace) -> int:
         return 2
     results = run_e2e(args.e2e_requests, args.e2e_budget_ms, progress=lambda msg: print(msg, file=sys.stderr, flush=True))
     print(json.dumps(results, indent=1) if args.json else format_e2e(results))
+    return 0
+
+
+def _run_link(args: argparse.Namespace) -> int:
+    from ..bench.link import format_link, run_link_bench
+
+    uploads = 10 if args.quick else args.link_uploads
+    if uploads < 1:
+        print("error: --link-uploads must be at least 1", file=sys.stderr)
+        return 2
+    results = run_link_bench(uploads, progress=lambda msg: print(msg, file=sys.stderr, flush=True))
+    print(json.dumps(results, indent=1) if args.json else format_link(results))
     return 0

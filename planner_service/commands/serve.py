@@ -19,6 +19,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--mavlink", default=None, metavar="URL", help="autopilot connection (mavlink.url)")
     parser.add_argument("--backend", default=None, choices=["pymavlink", "mavsdk"], help="MAVLink library (mavlink.backend)")
     parser.add_argument("--listen", default=None, metavar="ENDPOINT", help="zenoh listen endpoint (zenoh.listen)")
+    parser.add_argument("--zenoh-config", default=None, metavar="FILE",
+                        help="zenoh configuration file (JSON5) as the session's base: TLS, access control "
+                             "(zenoh.config_file; docs/zenoh/service-tls-acl.json5)")
     parser.add_argument("--log-level", default="INFO", choices=["DEBUG", "INFO", "WARNING", "ERROR"])
 
 
@@ -30,7 +33,7 @@ def run(args: argparse.Namespace) -> int:
     try:
         overrides = parse_overrides(args.overrides)
         for flag, key in (("journal", "journal.path"), ("mavlink", "mavlink.url"), ("backend", "mavlink.backend"),
-                          ("listen", "zenoh.listen")):
+                          ("listen", "zenoh.listen"), ("zenoh_config", "zenoh.config_file")):
             if getattr(args, flag) is not None:
                 overrides[key] = getattr(args, flag)
         config = load_config(args.config, overrides)

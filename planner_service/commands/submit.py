@@ -17,6 +17,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--tasks", type=int, required=True, help="number of tasks to offload")
     parser.add_argument("--connect", action="append", default=None, metavar="ENDPOINT",
                         help="zenoh endpoint of the service (default tcp/127.0.0.1:7447; repeatable)")
+    parser.add_argument("--zenoh-config", default=None, metavar="FILE",
+                        help="zenoh configuration file (JSON5) as the session's base, e.g. TLS certificates "
+                             "(docs/zenoh/user-tls.json5); --connect is applied on top")
     parser.add_argument("--prefix", default="uavmec", help="key prefix (default uavmec)")
     parser.add_argument("--vehicle", default="uav1", help="vehicle id (default uav1)")
     parser.add_argument("--timeout", type=float, default=5.0, help="seconds to wait for the service (default 5)")
@@ -31,7 +34,13 @@ def run(args: argparse.Namespace) -> int:
     except ProtocolError as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
-    with PlannerClient(args.connect or ["tcp/127.0.0.1:7447"], keys, timeout_s=args.timeout) as client:
+    try:
+        client = PlannerClient(args.connect or ["tcp/127.0.0.1:7447"], keys, timeout_s=args.timeout,
+                               config_file=args.zenoh_config)
+    except ProtocolError as err:  # a refused config file, or no session (ClientError)
+        print(f"error: {err}", file=sys.stderr)
+        return 1
+    with client:
         if not client.wait_for_service(args.timeout):
             print(f"error: no service alive at {keys.alive}", file=sys.stderr)
             return 1

@@ -26,7 +26,7 @@ from typing import Any, Callable
 import numpy as np
 
 from protocol import (Event, HoverPoint, PendingRequest, Plan, PlanPoint, State, Status, encode, encode_path,
-                      global_to_local, validate_mission)
+                      global_to_local, same_mission, validate_mission)
 from protocol.errors import MissionError
 
 from ..mcts import MctsConfig
@@ -38,10 +38,11 @@ from .errors import JournalError, LinkError, PlanningError
 from .intake import Accepted, Intake
 from .journal import Journal
 from .link import LinkEvent, LinkSettings, open_link
-from .link.base import MISSION_MODES, RETURNING_MODES
+from .link.base import HOLDING_MODES, MISSION_MODES, RETURNING_MODES
 from .planning import (PlannedPath, Planner, VehicleFix, assemble, check_path, not_served_reason, planning_battery_j,
                        should_return)
 from .progress import HOLD_RADIUS_M, HeldMission, item_dict, item_from_dict
+from .throttle import RateLimit
 from .zenoh_io import ZenohIO, reply_and_drop
 
 log = logging.getLogger("planner_service")
@@ -51,9 +52,20 @@ GRACE_S = 5.0
 RETRY_S = 1.0
 """Wait before re-trying a failed plan, upload or start."""
 CONNECT_TIMEOUT_S = 10.0
+REFUSAL_EVENTS_PER_S = 5.0
+"""At most this many ``request_rejected`` events a second for refused requests (a flood of
+bad requests must not become a flood of events); the rest are counted in the next one."""
+BUSY_LOG_EVERY_S = 10.0
+"""Period of the warning that counts queries answered busy."""
 UPLOAD_SLACK_S = 0.5
 """Wall time allowed for an upload and the messages around it, when judging whether the
-vehicle may reach its point before a new mission does."""
+vehicle may reach its point before a new mission does (at least; more when uploads have
+been taking longer: see ``_upload_s``)."""
+UPLOAD_HISTORY = 5
+"""Uploads whose wall time is remembered: the longest of them is expected of the next."""
+PROGRESS_WAIT_S = 2.0
+"""After the vehicle's mission was read back, wait this long at most for its MISSION_CURRENT
+(streamed at 2 Hz) before planning, so that points flown meanwhile are recorded first."""
 
 
 @dataclass(frozen=True)
@@ -77,14 +89,20 @@ class Service:
         self.keys = config.keys()
         self.flavour = config.mavlink.flavour
         self.journal = Journal(config.journal.path, config.journal.synchronous, now_s=clock())
-        self.intake = Intake(self.journal, self.area, clock)
+        self.intake = Intake(self.journal, self.area, clock, config.intake)
+        self._refusal_events = RateLimit(REFUSAL_EVENTS_PER_S, time.monotonic())
+        self._refusals_unreported = 0
+        self._busy_logged = (time.monotonic(), 0)
         budget = config.planner.budget_ms
         self.planner = Planner(self.scenario, MctsConfig(iterations=config.planner.iterations or None, budget_ms=budget),
                                config.planner.seed)
         self.zio = ZenohIO(config.zenoh, self.keys)
         m = config.mavlink
         self.link = open_link(m.backend, LinkSettings(m.url, m.flavour, m.item_timeout_s, m.retries, m.link_timeout_s,
-                                                      m.source_system, m.source_component), self._on_link_event)
+                                                      m.source_system, m.source_component,
+                                                      signing_key_file=m.signing_key_file,
+                                                      signing_timestamp_file=m.signing_timestamp_file),
+                              self._on_link_event)
         self.executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix="planner")
         self.stopping = asyncio.Event()
         self._wake = asyncio.Event()
@@ -96,9 +114,26 @@ class Service:
         self._last_plan_t = -math.inf
         self._rtl_sent_t = -math.inf
         self._planning = False
-        self._reached_seq = -1
         self._tasks: list[asyncio.Task[Any]] = []
         self.held: HeldMission | None = None
+        """The mission the vehicle holds, as far as the service knows."""
+        self._held_gen: int | None = None
+        """The link generation ``held`` is known to match (``LinkEvent.mission``); None while
+        in doubt: progress reports are then ignored until a download settles it."""
+        self._counted: set[int] = set()
+        """Item seqs of ``held``'s points already recorded (served, or reached and judged)."""
+        self._doubt_reason: str | None = None
+        """Why the vehicle may hold another mission than ``held``: read it back before planning."""
+        self._unconfirmed: HeldMission | None = None
+        """An upload whose last item went out but whose ACK never came, nor a read-back."""
+        self._must_upload = False
+        """The vehicle's mission is gone: upload even a plan of no points (return to launch)."""
+        self._resume_pending = False
+        """The vehicle lost its mission in the air: resume (or ask the operator) after the upload."""
+        self._progress_after = 0.0
+        self._progress_seen = True
+        self._upload_times_s: list[float] = []
+        """Wall time of the last accepted uploads (a lossy link makes them seconds long)."""
         self.plan_msg: Plan | None = None
         sortie = self.journal.current_sortie()
         self.sortie_over: str | None = (sortie.why or "ended") if sortie.over else None
@@ -114,6 +149,8 @@ class Service:
         self.plan_id = self.journal.last_plan_id()
         if last is not None:
             self._restore_held(last.plan_id, last.items, last.points)
+            assert self.held is not None
+            self._counted = self.held.counted_from(last.time_s, [(s.user_id, s.time_s) for s in services])
 
     # --- lifecycle ----------------------------------------------------------------------------
     async def run(self) -> int:
@@ -123,18 +160,28 @@ class Service:
                 loop.add_signal_handler(sig, self.stopping.set)
             except (NotImplementedError, RuntimeError):  # not the main thread (tests)
                 pass
-        self.zio.open(loop, self._on_request, self._on_state)
-        log.info("zenoh %s session on %s (connect %s); keys %s/**", self.cfg.zenoh.mode, list(self.cfg.zenoh.listen),
-                 list(self.cfg.zenoh.connect), f"{self.keys.prefix}/{self.keys.vehicle}")
         self._tasks = [
             asyncio.create_task(self._connect_loop(), name="connect"),
             asyncio.create_task(self._status_loop(), name="status"),
             asyncio.create_task(self._planning_loop(), name="planning"),
             asyncio.create_task(self._warm_up(), name="warm-up"),
         ]
-        log.info("ready: sortie %d (%s): %d pending requests, %d services in the journal %s", self.journal.sortie,
-                 f"over: {self.sortie_over}" if self.sortie_over else "running", len(self.journal.pending()),
-                 len(self.journal.services()), self.cfg.journal.path)
+        z = self.cfg.zenoh
+        try:
+            opened = await self.zio.open(loop, self._on_request, self._on_state, self.stopping)
+        except BaseException:
+            for task in self._tasks:
+                task.cancel()
+            await asyncio.gather(*self._tasks, return_exceptions=True)
+            await self.link.close()
+            self.journal.close()
+            raise
+        if opened:
+            log.info("zenoh %s session on %s (connect %s%s); keys %s/**", z.mode, list(z.listen), list(z.connect),
+                     f"; base {z.config_file}" if z.config_file else "", f"{self.keys.prefix}/{self.keys.vehicle}")
+            log.info("ready: sortie %d (%s): %d pending requests, %d services in the journal %s",
+                     self.journal.sortie, f"over: {self.sortie_over}" if self.sortie_over else "running",
+                     len(self.journal.pending()), len(self.journal.services()), self.cfg.journal.path)
         await self.stopping.wait()
         await self._shutdown()
         return 0
@@ -186,8 +233,12 @@ class Service:
             detail = f"{outcome.tasks} tasks" + (f"; replaces {list(outcome.replaced)}" if outcome.replaced else "")
             self._event("request_accepted", user_id=outcome.user_id, request_id=outcome.request_id, detail=detail)
             self._wake.set()
+        elif self._refusal_events.take(time.monotonic()):
+            unreported = f"[{self._refusals_unreported} more refused, not reported] " if self._refusals_unreported else ""
+            self._refusals_unreported = 0
+            self._event("request_rejected", detail=f"{unreported}{outcome.reply.field}: {outcome.reply.message}"[:256])
         else:
-            self._event("request_rejected", detail=f"{outcome.reply.field}: {outcome.reply.message}"[:256])
+            self._refusals_unreported += 1
 
     def _on_state(self, query: Any) -> None:
         pending = [PendingRequest(request_id=r.request_id, user_id=r.user_id, x_m=r.x_m, y_m=r.y_m, z_m=r.z_m,
@@ -238,8 +289,20 @@ class Service:
                 self.flown = True
             self.zio.publish("status", encode(self._status()))
             self._maybe_begin_sortie()
+            self._log_busy()
             await self._safety_check()
             await asyncio.sleep(period)
+
+    def _log_busy(self) -> None:
+        """Say how many queries were answered busy (they never reach the loop otherwise)."""
+        since, seen = self._busy_logged
+        now, refused = time.monotonic(), self.zio.in_flight.refused
+        if refused > seen and now - since >= BUSY_LOG_EVERY_S:
+            log.warning("%d queries answered busy in the last %.0f s (zenoh.max_queries_in_flight = %d)",
+                        refused - seen, now - since, self.zio.in_flight.limit)
+            self._busy_logged = (now, refused)
+        elif refused == seen:
+            self._busy_logged = (now, refused)
 
     async def _safety_check(self) -> None:
         """Return to launch when the battery reaches the threshold (the planner should never
@@ -264,15 +327,24 @@ class Service:
             log.info("autopilot connected (%s)", ev.text)
             if t.airborne:
                 self.started = self.flown = True
+            if self.held is not None:  # from the journal: does the vehicle still fly it?
+                self._doubt(f"the service started with plan {self.held.plan_id} in its journal")
             self._wake.set()
         elif ev.kind == "lost":
             self._event("link_lost", detail=ev.text)
         elif ev.kind == "restored":
             self._event("link_restored", detail=ev.text)
+            if self.held is not None or self.flown:
+                self._doubt("the link was lost")  # a radio gap, or the vehicle restarted
             self._urgent.set()
             self._wake.set()
+        elif ev.kind == "restarted":
+            self._event("vehicle_restarted", detail=ev.text[:256])
+            self._doubt(f"the vehicle restarted: {ev.text}")
         elif ev.kind == "reached":
-            self._reached(ev.seq)
+            self._progress(ev.seq, ev.mission, including=True)
+        elif ev.kind == "current":
+            self._on_current(ev)
         elif ev.kind == "landed":
             if self.flown:
                 self._end_sortie("the vehicle landed")
@@ -283,14 +355,46 @@ class Service:
         if t.airborne:
             self.flown = True
 
+    def _doubt(self, why: str) -> None:
+        """The vehicle may no longer hold ``held``: ignore its progress reports until the
+        mission is read back (before the next plan)."""
+        log.warning("%s: the mission held will be read back before planning", why)
+        self._doubt_reason = why
+        self._held_gen = None
+        self._urgent.set()
+        self._wake.set()
+
+    def _on_current(self, ev: LinkEvent) -> None:
+        held = self.held
+        if held is None or ev.mission != self._held_gen:
+            return
+        self._progress_seen = True
+        # MISSION_CURRENT.total leaves ArduPilot's home out by the spec (the stub counts it);
+        # 0: the vehicle has no mission, -1: it does not say. Else a mission we did not upload.
+        n = len(held.items)
+        if ev.total >= 0 and ev.total not in (n, n - 1 if self.flavour == "ardupilot" else n):
+            self._doubt(f"the vehicle reports a mission of {ev.total} items, not the {n} of plan {held.plan_id}")
+            return
+        self._progress(ev.seq, ev.mission, including=False)
+
+    def _progress(self, seq: int, mission: int, *, including: bool) -> None:
+        """The vehicle flies item ``seq`` (or completed it): record every point before it
+        (and it) not yet recorded. MISSION_ITEM_REACHED is sent once and may be lost; the
+        streamed MISSION_CURRENT catches up, also after a link gap or a restart of ours."""
+        held = self.held
+        if held is None or mission != self._held_gen:
+            return  # about another mission, or in doubt
+        for done in held.points_done(seq, self._counted, including=including):
+            self._reached(done)
+
     def _reached(self, seq: int) -> None:
         held = self.held
         point = held.point_at(seq) if held is not None else None
-        if point is None:
+        if point is None or seq in self._counted:
             return
+        self._counted.add(seq)
         now = self.clock()
         self.last_hover_index = point.hover_index
-        self._reached_seq = seq
         self._version += 1
         services = sum(1 for s in self.journal.services() if s.user_id == point.user_id)
         request = next((r for r in self.journal.pending() if r.user_id == point.user_id), None)
@@ -364,15 +468,17 @@ class Service:
             log.error("could not begin the next sortie: %s", err)
             return
         self.sortie_over = None
-        self.held = None
+        # the last sortie's mission and what was judged of it (a doubt is about that mission)
+        self.held, self._held_gen, self._counted, self._unconfirmed = None, None, set(), None
+        self._doubt_reason, self._must_upload, self._resume_pending = None, False, False
+        self._progress_seen, self._progress_after = True, 0.0
         self.plan_msg = None
         self.last_hover_index = -1
-        self._reached_seq = -1
         self.started = self.flown = False
         self._version += 1
         self._last_plan_t = -math.inf
         self.planner.new_sortie()
-        self.intake.closed_reason = None
+        self.intake.new_sortie()
         self._event("sortie_started", detail=f"sortie {number}: battery at {battery_fraction:.0%}")
         log.info("sortie %d begins: battery at %.0f%%", number, 100 * battery_fraction)
         self._wake.set()
@@ -406,6 +512,11 @@ class Service:
         if not t.connected or not t.valid:  # no vehicle yet: look again soon
             asyncio.get_running_loop().call_later(RETRY_S / 2, self._wake.set)
             return False
+        if not self._progress_seen and time.monotonic() < self._progress_after:
+            # The mission was just read back: its MISSION_CURRENT first, so that points
+            # flown meanwhile are recorded before the planner counts its users.
+            asyncio.get_running_loop().call_later(0.2, self._wake.set)
+            return False
         if t.airborne and t.mode in RETURNING_MODES:
             return False  # returning: the safety or the operator decided; no more plans
         if self._busy_at_point():
@@ -413,15 +524,60 @@ class Service:
         return self.flown or len(self.journal.pending()) >= self.cfg.planner.min_requests
 
     async def _plan_once(self) -> PlanOutcome | None:
-        if not self._ready_to_plan():
+        if self.sortie_over:
             return None
         self._idle.clear()
-        self._planning = True
         try:
+            if self._doubt_reason is not None and not await self._settle():
+                return None
+            if not self._ready_to_plan():
+                return None
+            self._planning = True
             return await self._plan_and_upload()
         finally:
             self._planning = False
             self._idle.set()
+
+    async def _settle(self) -> bool:
+        """Read back the mission the vehicle holds and take it as ``held`` if it is ours
+        (the last accepted, or an upload whose ACK was lost); otherwise the vehicle's
+        mission is gone or stale (it restarted): plan again and upload, whatever the plan."""
+        why = self._doubt_reason
+        t = self.link.telemetry
+        if not t.connected:
+            asyncio.get_running_loop().call_later(RETRY_S, self._wake.set)
+            return False
+        try:
+            items = await self.link.download()
+        except LinkError as err:
+            log.warning("could not read back the vehicle's mission (%s): %s; trying again", why, err)
+            asyncio.get_running_loop().call_later(RETRY_S, self._wake.set)
+            return False
+        if self._doubt_reason != why:
+            return False  # another doubt arose meanwhile: read again
+        self._doubt_reason = None
+        for candidate in (self.held, self._unconfirmed):
+            if candidate is None or not same_mission(items, candidate.items, self.flavour):  # type: ignore[arg-type]
+                continue
+            if candidate is not self.held:  # the upload whose ACK was lost went through
+                self.held, self._counted = candidate, set()
+                self.journal.record_mission(candidate.plan_id, [item_dict(i) for i in candidate.items],
+                                            [dict(p.__dict__) for p in candidate.points], "accepted", self.clock())
+                self._publish_plan(candidate)
+            self._held_gen, self._unconfirmed = self.link.generation, None
+            self._progress_seen, self._progress_after = False, time.monotonic() + PROGRESS_WAIT_S
+            log.info("%s: the vehicle holds plan %d (read back)", why, candidate.plan_id)
+            return True
+        lost = self.held
+        self.held, self._held_gen, self._counted, self._unconfirmed = None, None, set(), None
+        self._must_upload = t.airborne
+        self._resume_pending = t.airborne
+        ours = f"plan {lost.plan_id}" if lost is not None else "a mission of ours"
+        detail = f"{why}: the vehicle holds {len(items)} items, not {ours}; re-planning from where it is"
+        log.warning("%s", detail)
+        if not why or "restarted" not in why:
+            self._event("vehicle_restarted", detail=detail[:256])
+        return True
 
     def _busy_at_point(self) -> bool:
         """Could a mission uploaded now find the vehicle holding over its current point?
@@ -431,22 +587,29 @@ class Service:
         t = self.link.telemetry
         if not (t.airborne and self.held is not None and t.mode in MISSION_MODES):
             return False
-        if t.mission_seq <= self._reached_seq:  # that waypoint is done; MISSION_CURRENT lags
+        if self._held_gen is None or t.mission_seq in self._counted:  # in doubt, or done (MISSION_CURRENT lags)
             return False
         point = self.held.point_at(t.mission_seq)
         if point is None:
             return False
         fix = self._fix()
-        age_s = max(time.monotonic() - t.position_at, 0.0) + self.cfg.planner.budget_ms / 1e3 + UPLOAD_SLACK_S
+        age_s = max(time.monotonic() - t.position_at, 0.0) + self.cfg.planner.budget_ms / 1e3 + self._upload_s()
         reach_m = self.scenario.speed_mps * t.time_rate * age_s + HOLD_RADIUS_M
         return math.dist((fix.x_m, fix.y_m, fix.z_m), (point.x_m, point.y_m, point.z_m)) <= reach_m
 
+    def _upload_s(self) -> float:
+        """Wall time the next upload may take: the longest of the last few (seconds on a
+        lossy link, where each lost message waits ``item_timeout_s``), at least
+        ``UPLOAD_SLACK_S``. The vehicle flies the old mission meanwhile."""
+        return max([UPLOAD_SLACK_S, *self._upload_times_s])
+
     def _planning_fix(self) -> VehicleFix:
-        """The vehicle as the planner should see it: a conservative battery."""
+        """The vehicle as the planner should see it: a conservative battery, less what it
+        spends until the plan is flown (the reading's age, the search, the upload)."""
         fix = self._fix()
         t = self.link.telemetry
         stale_wall = max(time.monotonic() - t.battery_at, 0.0) if t.battery_at else 0.0
-        stale_vehicle = t.time_rate * (stale_wall + self.cfg.planner.budget_ms / 1e3 + 0.2)
+        stale_vehicle = t.time_rate * (stale_wall + self.cfg.planner.budget_ms / 1e3 + self._upload_s())
         battery = planning_battery_j(self.scenario, fix.battery_j, stale_vehicle, self.cfg.safety.energy_margin_j)
         return replace(fix, battery_j=battery)
 
@@ -459,7 +622,8 @@ class Service:
         decision, path = await asyncio.get_running_loop().run_in_executor(self.executor, self.planner.decide, assembled)
         planner_ms = (time.perf_counter() - t0) * 1e3
         self._last_plan_t = time.monotonic()
-        if self.stopping.is_set():
+        if self.stopping.is_set() or self.sortie_over or self._doubt_reason is not None:
+            self._wake.set()  # the doubt is settled first; a landing or shutdown ends it all
             return None
         if version != self._version:  # a service was recorded meanwhile: plan again from it
             self._urgent.set()
@@ -467,29 +631,35 @@ class Service:
             return None
         if self._busy_at_point():  # arrived while searching: the plan waits for the waypoint's end
             return None
-        if not path.points and not (fix.airborne and self.held is not None and self.held.points):
+        if not path.points and not (fix.airborne and (self._must_upload or (self.held is not None and self.held.points))):
             return None  # nothing to fly and nothing held to cancel
         check_path(path, self.area, self.scenario, fix.battery_j)
         items = encode_path([HoverPoint(p.x_m, p.y_m, p.z_m, p.hold_s) for p in path.points], self.origin,
                             self.flavour)  # type: ignore[arg-type]
-        validate_mission(items, self.origin, self.area, self.flavour)  # type: ignore[arg-type]
+        validate_mission(items, self.origin, self.area, self.flavour,  # type: ignore[arg-type]
+                         max_items=self.cfg.mavlink.max_mission_items)
         plan_id = self.plan_id + 1
         t1 = time.perf_counter()
         try:
             await self.link.upload(items)
         except LinkError as err:
-            self.journal.record_mission(plan_id, [item_dict(i) for i in items], _points(path), f"failed: {err.result}",
+            outcome = "unknown" if err.outcome_unknown else "failed"
+            self.journal.record_mission(plan_id, [item_dict(i) for i in items], _points(path), f"{outcome}: {err.result}",
                                         self.clock())
             self.plan_id = plan_id
+            if err.outcome_unknown:  # the vehicle may hold it: find out before anything else
+                self._unconfirmed = HeldMission.build(plan_id, items, path.points, self.flavour)
+                self._doubt(f"the outcome of plan {plan_id}'s upload is unknown")
             raise
         upload_ms = (time.perf_counter() - t1) * 1e3
+        self._upload_times_s = [*self._upload_times_s, upload_ms / 1e3][-UPLOAD_HISTORY:]
         self.plan_id = plan_id
         self.journal.record_mission(plan_id, [item_dict(i) for i in items], _points(path), "accepted", self.clock())
         self.held = HeldMission.build(plan_id, items, path.points, self.flavour)
-        self._reached_seq = -1
-        self.plan_msg = Plan(plan_id=plan_id, time_s=self.clock(), predicted_energy_j=max(path.predicted_energy_j, 0.0),
-                             points=[PlanPoint(p.x_m, p.y_m, p.z_m, p.hold_s, p.user_id) for p in path.points])
-        self.zio.publish("plan", encode(self.plan_msg))
+        self._held_gen, self._counted, self._unconfirmed, self._must_upload = self.link.generation, set(), None, False
+        # Reports that came between the ACK and now (the vehicle restarts the mission).
+        self._progress(self.link.telemetry.mission_seq, self._held_gen, including=False)
+        self._publish_plan(self.held, path.predicted_energy_j)
         newest = max((r.request_id for r in self.journal.pending()), default=0)
         self._event("mission_uploaded", detail=(
             f"plan {plan_id}: {len(path.points)} points; planner_ms={planner_ms:.1f} upload_ms={upload_ms:.1f} "
@@ -499,7 +669,38 @@ class Service:
         if not path.points:
             self._event("returning", detail=f"nothing more to serve ({path.stop_reason}): return to launch")
         await self._maybe_start()
+        await self._maybe_resume()
         return PlanOutcome(plan_id, len(path.points), planner_ms, upload_ms)
+
+    def _publish_plan(self, held: HeldMission, predicted_energy_j: float = 0.0) -> None:
+        self.plan_msg = Plan(plan_id=held.plan_id, time_s=self.clock(), predicted_energy_j=max(predicted_energy_j, 0.0),
+                             points=[PlanPoint(p.x_m, p.y_m, p.z_m, p.hold_s, p.user_id) for p in held.points])
+        self.zio.publish("plan", encode(self.plan_msg))
+
+    async def _maybe_resume(self) -> None:
+        """After the vehicle lost its mission in the air (a restart: it holds position), fly
+        the new one: if the service started the mission (``start_mission``), it resumes it;
+        otherwise it says the operator must (it never takes control it was not given)."""
+        t = self.link.telemetry
+        if not self._resume_pending or self.held is None:
+            return
+        if not t.airborne or t.mode not in HOLDING_MODES:
+            self._resume_pending = False  # flying it already, going home, or in the operator's hands
+            return
+        if not (self.cfg.mavlink.start_mission and self.started):
+            self._resume_pending = False
+            self._event("resume_needed", detail=(f"plan {self.held.plan_id} uploaded; the vehicle holds position in "
+                                                 f"{t.mode}: the operator must switch to AUTO to resume")[:256])
+            return
+        try:
+            await self.link.resume()
+        except LinkError as err:
+            log.warning("the autopilot did not resume the mission (%s); trying again", err)
+            asyncio.get_running_loop().call_later(RETRY_S, lambda: asyncio.ensure_future(self._maybe_resume()))
+            return
+        self._resume_pending = False
+        self._event("mission_resumed", detail=f"plan {self.held.plan_id} from its start (was {t.mode})")
+        log.info("mission resumed after the vehicle lost its mission (plan %d)", self.held.plan_id)
 
     async def _maybe_start(self) -> None:
         t = self.link.telemetry

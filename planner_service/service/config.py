@@ -10,12 +10,15 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import os
 import tomllib
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any, Mapping
 
 from protocol import Area, GeoOrigin, Keys, ProtocolError
+from protocol.errors import SigningError
+from protocol.signing import default_timestamp_path, load_key
 
 from ..model import Scenario, ScenarioError, preset
 from .errors import ConfigError
@@ -40,6 +43,26 @@ class ZenohConfig:
     """Second chunk: the vehicle id."""
     status_hz: float = 2.0
     """Rate of the status publication (at least 1 Hz)."""
+    max_queries_in_flight: int = 64
+    """Queries handed from zenoh's threads to the event loop and not yet answered; one more
+    is answered at once "busy: ..." from zenoh's thread (bounds the memory a flood takes)."""
+    config_file: str = ""
+    """A zenoh configuration file (JSON5) used as the session's base (TLS, access control,
+    timeouts); mode, listen, connect and multicast_scouting above are applied on top. Empty:
+    zenoh's defaults."""
+
+
+@dataclass(frozen=True)
+class IntakeConfig:
+    max_pending_requests: int = 100
+    """Pending requests the journal holds; beyond it a user without a pending request is
+    refused "busy: ..." (a user replacing its own pending request is still taken)."""
+    max_users: int = 200
+    """Distinct user ids in one sortie; a request from a new id beyond it is refused "full: ..."
+    (bounds the journal's users and the planner's size)."""
+    max_requests_per_s: float = 50.0
+    """Accepted requests per second, over a one-second burst; beyond it "busy: ..." (bounds
+    the journal's growth and the fsyncs a flood costs)."""
 
 
 @dataclass(frozen=True)
@@ -55,13 +78,25 @@ class MavlinkConfig:
     """Arm and start the mission once one is uploaded. Off by default: on a real aircraft
     the operator arms; turn it on only where the operator allows it (the stub, SITL)."""
     item_timeout_s: float = 0.5
-    """Wait for the autopilot's next request or ack before repeating the last message."""
+    """Longest wait for the autopilot's next request or ack before repeating the last
+    message (the link waits about four measured round trips when that is shorter)."""
     retries: int = 10
     """Repeats of one message before an upload is given up."""
     link_timeout_s: float = 3.0
-    """Silence after which the link counts as lost (and is reopened)."""
+    """Silence (no message at all) after which the link counts as lost."""
     source_system: int = 255
     source_component: int = 190
+    max_mission_items: int = 512
+    """The autopilot's mission capacity: a plan of more items is refused before upload
+    (``protocol.validate_mission``). ArduPilot's depends on its storage; the stub's is
+    ``--max-mission-items``."""
+    signing_key_file: str = ""
+    """MAVLink 2 signing: sign every message with the key in this file (64 hex characters,
+    mode 0600; ``keygen`` makes one) and accept only correctly signed ones. Empty: off.
+    Needs the pymavlink backend."""
+    signing_timestamp_file: str = ""
+    """Where the last signing timestamp is kept so that a restart never reuses one; empty:
+    beside the key (KEY.service-timestamp)."""
 
 
 @dataclass(frozen=True)
@@ -121,6 +156,7 @@ class SortieConfig:
 @dataclass(frozen=True)
 class ServiceConfig:
     zenoh: ZenohConfig = field(default_factory=ZenohConfig)
+    intake: IntakeConfig = field(default_factory=IntakeConfig)
     mavlink: MavlinkConfig = field(default_factory=MavlinkConfig)
     planner: PlannerConfig = field(default_factory=PlannerConfig)
     journal: JournalConfig = field(default_factory=JournalConfig)
@@ -150,9 +186,8 @@ class ServiceConfig:
         return Keys(self.zenoh.prefix, self.zenoh.vehicle)
 
 
-_SECTIONS = {"zenoh": ZenohConfig, "mavlink": MavlinkConfig, "planner": PlannerConfig,
-             "journal": JournalConfig, "origin": OriginConfig, "safety": SafetyConfig,
-             "sortie": SortieConfig}
+_SECTIONS = {"zenoh": ZenohConfig, "intake": IntakeConfig, "mavlink": MavlinkConfig, "planner": PlannerConfig,
+             "journal": JournalConfig, "origin": OriginConfig, "safety": SafetyConfig, "sortie": SortieConfig}
 
 
 def _text(value: Any) -> str:
@@ -275,6 +310,15 @@ def validate(c: ServiceConfig) -> None:
         raise ConfigError("zenoh.connect", "client mode needs at least one endpoint to connect to")
     if not z.status_hz >= 1.0:
         raise ConfigError("zenoh.status_hz", f"must be at least 1 Hz, got {z.status_hz}")
+    if z.max_queries_in_flight < 1:
+        raise ConfigError("zenoh.max_queries_in_flight", "must be at least 1")
+    if z.config_file and not Path(z.config_file).is_file():
+        raise ConfigError("zenoh.config_file", f"{z.config_file} is not a readable file")
+    i = c.intake
+    if i.max_pending_requests < 1 or i.max_users < 1:
+        raise ConfigError("intake", "max_pending_requests and max_users must be at least 1")
+    if not i.max_requests_per_s > 0:
+        raise ConfigError("intake.max_requests_per_s", "must be positive")
     try:
         c.keys()
     except ProtocolError as err:
@@ -288,10 +332,16 @@ def validate(c: ServiceConfig) -> None:
             raise ConfigError(f"mavlink.{key}", "must be positive")
     if m.retries < 1:
         raise ConfigError("mavlink.retries", "must be at least 1")
+    if not 3 <= m.max_mission_items <= 65535:  # home, takeoff and RTL; MISSION_COUNT is uint16
+        raise ConfigError("mavlink.max_mission_items", f"must lie in 3..65535, got {m.max_mission_items}")
+    _validate_signing(m)
     if not p.budget_ms > 0:
         raise ConfigError("planner.budget_ms", "must be positive")
     if p.iterations < 0 or p.min_requests < 1 or p.replan_min_interval_s < 0:
         raise ConfigError("planner", "iterations >= 0, min_requests >= 1, replan_min_interval_s >= 0")
+    if p.min_requests > c.intake.max_pending_requests:
+        raise ConfigError("planner.min_requests", f"{p.min_requests} can never be pending: "
+                          f"intake.max_pending_requests is {c.intake.max_pending_requests}")
     if c.journal.synchronous.upper() not in ("OFF", "NORMAL", "FULL", "EXTRA"):
         raise ConfigError("journal.synchronous", "must be OFF, NORMAL, FULL or EXTRA")
     if not s.energy_margin_j >= 0:
@@ -314,6 +364,27 @@ def validate(c: ServiceConfig) -> None:
     if not area.min_flight_altitude_m <= scenario.altitude_m <= area.max_altitude_m:
         raise ConfigError("safety.max_altitude_m", f"the scenario's altitude {scenario.altitude_m} m is outside "
                           f"[{area.min_flight_altitude_m}, {area.max_altitude_m}] m")
+
+
+def _validate_signing(m: MavlinkConfig) -> None:
+    """The key must load (exists, 64 hex characters, owner-only) and the timestamp file's
+    folder be writable, so that a signing setup that cannot work is refused at start."""
+    if not m.signing_key_file:
+        if m.signing_timestamp_file:
+            raise ConfigError("mavlink.signing_timestamp_file", "set without mavlink.signing_key_file")
+        return
+    if m.backend != "pymavlink":
+        raise ConfigError("mavlink.backend", "signing needs the pymavlink backend: the mavsdk 4 binding has no MAVLink "
+                          "signing (mavlink.signing_key_file is set)")
+    try:
+        load_key(m.signing_key_file)
+    except SigningError as err:
+        raise ConfigError("mavlink.signing_key_file", str(err)) from None
+    stamps = m.signing_timestamp_file or str(default_timestamp_path(m.signing_key_file, "service"))
+    folder = os.path.dirname(stamps) or "."
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise ConfigError("mavlink.signing_timestamp_file", f"{stamps}: the folder {folder} is missing or not writable "
+                          "(the signing timestamp is stored there)")
 
 
 def to_toml(c: ServiceConfig) -> str:

@@ -31,9 +31,12 @@ class PlanningError(ServiceError):
 
 class LinkError(ServiceError):
     """A MAVLink operation failed: ``operation`` says what was attempted, ``result`` the
-    autopilot's answer (a MAV_MISSION_RESULT / MAV_RESULT name) or why there was none."""
+    autopilot's answer (a MAV_MISSION_RESULT / MAV_RESULT name) or why there was none.
+    ``outcome_unknown``: an upload whose last item was sent but never acknowledged, and
+    the mission held could not be read back either; the autopilot may hold either one."""
 
-    def __init__(self, operation: str, result: str) -> None:
+    def __init__(self, operation: str, result: str, outcome_unknown: bool = False) -> None:
         super().__init__(f"{operation}: {result}")
         self.operation = operation
         self.result = result
+        self.outcome_unknown = outcome_unknown

@@ -82,6 +82,8 @@ CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
 
 INDEXES = """
 CREATE INDEX IF NOT EXISTS requests_by_user ON requests (user_id, status);
+-- pending(), users() and the fairness counts run for every request and decision: through
+-- these indexes they read the current sortie only, however long the journal
 CREATE INDEX IF NOT EXISTS requests_by_sortie ON requests (sortie, status, user_id);
 CREATE INDEX IF NOT EXISTS services_by_sortie ON services (sortie, user_id);
 CREATE INDEX IF NOT EXISTS missions_by_sortie ON missions (sortie, result);
@@ -355,6 +357,15 @@ class Journal:
         return [RequestRow(*r) for r in self._rows(
             f"SELECT {_REQ} FROM requests WHERE sortie = ? AND status = 'pending' ORDER BY request_id",
             (self.sortie,))]
+
+    def pending_count(self) -> int:
+        """How many requests of the current sortie are pending."""
+        return int(self._rows("SELECT COUNT(*) FROM requests WHERE sortie = ? AND status = 'pending'",
+                              (self.sortie,))[0][0])
+
+    def user_ids(self) -> set[str]:
+        """Every user id with a request in the current sortie."""
+        return {r[0] for r in self._rows("SELECT DISTINCT user_id FROM requests WHERE sortie = ?", (self.sortie,))}
 
     def users(self, sortie: int | None = None) -> list[UserRow]:
         """Every user heard from in the sortie, in order of first request; position from its

@@ -1,12 +1,17 @@
 """The mission the vehicle holds and where the vehicle is in it: which item sequence
-number is which planned point, and whether the vehicle is holding over one (a re-plan then
-would cut a user's upload short). Pure."""
+number is which planned point, which points are done, and whether the vehicle is holding
+over one (a re-plan then would cut a user's upload short). Pure.
+
+A point is done when the vehicle reports it reached (MISSION_ITEM_REACHED, sent once and
+lost one time in five on a 20 % lossy link) or when the vehicle flies a later item
+(MISSION_CURRENT, streamed): items are flown in order, from the start of the mission on
+each upload."""
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any
+from typing import AbstractSet, Any, Iterable
 
 from protocol import MissionItem
 
@@ -36,6 +41,20 @@ class HeldMission:
         """The planned point item ``seq`` flies to, or None (home, takeoff, RTL)."""
         i = seq - self.first_point_seq
         return self.points[i] if 0 <= i < len(self.points) else None
+
+    def points_done(self, seq: int, counted: AbstractSet[int], *, including: bool) -> list[int]:
+        """Item seqs of the points done, judging from item ``seq`` (MISSION_CURRENT: the
+        vehicle flies it, every point before is done; MISSION_ITEM_REACHED, ``including``:
+        it too), less those already ``counted``, in order."""
+        last = min(seq if including else seq - 1, self.first_point_seq + len(self.points) - 1)
+        return [s for s in range(self.first_point_seq, last + 1) if s not in counted]
+
+    def counted_from(self, accepted_at_s: float, served: Iterable[tuple[str, float]]) -> set[int]:
+        """Item seqs of this mission's points already recorded, from the journal's services
+        (user, time) after the mission was accepted at ``accepted_at_s``: a path serves each
+        user at most once, so a service of the point's user since then is that point's."""
+        since = {user for user, t in served if t >= accepted_at_s}
+        return {self.first_point_seq + i for i, p in enumerate(self.points) if p.user_id in since}
 
 
 def item_dict(item: MissionItem) -> dict[str, Any]:

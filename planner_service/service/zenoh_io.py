@@ -5,35 +5,48 @@ zenoh-python calls its handlers on its own threads; each query is handed to the 
 loop with ``call_soon_threadsafe`` and answered there (a Query may be replied to from any
 thread until it is dropped; ``reply_and_drop`` finalises it at once so the client's get
 completes without waiting for the garbage collector).
+
+Back-pressure: at most ``max_queries_in_flight`` queries wait for the loop. One more is
+answered at once on zenoh's thread with ``ErrorReply(field="service", message="busy: ...")``
+and dropped, so a flood costs bounded memory and every client gets an answer instead of a
+timeout.
 """
 
 from __future__ import annotations
 
 import asyncio
-import json
-from typing import Any, Callable
+import logging
+import threading
+from typing import Any, Callable, Sequence
 
 import zenoh
 
-from protocol import Keys
+from protocol import ErrorReply, Keys, ProtocolError, encode
+from protocol.zenoh_config import error_text
+from protocol.zenoh_config import session_config as _session_config
 
 from .config import ZenohConfig
 from .errors import ServiceError
+from .intake import BUSY, client_ref
+
+log = logging.getLogger("planner_service.zenoh")
+
+OPEN_RETRY_S = 2.0
+"""In client mode, how long one attempt to reach a router lasts before the next."""
 
 
 class ZenohError(ServiceError):
     """The zenoh session could not be opened or used."""
 
 
-def session_config(mode: str, listen: tuple[str, ...] | list[str] = (), connect: tuple[str, ...] | list[str] = (),
-                   multicast_scouting: bool = False) -> zenoh.Config:
-    """A zenoh Config: mode, explicit endpoints, multicast scouting on or off."""
-    conf = zenoh.Config()
-    conf.insert_json5("mode", json.dumps(mode))
-    conf.insert_json5("scouting/multicast/enabled", "true" if multicast_scouting else "false")
-    conf.insert_json5("listen/endpoints", json.dumps(list(listen)))
-    conf.insert_json5("connect/endpoints", json.dumps(list(connect)))
-    return conf
+def session_config(mode: str, listen: Sequence[str] = (), connect: Sequence[str] = (),
+                   multicast_scouting: bool = False, config_file: str | None = None) -> zenoh.Config:
+    """The service's zenoh Config (``protocol.zenoh_config.session_config``); ``ZenohError``
+    naming ``zenoh.config_file`` if that file is refused."""
+    try:
+        return _session_config(mode, listen, connect, multicast_scouting, config_file)
+    except ProtocolError as err:
+        raise ZenohError(f"zenoh.config_file: {err.message}") from None
 
 
 def reply_and_drop(query: Any, key: str, payload: bytes) -> None:
@@ -43,39 +56,119 @@ def reply_and_drop(query: Any, key: str, payload: bytes) -> None:
         query.drop()
 
 
+class InFlight:
+    """Counts queries handed to the event loop and not yet answered (thread-safe: entered
+    on zenoh's threads, left on the loop's)."""
+
+    def __init__(self, limit: int) -> None:
+        self.limit = limit
+        self.count = 0
+        self.refused = 0
+        """Queries answered busy so far (for the log)."""
+        self._lock = threading.Lock()
+
+    def enter(self) -> bool:
+        with self._lock:
+            if self.count >= self.limit:
+                self.refused += 1
+                return False
+            self.count += 1
+            return True
+
+    def leave(self) -> None:
+        with self._lock:
+            self.count -= 1
+
+
 class ZenohIO:
     def __init__(self, cfg: ZenohConfig, keys: Keys) -> None:
         self.cfg = cfg
         self.keys = keys
         self.session: Any = None
+        self.in_flight = InFlight(cfg.max_queries_in_flight)
         self._request_q: Any = None
         self._state_q: Any = None
         self._pubs: dict[str, Any] = {}
         self._token: Any = None
 
-    def open(self, loop: asyncio.AbstractEventLoop, on_request: Callable[[Any], None],
-             on_state: Callable[[Any], None]) -> None:
-        """Open the session and declare everything; handlers run on ``loop``'s thread."""
+    def _config(self) -> zenoh.Config:
         c = self.cfg
-        try:
-            self.session = zenoh.open(session_config(c.mode, c.listen, c.connect, c.multicast_scouting))
-        except zenoh.ZError as err:
-            raise ZenohError(f"cannot open a zenoh session ({c.mode}, listen {list(c.listen)}, "
-                             f"connect {list(c.connect)}): {err}") from None
+        return session_config(c.mode, c.listen, c.connect, c.multicast_scouting, c.config_file or None)
 
-        def hand_over(handler: Callable[[Any], None]) -> Callable[[Any], None]:
-            def callback(query: Any) -> None:
+    async def open(self, loop: asyncio.AbstractEventLoop, on_request: Callable[[Any], None],
+                   on_state: Callable[[Any], None], stopping: asyncio.Event) -> bool:
+        """Open the session and declare everything; handlers run on ``loop``'s thread.
+
+        In client mode the session needs a router: while none answers, it is tried again
+        every ``OPEN_RETRY_S`` (off the loop's thread, so shutdown stays possible) until one
+        does or ``stopping`` is set (then False). Once open, zenoh itself reconnects to the
+        ``connect`` endpoints after a router restarts, and the declarations are restored."""
+        conf = self._config()
+        if self.cfg.mode == "client":
+            conf.insert_json5("connect/timeout_ms", str(int(OPEN_RETRY_S * 1000)))
+        warned = False
+        while True:
+            try:
+                self.session = await asyncio.to_thread(zenoh.open, conf)
+                break
+            except zenoh.ZError as err:
+                c = self.cfg
+                if c.mode != "client":
+                    raise ZenohError(f"cannot open a zenoh session ({c.mode}, listen {list(c.listen)}, "
+                                     f"connect {list(c.connect)}): {error_text(err)}") from None
+                if not warned:
+                    log.warning("waiting for a zenoh router at %s: %s", list(c.connect), error_text(err))
+                    warned = True
+                if stopping.is_set():
+                    return False
+                # a refused connection fails at once: wait before the next attempt
                 try:
-                    loop.call_soon_threadsafe(handler, query)
-                except RuntimeError:  # the loop is closed: refuse rather than hang the client
-                    query.drop()
-            return callback
-
+                    await asyncio.wait_for(stopping.wait(), OPEN_RETRY_S / 4)
+                    return False
+                except TimeoutError:
+                    pass
+        if stopping.is_set():
+            self.close()
+            return False
         s = self.session
         self._pubs = {name: s.declare_publisher(getattr(self.keys, name)) for name in ("status", "plan", "events")}
-        self._state_q = s.declare_queryable(self.keys.state, hand_over(on_state))
-        self._request_q = s.declare_queryable(self.keys.request, hand_over(on_request))
+        self._state_q = s.declare_queryable(self.keys.state, self._hand_over(loop, on_state, self.keys.state))
+        self._request_q = s.declare_queryable(self.keys.request, self._hand_over(loop, on_request, self.keys.request))
         self._token = s.liveliness().declare_token(self.keys.alive)
+        return True
+
+    def _hand_over(self, loop: asyncio.AbstractEventLoop, handler: Callable[[Any], None],
+                   key: str) -> Callable[[Any], None]:
+        """A zenoh callback (zenoh's thread) that queues ``handler(query)`` on the loop, or
+        answers busy at once when ``max_queries_in_flight`` are already queued."""
+        gate = self.in_flight
+
+        def run(query: Any) -> None:
+            try:
+                handler(query)
+            finally:
+                gate.leave()
+
+        def callback(query: Any) -> None:
+            if not gate.enter():
+                self._busy(query, key)
+                return
+            try:
+                loop.call_soon_threadsafe(run, query)
+            except RuntimeError:  # the loop is closed: refuse rather than hang the client
+                gate.leave()
+                query.drop()
+        return callback
+
+    def _busy(self, query: Any, key: str) -> None:
+        payload = query.payload.to_bytes() if query.payload is not None else None
+        reply = ErrorReply(field="service", message=(
+            f"{BUSY}{self.in_flight.limit} queries are already waiting (zenoh.max_queries_in_flight); "
+            f"retry in a moment"), client_ref=client_ref(payload))
+        try:
+            reply_and_drop(query, key, encode(reply))
+        except zenoh.ZError:  # the client went away meanwhile: nothing to answer
+            pass
 
     def publish(self, name: str, payload: bytes) -> None:
         pub = self._pubs.get(name)

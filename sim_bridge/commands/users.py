@@ -25,6 +25,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--duration", type=float, default=None, help="stop after this many wall seconds")
     parser.add_argument("--connect", action="append", default=None, metavar="ENDPOINT",
                         help="zenoh endpoint of the service (default tcp/127.0.0.1:7447; repeatable)")
+    parser.add_argument("--zenoh-config", default=None, metavar="FILE",
+                        help="zenoh configuration file (JSON5) as the session's base, e.g. TLS certificates "
+                             "(docs/zenoh/user-tls.json5); --connect is applied on top")
     parser.add_argument("--prefix", default="uavmec")
     parser.add_argument("--vehicle", default="uav1")
     parser.add_argument("--log-level", default="INFO", choices=("DEBUG", "INFO", "WARNING", "ERROR"))
@@ -49,7 +52,12 @@ def run(args: argparse.Namespace) -> int:
     stop = threading.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: stop.set())
-    with PlannerClient(args.connect or ["tcp/127.0.0.1:7447"], keys) as client:
+    try:
+        client = PlannerClient(args.connect or ["tcp/127.0.0.1:7447"], keys, config_file=args.zenoh_config)
+    except ProtocolError as err:  # a refused config file, or no session (ClientError)
+        print(f"error: {err}", file=sys.stderr)
+        return 1
+    with client:
         logging.getLogger("sim_bridge.users").info("%d users waiting for the service at %s", args.count, keys.alive)
         while not client.wait_for_service(1.0):
             if stop.is_set():

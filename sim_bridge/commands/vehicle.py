@@ -33,6 +33,19 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--retries", type=int, default=5, help="re-requests before an upload is abandoned (default 5)")
     parser.add_argument("--fence-margin", type=float, default=100.0,
                         help="geofence: the scenario area grown by this many metres (default 100)")
+    parser.add_argument("--max-mission-items", type=int, default=512,
+                        help="mission capacity: a larger upload is answered NO_SPACE (default 512)")
+    parser.add_argument("--signing-key", default=None, metavar="FILE",
+                        help="enforce MAVLink 2 signing with the key in FILE (64 hex characters, mode 0600; make one "
+                             "with: python -m planner_service keygen FILE): outgoing messages are signed, incoming "
+                             "ones obeyed only if correctly signed (unsigned RADIO_STATUS excepted)")
+    parser.add_argument("--signing-timestamp-file", default=None, metavar="FILE",
+                        help="where the last signing timestamp is kept across restarts "
+                             "(default: beside the key, FILE.vehicle-timestamp)")
+    parser.add_argument("--state-file", default=None, metavar="PATH",
+                        help="save the flight (position, battery, armed, mode, time, home) here a few times a "
+                             "second and, if the file exists at start, resume from it as after a reboot: in the "
+                             "air it holds position, its mission lost; time_boot_ms restarts from 0")
     parser.add_argument("--recharge-s", type=float, default=None, metavar="SECONDS",
                         help="battery swap: SECONDS of simulated time after landing and disarming, the battery "
                              "is full again (default: never)")
@@ -45,6 +58,7 @@ def run(args: argparse.Namespace) -> int:
     # Imported here so that `--help` does not pay for numba and pymavlink.
     from planner_service.model import ScenarioError, preset
     from protocol.errors import MissionError
+    from protocol.errors import SigningError
     from protocol.geodesy import GeoOrigin
     from sim_bridge.vehicle import Vehicle, VehicleConfig, VehicleError
 
@@ -54,10 +68,13 @@ def run(args: argparse.Namespace) -> int:
         config = VehicleConfig(
             url=args.mavlink, flavour=args.flavour, scenario=scenario, origin=origin,
             speedup=args.speedup, system_id=args.sysid, item_timeout_s=args.item_timeout,
-            max_retries=args.retries, fence_margin_m=args.fence_margin, recharge_s=args.recharge_s,
+            max_retries=args.retries, fence_margin_m=args.fence_margin,
+            max_mission_items=args.max_mission_items,
+            signing_key_file=args.signing_key, signing_timestamp_file=args.signing_timestamp_file,
+            state_file=args.state_file, recharge_s=args.recharge_s,
         )
         vehicle = Vehicle(config)
-    except (ScenarioError, MissionError, VehicleError) as exc:
+    except (ScenarioError, MissionError, VehicleError, SigningError) as exc:
         print(f"vehicle: {exc}", file=sys.stderr)
         return 2
     stop = threading.Event()

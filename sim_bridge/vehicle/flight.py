@@ -52,6 +52,25 @@ ends at most one sub-step's drain below the threshold when the aircraft turns ho
 
 
 @dataclass(frozen=True)
+class FlightSnapshot:
+    """A flight's state as the vehicle saves it to survive a restart (``--state-file``):
+    local metres, joules, simulated seconds; ``mode`` is a ``Mode`` value."""
+
+    flavour: str
+    pos: tuple[float, float, float]
+    home: tuple[float, float, float]
+    energy_j: float
+    armed: bool
+    landed: bool
+    mode: str
+    time_s: float
+    speed_mps: float
+    flight_j: float = 0.0
+    hover_j: float = 0.0
+    compute_j: float = 0.0
+
+
+@dataclass(frozen=True)
 class FlightEvent:
     """Something the link reports: ``kind`` is one of reached, current, mode, landed,
     disarmed, battery_low, battery_swapped, mission_done; ``seq`` the mission item when it
@@ -89,6 +108,8 @@ class Flight:
         self.hold_left: float | None = None
         self.energy_j = float(self.scenario.battery_j)
         self.time_s = 0.0
+        self.boot_s = 0.0
+        """Simulated time of the last (re)start: ``time_boot_ms`` counts from here."""
         self.speed_mps = float(self.scenario.speed_mps)
         self.guided_alt: float | None = None
         self.climb_out: float | None = None
@@ -126,6 +147,11 @@ class Flight:
     def first_item(self) -> int:
         """ArduPilot's item 0 is home and never flown."""
         return 1 if self.flavour == "ardupilot" and len(self.mission) > 1 else 0
+
+    @property
+    def since_boot_s(self) -> float:
+        """Simulated seconds since the vehicle (re)started: its MAVLink clock."""
+        return self.time_s - self.boot_s
 
     @property
     def mission_done(self) -> bool:
@@ -203,6 +229,39 @@ class Flight:
         self.current = seq
         self.hold_left = None
         self.climb_out = None
+
+    # --- restart ------------------------------------------------------------------------------
+    def snapshot(self) -> FlightSnapshot:
+        """What survives a restart of the vehicle: where it is and what it has spent."""
+        return FlightSnapshot(
+            flavour=self.flavour, pos=(self.pos[0], self.pos[1], self.pos[2]), home=self.home,
+            energy_j=self.energy_j, armed=self.armed, landed=self.landed, mode=self.mode.value,
+            time_s=self.time_s, speed_mps=self.speed_mps, flight_j=self.flight_j, hover_j=self.hover_j,
+            compute_j=self.compute_j,
+        )
+
+    def resume(self, snap: FlightSnapshot) -> None:
+        """Come back as after a reboot: at the saved position with the saved battery and
+        home, but with the mission lost (the worst case: an autopilot that keeps its mission
+        in storage would still hold it) and the clock since boot restarting at 0. In the air
+        it is armed and holds position (LOITER / AUTO.LOITER) until told otherwise; on the
+        ground it is disarmed."""
+        if snap.flavour != self.flavour:
+            raise VehicleError("state_file", f"saved by a {snap.flavour} vehicle, this one is {self.flavour}")
+        self.pos = list(snap.pos)
+        self.home = snap.home
+        self.energy_j = snap.energy_j
+        self.landed = snap.landed
+        self.armed = snap.armed and not snap.landed
+        self.mode = Mode.HOLD if not self.landed else (Mode.MANUAL if self.flavour == "ardupilot" else Mode.HOLD)
+        self.time_s = self.boot_s = snap.time_s
+        self.speed_mps = snap.speed_mps
+        self.flight_j, self.hover_j, self.compute_j = snap.flight_j, snap.hover_j, snap.compute_j
+        self.vel = (0.0, 0.0, 0.0)
+        self.mission, self.started, self.failsafe = [], False, False
+        self.guided_alt = None
+        self._go_to_item(0)
+        self._leg, self._leg_m = None, 0.0
 
     # --- simulation -------------------------------------------------------------------------
     def step(self, dt_s: float) -> list[FlightEvent]:

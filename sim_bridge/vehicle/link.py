@@ -9,6 +9,11 @@ another's stream).
 URLs: ``udpin:HOST:PORT`` (listen; reply to every peer heard from recently),
 ``udpout:HOST:PORT`` (send to a ground station listening there), ``tcpin:HOST:PORT``
 (listen for TCP clients).
+
+Signing (``signer``): every parser and the encoder share one ``protocol.signing.Signer``, so
+outgoing messages are signed and an incoming message counts only if correctly signed (or an
+unsigned RADIO_STATUS); the shared stream timestamps catch a replay from any address. A
+sender whose every message is dropped is not a peer: it is neither greeted nor answered.
 """
 
 from __future__ import annotations
@@ -21,6 +26,8 @@ from dataclasses import dataclass
 from typing import Any, Callable, Hashable
 
 from pymavlink.dialects.v20 import common as mavlink
+
+from protocol.signing import Signer
 
 from .errors import VehicleError
 
@@ -44,10 +51,16 @@ class Received:
     new_peer: bool
 
 
-def _parser(system_id: int, component_id: int) -> mavlink.MAVLink:
+def _parser(system_id: int, component_id: int, signer: Signer | None = None) -> mavlink.MAVLink:
     parser = mavlink.MAVLink(None, srcSystem=system_id, srcComponent=component_id)
     parser.robust_parsing = True
+    if signer is not None:
+        signer.attach(parser)
     return parser
+
+
+def _signature_refused(msg: Any) -> bool:
+    return msg.get_type() == "BAD_DATA" and getattr(msg, "reason", "") == "Invalid signature"
 
 
 def parse_url(url: str) -> tuple[str, str, int]:
@@ -68,12 +81,13 @@ class Link:
     """Sockets of one MAVLink endpoint; ``poll`` reads, ``send`` writes."""
 
     def __init__(self, url: str, system_id: int = 1, component_id: int = 1,
-                 clock: Callable[[], float] = time.monotonic) -> None:
+                 clock: Callable[[], float] = time.monotonic, signer: Signer | None = None) -> None:
         self.kind, host, port = parse_url(url)
         self.url = url
         self._clock = clock
         self._ids = (system_id, component_id)
-        self.encoder = _parser(system_id, component_id)
+        self.signer = signer
+        self.encoder = _parser(system_id, component_id, signer)
         self.selector = selectors.DefaultSelector()
         self._peers: dict[Hashable, float] = {}
         """Peers that sent valid MAVLink, with the time they are forgotten."""
@@ -170,16 +184,26 @@ class Link:
         if parser is None:
             if len(self._parsers) >= MAX_PARSERS:
                 self._parsers.pop(next(iter(self._parsers)))
-            parser = self._parsers[peer] = _parser(*self._ids)
+            parser = self._parsers[peer] = _parser(*self._ids, self.signer)
         self._heard[peer] = now
+        dropped = self.signer.stats.dropped_total if self.signer is not None else 0
         try:
             messages = parser.parse_buffer(data) or []
         except Exception as exc:  # robust parsing should not raise; a vehicle must not die if it does
             log.debug("unparseable bytes from %s: %s", peer, exc)
-            self._parsers[peer] = _parser(*self._ids)
+            self._parsers[peer] = _parser(*self._ids, self.signer)
             messages = []
-        good = [m for m in messages if m.get_type() != "BAD_DATA"]
-        self.bad_bytes += sum(len(m.get_msgbuf()) for m in messages if m.get_type() == "BAD_DATA")
+        if self.signer is not None and self.signer.stats.dropped_total > dropped:
+            # Dropped for their signature (they come back as BAD_DATA): counted, never obeyed.
+            log.debug("dropped %d message(s) from %s, the last %s", self.signer.stats.dropped_total - dropped, peer,
+                      self.signer.last_drop)
+            messages = [m for m in messages if not _signature_refused(m)]
+        # A frame with a message id the dialect does not know cannot have its CRC checked
+        # (the CRC seed is per message), so pymavlink passes it on as MAVLink_unknown: one
+        # byte edited in a frame's id is enough. It is noise, like BAD_DATA.
+        good = [m for m in messages if m.get_type() != "BAD_DATA" and not isinstance(m, mavlink.MAVLink_unknown)]
+        self.bad_bytes += sum(len(m.get_msgbuf()) for m in messages if m.get_type() == "BAD_DATA"
+                              or isinstance(m, mavlink.MAVLink_unknown))
         if not good:
             return  # noise is not a peer: it is neither greeted nor sent telemetry
         new = peer not in self._peers

@@ -11,6 +11,7 @@ import logging
 import math
 import threading
 import time
+from pathlib import Path
 from dataclasses import dataclass, field
 from typing import Any, Callable, Hashable
 
@@ -18,7 +19,9 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from planner_service.model import Scenario
 from protocol.geodesy import GeoOrigin, local_to_global
-from protocol.mission import GLOBAL_FRAMES, NAV_POSITION_COMMANDS, MissionItem, f32, item_local
+from protocol.errors import SigningError
+from protocol.mission import GLOBAL_FRAMES, NAV_POSITION_COMMANDS, MissionItem, f32, item_local, mission_digest
+from protocol.signing import Signer, TimestampStore, default_timestamp_path, load_key
 
 from . import telemetry as tm
 from .commands import Commands
@@ -26,6 +29,7 @@ from .errors import VehicleError
 from .flight import Flight, FlightEvent
 from .link import Link, Received
 from .mission_store import MissionStore
+from .state_file import SAVE_INTERVAL_S, load_state, save_state
 from .modes import mode_from_custom, mode_name
 
 log = logging.getLogger(__name__)
@@ -45,6 +49,8 @@ DEFAULT_INTERVALS_S: dict[int, float] = {
 }
 MIN_INTERVAL_S = 0.02
 MAX_STEP_TICKS = 5
+SIGNING_TICK_S = 1.0
+"""How often the signing timestamp is brought up to the clock (and its reservation stored)."""
 
 
 @dataclass(frozen=True)
@@ -64,6 +70,15 @@ class VehicleConfig:
     fence_margin_m: float = 100.0
     """Geofence: the scenario's area grown by this margin; waypoints outside are refused."""
     max_altitude_m: float = 150.0
+    max_mission_items: int = 512
+    """Mission capacity: a MISSION_COUNT above it is answered MAV_MISSION_NO_SPACE."""
+    signing_key_file: str | None = None
+    """Enforce MAVLink 2 signing with the key in this file (``protocol.signing.load_key``)."""
+    signing_timestamp_file: str | None = None
+    """Where the signing timestamp is kept; default beside the key (KEY.vehicle-timestamp)."""
+    state_file: str | None = None
+    """Save the flight here a few times a second and resume from it at start (a restart
+    in the air comes back holding position, its mission lost)."""
     recharge_s: float | None = None
     """Battery swap: simulated seconds on the ground, disarmed, until the battery is full
     again; None: never (one sortie's battery)."""
@@ -77,6 +92,8 @@ class VehicleConfig:
             raise VehicleError("system_id", "must lie in 1..255")
         if not self.tick_s > 0 or not self.item_timeout_s > 0 or self.max_retries < 0:
             raise VehicleError("timing", "tick_s and item_timeout_s must be positive, max_retries >= 0")
+        if not 1 <= self.max_mission_items <= 65535:
+            raise VehicleError("max_mission_items", f"must lie in 1..65535, got {self.max_mission_items}")
         if self.recharge_s is not None and not (math.isfinite(self.recharge_s) and self.recharge_s >= 0):
             raise VehicleError("recharge_s", f"must be a finite number of seconds >= 0, got {self.recharge_s}")
 
@@ -88,24 +105,51 @@ class Vehicle:
         self.config = config
         self.clock = clock
         self.flight = Flight(config.scenario, config.origin, config.flavour, recharge_s=config.recharge_s)
-        self.link = Link(config.url, config.system_id, config.component_id, clock)
+        self.signer = self._signer(config)
+        try:
+            self.link = Link(config.url, config.system_id, config.component_id, clock, self.signer)
+        except VehicleError:
+            if self.signer is not None:
+                self.signer.close()
+            raise
         self.store = MissionStore(
             self._send_to, clock, check=self._check_mission, on_commit=self._on_commit,
             on_set_current=self._on_set_current, item_timeout_s=config.item_timeout_s,
-            max_retries=config.max_retries,
+            max_retries=config.max_retries, capacity=config.max_mission_items,
         )
         self.commands = Commands(self.flight, self._message_for, self._set_interval)
         self.intervals = dict(DEFAULT_INTERVALS_S)
         self._due: dict[int, float] = {}
         self._last_tick = clock()
         self._power_w = 0.0
+        self._state_path = Path(config.state_file) if config.state_file else None
+        self._saved_at = -float("inf")
+        if self._state_path is not None:
+            snap = load_state(self._state_path)
+            if snap is not None:
+                self.flight.resume(snap)
+                f = self.flight
+                log.info("restarted from %s: %s at (%.0f, %.0f, %.0f) m, battery %.1f%%, mode %s, mission lost",
+                         self._state_path, "airborne" if not f.landed else "on the ground", *f.pos,
+                         100 * f.battery_fraction, mode_name(config.flavour, f.mode))
         self._last_mode = self.flight.mode
-        self._last_armed = False
+        self._last_armed = self.flight.armed
+        self._signing_due = clock() + SIGNING_TICK_S
+
+    @staticmethod
+    def _signer(config: VehicleConfig) -> Signer | None:
+        """The signing state, or None without a key (``SigningError`` names a bad file)."""
+        if not config.signing_key_file:
+            return None
+        key = load_key(config.signing_key_file)
+        stamps = config.signing_timestamp_file or default_timestamp_path(config.signing_key_file, "vehicle")
+        return Signer(key, TimestampStore(stamps))
 
     # --- loop ------------------------------------------------------------------------------
     def run(self, stop: threading.Event) -> None:
         """Serve until ``stop`` is set."""
-        log.info("vehicle (%s) listening on %s, speed-up %g", self.config.flavour, self.config.url, self.config.speedup)
+        log.info("vehicle (%s) listening on %s, speed-up %g%s", self.config.flavour, self.config.url,
+                 self.config.speedup, ", signing enforced" if self.signer is not None else "")
         try:
             while not stop.is_set():
                 wait = self._last_tick + self.config.tick_s - self.clock()
@@ -115,6 +159,13 @@ class Vehicle:
                     self._safely(self.tick)
         finally:
             self.link.close()
+            self._safely(self._save_state, True)
+            if self.signer is not None:
+                log.info("signing: %s", self.signer.stats.summary())
+                try:
+                    self.signer.close()
+                except SigningError as err:
+                    log.error("signing timestamp not stored: %s", err)
 
     def _safely(self, fn: Callable[..., None], *args: Any) -> None:
         try:
@@ -147,7 +198,22 @@ class Vehicle:
             self._last_mode, self._last_armed = self.flight.mode, self.flight.armed
             self._send_to(tm.heartbeat(self.flight), None)
         self.store.tick()
+        if self.signer is not None and now >= self._signing_due:
+            self._signing_due = now + SIGNING_TICK_S
+            try:
+                self.signer.tick()
+            except SigningError as err:  # a full disk must not stop the telemetry below
+                log.error("signing timestamp not stored (a restart could reuse timestamps): %s", err)
         self._stream(now)
+        self._save_state()
+
+    def _save_state(self, force: bool = False) -> None:
+        """The flight to the state file, every ``SAVE_INTERVAL_S`` of wall time."""
+        now = self.clock()
+        if self._state_path is None or (not force and now < self._saved_at + SAVE_INTERVAL_S):
+            return
+        self._saved_at = now
+        save_state(self._state_path, self.flight.snapshot())
 
     def _stream(self, now: float) -> None:
         for msg_id, interval in self.intervals.items():
@@ -255,7 +321,7 @@ class Vehicle:
         return True
 
     def _on_commit(self, items: list[MissionItem]) -> list[MissionItem]:
-        log.info("mission of %d items accepted", len(items))
+        log.info("mission of %d items accepted (digest %s)", len(items), mission_digest(items, self.config.flavour))
         if self.config.flavour == "ardupilot" and items:
             # ArduPilot keeps home in item 0 whatever was uploaded there (a download
             # returns home): the pitfall the flavour exists to reproduce.

@@ -35,8 +35,8 @@ FIRMWARE_TYPE_OFFICIAL = 255
 
 
 def time_boot_ms(flight: Flight) -> int:
-    """Milliseconds of simulated time since start (the vehicle's own clock)."""
-    return int(flight.time_s * 1000.0) % (1 << 32)
+    """Milliseconds of simulated time since the vehicle (re)started (its own clock)."""
+    return int(flight.since_boot_s * 1000.0) % (1 << 32)
 
 
 def heartbeat(flight: Flight) -> Any:
@@ -107,7 +107,7 @@ def gps_raw_int(flight: Flight) -> Any:
     lat, lon, alt = _global(flight)
     speed = math.hypot(flight.vel[0], flight.vel[1])
     return mavlink.MAVLink_gps_raw_int_message(
-        int(flight.time_s * 1e6), mavlink.GPS_FIX_TYPE_3D_FIX, lat, lon, int(round(alt * 1000)), 80, 120,
+        int(flight.since_boot_s * 1e6), mavlink.GPS_FIX_TYPE_3D_FIX, lat, lon, int(round(alt * 1000)), 80, 120,
         int(round(speed * 100)), 65535, 14,
     )
 
@@ -171,7 +171,8 @@ def mission_current(flight: Flight, seq: int | None = None, state: int | None = 
     seq = min(flight.current if seq is None else seq, last)
     mode = 1 if flight.mode is Mode.AUTO else 2
     state = mission_state(flight) if state is None else state
-    return mavlink.MAVLink_mission_current_message(seq, len(flight.mission), state, mode)
+    total = len(flight.mission) if flight.mission else 0xFFFF  # UINT16_MAX: no mission (MAVLink)
+    return mavlink.MAVLink_mission_current_message(seq, total, state, mode)
 
 
 def home_position(flight: Flight) -> Any:
@@ -179,7 +180,7 @@ def home_position(flight: Flight) -> Any:
     lat, lon, alt = local_to_global(flight.origin, x, y, z)
     return mavlink.MAVLink_home_position_message(
         int(round(lat * 1e7)), int(round(lon * 1e7)), int(round(alt * 1000)), y, x, -z,
-        [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0, int(flight.time_s * 1e6),
+        [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0, int(flight.since_boot_s * 1e6),
     )
 
 

@@ -53,6 +53,16 @@ class Stack:
         assert self.client.wait_for_service(20.0), "the service's liveliness token never appeared"
         return child
 
+    def proxy(self, *impairment: str) -> int:
+        """A lossy UDP proxy (``sim_bridge lossy-proxy``) in front of the vehicle; the port
+        the service should send to instead of the vehicle's."""
+        port = free_port(socket.SOCK_DGRAM)
+        child = Child("sim_bridge", ["lossy-proxy", "--listen", f"127.0.0.1:{port}", "--forward",
+                                     f"127.0.0.1:{self.mav_port}", *impairment], self.tmp / "proxy.log")
+        self.children.append(child)
+        child.wait_ready("lossy proxy")
+        return port
+
     def users(self, *extra: str) -> Child:
         child = Child("sim_bridge", ["users", "--connect", self.endpoint, *extra], self.tmp / "users.log")
         self.children.append(child)

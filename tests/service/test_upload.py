@@ -1,11 +1,11 @@
-"""The mission upload state machine, fed the autopilot's messages by hand."""
+"""The mission upload and download state machines, fed the autopilot's messages by hand."""
 
 from __future__ import annotations
 
 from pymavlink.dialects.v20 import common as M
 
-from planner_service.service.link.upload import MissionUpload
-from protocol import GeoOrigin, HoverPoint, encode_path
+from planner_service.service.link.upload import MissionDownload, MissionUpload
+from protocol import GeoOrigin, HoverPoint, encode_path, same_mission
 
 ITEMS = encode_path([HoverPoint(10.0, 20.0, 50.0, 3.0), HoverPoint(60.0, 20.0, 50.0, 3.0)], GeoOrigin(), "ardupilot")
 
@@ -58,3 +58,54 @@ def test_refusal_and_bad_request() -> None:
     up2.begin()
     bad = up2.on_message(req(9))
     assert bad is not None and not bad.accepted and "BAD_REQUEST" in bad.result
+
+
+def test_given_up_after_the_last_item_may_have_been_committed() -> None:
+    up, _ = machine(retries=1)
+    up.begin()
+    for seq in range(len(ITEMS)):
+        up.on_message(req(seq))
+    assert up.on_timeout() is None  # the last item again
+    done = up.on_timeout()
+    assert done is not None and not done.accepted and done.maybe_committed
+    early, _ = machine(retries=1)
+    early.begin()
+    early.on_message(req(0))
+    early.on_timeout()
+    done = early.on_timeout()
+    assert done is not None and not done.maybe_committed  # the vehicle never had every item
+
+
+def test_download_reads_what_the_vehicle_holds() -> None:
+    sent: list = []
+    down = MissionDownload(sent.append, (1, 1), retries=2)
+    down.begin()
+    assert sent[-1].get_type() == "MISSION_REQUEST_LIST"
+    assert down.on_timeout() is None and sent[-1].get_type() == "MISSION_REQUEST_LIST"  # asked again
+    assert down.on_message(M.MAVLink_mission_count_message(255, 190, len(ITEMS), M.MAV_MISSION_TYPE_MISSION)) is None
+    for item in ITEMS:
+        assert sent[-1].get_type() == "MISSION_REQUEST_INT" and sent[-1].seq == item.seq
+        assert down.on_message(item.to_message(255, 190)) is down.done  # None until the last
+        if item.seq == 1:
+            assert down.on_message(item.to_message(255, 190)) is None  # a duplicate changes nothing
+    done = down.done
+    assert done is not None and done.ok and same_mission(list(done.items), ITEMS)
+    assert sent[-1].get_type() == "MISSION_ACK" and sent[-1].type == M.MAV_MISSION_ACCEPTED
+
+
+def test_download_of_nothing_refusal_and_silence() -> None:
+    sent: list = []
+    empty = MissionDownload(sent.append, (1, 1), retries=2)
+    empty.begin()
+    done = empty.on_message(M.MAVLink_mission_count_message(255, 190, 0, M.MAV_MISSION_TYPE_MISSION))
+    assert done is not None and done.ok and done.items == ()
+    refused = MissionDownload(sent.append, (1, 1), retries=2)
+    refused.begin()
+    refused.on_message(M.MAVLink_mission_count_message(255, 190, 3, M.MAV_MISSION_TYPE_MISSION))
+    done = refused.on_message(ack(M.MAV_MISSION_INVALID_SEQUENCE))
+    assert done is not None and not done.ok and done.result == "MAV_MISSION_INVALID_SEQUENCE"
+    silent = MissionDownload(sent.append, (1, 1), retries=1)
+    silent.begin()
+    assert silent.on_timeout() is None
+    done = silent.on_timeout()
+    assert done is not None and not done.ok and done.result == "NO_ANSWER after 1 requests for MISSION_COUNT"

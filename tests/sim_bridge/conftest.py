@@ -15,6 +15,8 @@ import pytest
 from planner_service.service.processes import free_port
 
 REPO = Path(__file__).resolve().parents[2]
+# MAVLink garbage (mavlink_garbage.py) lives beside the protocol tests; the service's tests use it too.
+sys.path.insert(0, str(REPO / "tests" / "protocol"))
 
 
 class Process:

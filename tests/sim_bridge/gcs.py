@@ -11,6 +11,7 @@ os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavutil  # noqa: E402
 
 from protocol.mission import MissionItem  # noqa: E402
+from protocol.signing import Signer  # noqa: E402
 
 M = mavutil.mavlink
 
@@ -20,10 +21,13 @@ class GcsError(RuntimeError):
 
 
 class GroundStation:
-    """pymavlink as a ground station (system 255, component 190)."""
+    """pymavlink as a ground station (system 255, component 190); with ``signer`` every
+    message it sends is signed and only correctly signed ones are received."""
 
-    def __init__(self, url: str, timeout_s: float = 0.3, retries: int = 30) -> None:
+    def __init__(self, url: str, timeout_s: float = 0.3, retries: int = 30, signer: Signer | None = None) -> None:
         self.conn = mavutil.mavlink_connection(url, source_system=255, source_component=190)
+        if signer is not None:
+            signer.attach(self.conn.mav)
         self.timeout_s = timeout_s
         self.retries = retries
         self.target = (1, 1)

@@ -22,6 +22,8 @@ PX4_MODES = {(1, 0): "MANUAL", (2, 0): "ALTCTL", (3, 0): "POSCTL", (4, 1): "AUTO
              (4, 6): "AUTO.LAND", (5, 0): "ACRO", (6, 0): "OFFBOARD", (7, 0): "STABILIZED"}
 RETURNING_MODES = frozenset({"RTL", "LAND", "AUTO.RTL", "AUTO.LAND", "RETURN_TO_LAUNCH", "LAND"})
 MISSION_MODES = frozenset({"AUTO", "AUTO.MISSION", "MISSION"})
+HOLDING_MODES = frozenset({"LOITER", "POSHOLD", "BRAKE", "AUTO.LOITER", "HOLD"})
+"""Modes in which an airborne vehicle waits where it is (what a restarted autopilot does)."""
 
 
 def mode_name(flavour: str, custom_mode: int) -> str:
@@ -80,13 +82,23 @@ class ClockRate:
 
 @dataclass(frozen=True)
 class LinkEvent:
-    """Something the vehicle reported: ``kind`` is connected, lost, restored, reached
-    (``seq``: a mission item completed), current (``seq``), mode (``text``: the new mode),
-    landed, text (a STATUSTEXT)."""
+    """Something the vehicle reported: ``kind`` is connected, lost, restored, restarted
+    (the vehicle rebooted: its clock went back), reached (``seq``: a mission item
+    completed), current (``seq`` now flown, ``total`` items: 0 none, -1 not said), mode (``text``:
+    the new mode),
+    landed, text (a STATUSTEXT).
+
+    ``mission`` says which mission a reached or current event is about: the link's
+    ``generation`` when the vehicle sent it. The generation grows when an upload is
+    accepted, when a download shows what the vehicle holds and when the vehicle restarts,
+    so a report sent before one of those (delayed or reordered on the link) is never read
+    against the mission that followed."""
 
     kind: str
     seq: int = -1
     text: str = ""
+    total: int = -1
+    mission: int = 0
 
 
 @dataclass
@@ -101,6 +113,10 @@ class LinkSettings:
     source_system: int = 255
     source_component: int = 190
     extra: dict = field(default_factory=dict)
+    signing_key_file: str = ""
+    """Sign with the key in this file (pymavlink backend; empty: no signing)."""
+    signing_timestamp_file: str = ""
+    """The signing timestamp's file (empty: beside the key)."""
 
 
 class VehicleLink(abc.ABC):
@@ -110,6 +126,8 @@ class VehicleLink(abc.ABC):
         self.settings = settings
         self.on_event = on_event
         self.telemetry = Telemetry()
+        self.generation = 0
+        """Which mission the vehicle holds, as far as this link knows (see ``LinkEvent``)."""
 
     @abc.abstractmethod
     async def connect(self, timeout_s: float) -> None:
@@ -118,12 +136,24 @@ class VehicleLink(abc.ABC):
 
     @abc.abstractmethod
     async def upload(self, items: Sequence[MissionItem]) -> None:
-        """Upload a whole mission with the protocol's retries; the autopilot keeps its
-        old mission unless this returns."""
+        """Upload a whole mission with the protocol's retries. When this returns the
+        autopilot holds it (``generation`` has grown); when it raises ``LinkError`` the
+        autopilot kept its old mission, unless the error's ``outcome_unknown`` says that
+        could not be found out."""
+
+    @abc.abstractmethod
+    async def download(self) -> list[MissionItem]:
+        """The mission the autopilot holds (``generation`` grows: later reports are about
+        it)."""
 
     @abc.abstractmethod
     async def start(self) -> None:
         """Arm and fly the mission (the operator allowed it)."""
+
+    @abc.abstractmethod
+    async def resume(self) -> None:
+        """Fly the mission held from its start again, already armed and airborne (mode
+        AUTO / AUTO.MISSION and MISSION_START): after the autopilot restarted in the air."""
 
     @abc.abstractmethod
     async def return_to_launch(self) -> None:

@@ -6,6 +6,12 @@ item. Progress comes from mission_raw's progress stream: the current item moving
 to c' means items c .. c'-1 were completed. MAVSDK's coloured log lines are routed to the
 ``mavsdk`` logger (stderr) instead of stdout.
 
+Which mission a report is about: ``generation`` grows after each accepted upload or
+download (MAVSDK hides the packets, so a progress report delayed past an upload cannot be
+told apart; the progress baseline below guards against most). A vehicle restart shows as
+the attitude's timestamp going back: a "restarted" event. MAVSDK itself reconnects to the
+restarted vehicle on its own (same system id); the service then uploads and resumes.
+
 Battery: MAVSDK reports the remaining percentage (1 % steps) but no energy consumed, so the
 battery in joules is that fraction of the scenario's pack (the planner's margin covers the
 step). Vehicle time (for the clock rate) comes from the attitude's timestamp.
@@ -34,6 +40,8 @@ from ..errors import LinkError
 from .base import ClockRate, LinkEvent, LinkSettings, Telemetry, VehicleLink
 
 _log = logging.getLogger("mavsdk")
+RESTART_SLACK_S = 2.0
+"""Wall seconds (times the clock rate) the vehicle's clock must go back to count as a restart."""
 RETRYABLE = {MissionRawResult.BUSY, MissionRawResult.TIMEOUT, MissionRawResult.ERROR}
 
 
@@ -66,6 +74,12 @@ def _name(result: Any) -> str:
     return str(getattr(result, "name", result))
 
 
+def mission_item(raw: RawItem) -> MissionItem:
+    return MissionItem(seq=raw.seq, frame=raw.frame, command=raw.command, current=raw.current,
+                       autocontinue=raw.autocontinue, param1=raw.param1, param2=raw.param2, param3=raw.param3,
+                       param4=raw.param4, x=raw.x, y=raw.y, z=raw.z, mission_type=raw.mission_type)
+
+
 def raw_item(item: MissionItem) -> RawItem:
     return RawItem(seq=item.seq, frame=item.frame, command=item.command, current=item.current,
                    autocontinue=item.autocontinue, param1=item.param1, param2=item.param2, param3=item.param3,
@@ -82,6 +96,7 @@ class MavsdkLink(VehicleLink):
         self._expect_total: int | None = None
         self._heard = 0.0
         self._lost = False
+        self._boot_s: float | None = None
         self._upload_lock = asyncio.Lock()
 
     async def connect(self, timeout_s: float) -> None:
@@ -141,8 +156,17 @@ class MavsdkLink(VehicleLink):
             self._set(battery_fraction=battery.remaining_percent / 100.0, battery_at=time.monotonic())
 
     def _on_attitude(self, attitude: Any) -> None:
-        if attitude.timestamp_us:
-            self._set(time_rate=self._clock_rate.update(attitude.timestamp_us / 1e6, time.monotonic()))
+        if not attitude.timestamp_us:
+            return
+        boot_s = attitude.timestamp_us / 1e6
+        last = self._boot_s
+        if last is not None and boot_s < last - RESTART_SLACK_S * max(self.telemetry.time_rate, 1.0):
+            self.generation += 1
+            self._progress, self._expect_total = None, None
+            self.on_event(LinkEvent("restarted", text=f"its clock went back from {last:.1f} s to {boot_s:.1f} s"))
+            last = None
+        self._boot_s = boot_s if last is None else max(last, boot_s)
+        self._set(time_rate=self._clock_rate.update(boot_s, time.monotonic()))
 
     def _on_in_air(self, in_air: Any) -> None:
         was = self.telemetry.airborne
@@ -167,9 +191,9 @@ class MavsdkLink(VehicleLink):
         if base is None or base[1] != total or current < base[0]:
             return  # a new baseline: nothing completed yet
         for seq in range(base[0], current):
-            self.on_event(LinkEvent("reached", seq=seq))
+            self.on_event(LinkEvent("reached", seq=seq, mission=self.generation))
         if current != base[0]:
-            self.on_event(LinkEvent("current", seq=current))
+            self.on_event(LinkEvent("current", seq=current, total=total, mission=self.generation))
 
     async def _watchdog(self) -> None:
         while True:
@@ -196,9 +220,22 @@ class MavsdkLink(VehicleLink):
                         break
                     continue
                 self._expect_total, self._progress = len(raw), None
+                self.generation += 1
                 return
             result = _name(last.result) if last is not None else "UNKNOWN"
             raise LinkError("upload_mission()", result)
+
+    async def download(self) -> list[MissionItem]:
+        async with self._upload_lock:
+            try:
+                raw = await self._raw.download_mission()
+            except MissionRawError as err:
+                if err.result != MissionRawResult.NO_MISSION_AVAILABLE:
+                    raise LinkError("download_mission()", _name(err.result)) from None
+                raw = []  # the vehicle holds none
+            self._expect_total, self._progress = len(raw), None
+            self.generation += 1
+            return [mission_item(r) for r in raw]
 
     async def start(self) -> None:
         try:
@@ -206,6 +243,12 @@ class MavsdkLink(VehicleLink):
             await self._raw.start_mission()
         except (ActionError, MissionRawError) as err:
             raise LinkError("start()", _name(err.result)) from None
+
+    async def resume(self) -> None:
+        try:
+            await self._raw.start_mission()  # PX4: AUTO.MISSION; ArduPilot: AUTO and MISSION_START
+        except MissionRawError as err:
+            raise LinkError("resume()", _name(err.result)) from None
 
     async def return_to_launch(self) -> None:
         try:

@@ -1,10 +1,15 @@
-"""The ground-station side of the MAVLink mission upload, as a state machine with no I/O:
-it is given a ``send`` callable, fed the autopilot's messages and told when a wait ran
-out. MISSION_COUNT -> (MISSION_REQUEST_INT or legacy MISSION_REQUEST -> MISSION_ITEM_INT)*
--> MISSION_ACK. Silence repeats the last message, up to ``retries`` times in a row.
+"""The ground-station side of the MAVLink mission upload and download, as state machines
+with no I/O: each is given a ``send`` callable, fed the autopilot's messages and told when
+a wait ran out. Silence repeats the last message, up to ``retries`` times in a row.
 
-ArduPilot asks with the legacy MISSION_REQUEST and accepts MISSION_ITEM_INT in reply, so
-both requests are answered with MISSION_ITEM_INT.
+Upload: MISSION_COUNT -> (MISSION_REQUEST_INT or legacy MISSION_REQUEST ->
+MISSION_ITEM_INT)* -> MISSION_ACK. ArduPilot asks with the legacy MISSION_REQUEST and
+accepts MISSION_ITEM_INT in reply, so both requests are answered with MISSION_ITEM_INT.
+An upload given up after its last item was sent may have been committed (only the ACK was
+lost): ``UploadDone.maybe_committed`` says so, and the caller must find out.
+
+Download: MISSION_REQUEST_LIST -> MISSION_COUNT -> (MISSION_REQUEST_INT -> MISSION_ITEM_INT)*
+-> MISSION_ACK (ours).
 """
 
 from __future__ import annotations
@@ -33,6 +38,8 @@ class UploadDone:
     accepted: bool
     result: str
     messages_sent: int
+    maybe_committed: bool = False
+    """Given up for silence after the last item was sent: the autopilot may hold it."""
 
 
 class MissionUpload:
@@ -87,10 +94,91 @@ class MissionUpload:
         self.silent += 1
         if self.silent > self.retries:
             where = "MISSION_COUNT" if self.last_sent is None else f"item {self.last_sent}"
-            self.done = UploadDone(False, f"NO_ANSWER after {self.retries} repeats of {where}", self.sent)
+            self.done = UploadDone(False, f"NO_ANSWER after {self.retries} repeats of {where}", self.sent,
+                                   maybe_committed=self.last_sent == len(self.items) - 1)
             return self.done
         if self.last_sent is None:
             self._send(self._count())
         else:
             self._send(self.items[self.last_sent].to_message(*self.target))
+        return None
+
+
+def cancel_message(target: tuple[int, int]) -> Any:
+    """MISSION_ACK CANCELLED: tells the autopilot to drop an upload we gave up, so that a
+    later upload of the same length is never taken for its continuation."""
+    return mavlink.MAVLink_mission_ack_message(target[0], target[1], mavlink.MAV_MISSION_OPERATION_CANCELLED,
+                                               MISSION_TYPE)
+
+
+@dataclass(frozen=True)
+class DownloadDone:
+    """How a download ended: ``ok`` with the ``items``, or why not (``result``)."""
+
+    ok: bool
+    result: str
+    items: tuple[MissionItem, ...] = ()
+
+
+class MissionDownload:
+    def __init__(self, send: Callable[[Any], None], target: tuple[int, int], retries: int) -> None:
+        self.send = send
+        self.target = target
+        self.retries = retries
+        self.count: int | None = None
+        self.items: list[MissionItem] = []
+        self.silent = 0
+        self.sent = 0
+        self.done: DownloadDone | None = None
+
+    def _send(self, msg: Any) -> None:
+        self.sent += 1
+        self.send(msg)
+
+    def _ask(self) -> None:
+        if self.count is None:
+            self._send(mavlink.MAVLink_mission_request_list_message(*self.target, MISSION_TYPE))
+        else:
+            self._send(mavlink.MAVLink_mission_request_int_message(*self.target, len(self.items), MISSION_TYPE))
+
+    def _finish(self) -> DownloadDone:
+        self._send(mavlink.MAVLink_mission_ack_message(*self.target, mavlink.MAV_MISSION_ACCEPTED, MISSION_TYPE))
+        self.done = DownloadDone(True, "MAV_MISSION_ACCEPTED", tuple(self.items))
+        return self.done
+
+    def begin(self) -> None:
+        self._ask()
+
+    def on_message(self, msg: Any) -> DownloadDone | None:
+        """Feed a MISSION_COUNT, MISSION_ITEM_INT or MISSION_ACK; the outcome once there is one."""
+        if self.done is not None:
+            return self.done
+        if getattr(msg, "mission_type", MISSION_TYPE) != MISSION_TYPE:
+            return None
+        kind = msg.get_type()
+        if kind == "MISSION_COUNT" and self.count is None:
+            self.count, self.silent = int(msg.count), 0
+            if self.count == 0:
+                return self._finish()
+            self._ask()
+        elif kind == "MISSION_ITEM_INT" and self.count is not None and msg.seq == len(self.items):
+            self.items.append(MissionItem.from_message(msg))
+            self.silent = 0
+            if len(self.items) == self.count:
+                return self._finish()
+            self._ask()
+        elif kind == "MISSION_ACK" and self.count is not None and msg.type != mavlink.MAV_MISSION_ACCEPTED:
+            self.done = DownloadDone(False, result_name(msg.type))
+        return self.done
+
+    def on_timeout(self) -> DownloadDone | None:
+        """The wait ran out: ask again, or give up."""
+        if self.done is not None:
+            return self.done
+        self.silent += 1
+        if self.silent > self.retries:
+            where = "MISSION_COUNT" if self.count is None else f"item {len(self.items)} of {self.count}"
+            self.done = DownloadDone(False, f"NO_ANSWER after {self.retries} requests for {where}")
+            return self.done
+        self._ask()
         return None

@@ -1,0 +1,136 @@
+"""The checks of a whole sortie for the end-to-end fault tests (helper of test_faults.py; it
+repeats test_sortie.py's checks and adds): the journal against the vehicle stub's own log.
+
+The vehicle logs every mission it commits with its digest (``protocol.mission_digest``) and
+every item it reaches; from those and the journal's accepted missions the visits the
+vehicle really made are known, user by user, whatever the service saw of them."""
+
+from __future__ import annotations
+
+import json
+import re
+import sys
+from collections import Counter
+from dataclasses import dataclass
+from pathlib import Path
+
+from planner_service.model import Scenario
+from planner_service.service.progress import item_from_dict
+from planner_service.service.report import fairness_violations
+from protocol import Area, Event, GeoOrigin, mission_digest, validate_mission
+from protocol.mission import NAV_RTL
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "sim_bridge"))
+from gcs import GroundStation  # noqa: E402  (the vehicle tests' small ground station)
+from stack import Stack  # noqa: E402
+
+COMMIT = re.compile(r"mission of \d+ items accepted \(digest ([0-9a-f]{8})\)")
+REACHED = re.compile(r"mission item (\d+) reached")
+
+
+@dataclass
+class Sortie:
+    """What the vehicle did, read from its logs and the journal."""
+
+    commits: list[str]
+    """Digests of the missions the vehicle committed, in order."""
+    accepted: list[str]
+    """Digests of the journal's accepted missions, in order."""
+    visits: list[str]
+    """The user of every planned point the vehicle completed, in order."""
+    services: list[tuple[str, int, float]]
+    """(user, tasks, battery_j) of every service in the journal, in order."""
+
+
+def read_sortie(stack: Stack, vehicle_logs: list[str], flavour: str) -> Sortie:
+    rows = stack.rows("SELECT items, points FROM missions WHERE result = 'accepted' ORDER BY mission_id")
+    points_of: dict[str, list[dict]] = {}
+    accepted = []
+    for items_json, points_json in rows:
+        digest = mission_digest([item_from_dict(i) for i in json.loads(items_json)], flavour)  # type: ignore[arg-type]
+        accepted.append(digest)
+        points_of[digest] = json.loads(points_json)
+    first = 2 if flavour == "ardupilot" else 1  # after home (ArduPilot) and the takeoff item
+    commits, visits = [], []
+    points: list[dict] = []
+    for line in "\n".join(vehicle_logs).splitlines():
+        if m := COMMIT.search(line):
+            commits.append(m.group(1))
+            points = points_of.get(m.group(1), [])
+        elif m := REACHED.search(line):
+            i = int(m.group(1)) - first
+            if 0 <= i < len(points):
+                visits.append(points[i]["user_id"])
+    services = [(u, t, b) for u, t, b in stack.rows("SELECT user_id, tasks, battery_j FROM services ORDER BY service_id")]
+    return Sortie(commits, accepted, visits, services)
+
+
+def check_sortie(stack: Stack, scenario: Scenario, flavour: str, vehicle_logs: list[str],
+                 unjournaled_commits: int = 0) -> Sortie:
+    """Every check of test_sortie.py, and the journal against what the vehicle did:
+    - every request closed (served, replaced, not_served with a reason);
+    - fairness (3)/(9c) held in the journal, and no user visited beyond the limit;
+    - every service recorded was a visit the vehicle made, and every visit is a service
+      unless the service said why not (a ``waypoint_reached`` event);
+    - the energy reserve held (no failsafe on the vehicle nor the service, landed above
+      the threshold);
+    - every upload in the journal accepted or failed with its result; the vehicle
+      committed exactly the accepted ones (``unjournaled_commits`` more at most: a service
+      killed between the vehicle's ACK and its journal write), each valid and ending in
+      return to launch; the vehicle holds the last at the end."""
+    statuses = Counter(s for (s,) in stack.rows("SELECT status FROM requests"))
+    assert statuses["pending"] == 0, statuses
+    for rid, status, reason in stack.rows("SELECT request_id, status, reason FROM requests"):
+        assert status in ("served", "replaced", "not_served")
+        if status != "served":
+            assert reason, f"request {rid} {status} without a reason"
+
+    sortie = read_sortie(stack, vehicle_logs, flavour)
+    services = sortie.services
+    assert len(services) >= 3, services
+    assert fairness_violations(scenario, [(u, t) for u, t, _ in services]) == 0
+    assert max(Counter(u for u, _, _ in services).values()) <= scenario.max_services_per_user
+    assert all(b >= scenario.energy_floor_j for _, _, b in services)
+    visits, served = Counter(sortie.visits), Counter(u for u, _, _ in services)
+    assert not served - visits, f"services the vehicle never flew: {served - visits}"
+    unexplained = visits - served
+    explained = Counter(e.user_id for e in list(stack.events) if isinstance(e, Event) and e.event == "waypoint_reached")
+    assert not unexplained - explained, f"visits recorded nowhere: {unexplained - explained}; visits {sortie.visits}"
+    assert max(visits.values()) <= scenario.max_services_per_user, f"a user visited beyond the limit: {visits}"
+
+    joined = "\n".join(vehicle_logs)
+    assert ": returning" not in joined, "the vehicle's battery failsafe fired"
+    assert not any(e.event == "returning" and "battery at" in e.detail for e in stack.events), "the service's RTL fired"
+    landed = [line for line in joined.splitlines() if "landed at" in line]
+    assert landed, joined[-2000:]
+    battery_pct = float(landed[-1].rsplit("battery", 1)[1].strip().rstrip("%"))
+    assert battery_pct >= 100 * scenario.battery_threshold
+
+    for plan_id, result in stack.rows("SELECT plan_id, result FROM missions ORDER BY mission_id"):
+        assert result == "accepted" or (result.split(": ", 1)[0] in ("failed", "unknown") and result.split(": ", 1)[1]), \
+            f"plan {plan_id}: {result!r}"
+    if unjournaled_commits:
+        extra = Counter(sortie.commits) - Counter(sortie.accepted)
+        assert sum(extra.values()) <= unjournaled_commits, (sortie.commits, sortie.accepted)
+        assert not Counter(sortie.accepted) - Counter(sortie.commits), (sortie.commits, sortie.accepted)
+    else:
+        assert sortie.commits == sortie.accepted, (sortie.commits, sortie.accepted)
+
+    missions = stack.rows("SELECT items FROM missions WHERE result = 'accepted' ORDER BY mission_id")
+    assert len(missions) >= 2
+    origin, area = GeoOrigin(), Area(500.0, 120.0, 10.0)
+    for (items_json,) in missions:
+        items = [item_from_dict(i) for i in json.loads(items_json)]
+        validate_mission(items, origin, area, flavour)  # type: ignore[arg-type]  # raises if not complete and safe
+        assert items[-1].command == NAV_RTL
+
+    gcs = GroundStation(f"udpout:127.0.0.1:{stack.mav_port}")
+    try:
+        gcs.wait_vehicle()
+        held = gcs.download()
+    finally:
+        gcs.close()
+    last = [item_from_dict(i) for i in json.loads(missions[-1][0])]
+    assert len(held) == len(last) and held[-1].command == NAV_RTL
+    assert mission_digest(held, flavour) == mission_digest(last, flavour)  # type: ignore[arg-type]
+    return sortie

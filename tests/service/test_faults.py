@@ -1,0 +1,120 @@
+"""The service survives a lossy MAVLink link, a vehicle restart mid-sortie and its own
+SIGKILL: whole sorties end to end (vehicle stub, lossy proxy, service, simulated users as
+real processes on loopback), checked as test_sortie.py checks a clean one and against the
+vehicle's own log (sortie_checks.py). Each prints its figures."""
+
+from __future__ import annotations
+
+import os
+import re
+import signal
+import statistics
+import time
+
+import pytest
+
+from planner_service.model import field
+from planner_service.service.processes import Child
+from protocol import Event
+
+from sortie_checks import check_sortie
+from stack import Stack
+
+SPEEDUP = "40"
+SERVICE = {"mavlink__start_mission": "true", "planner__min_requests": "5"}
+
+
+def kill(child: Child) -> None:
+    """SIGKILL, as a crash would: no shutdown path runs."""
+    os.killpg(child.proc.pid, signal.SIGKILL)
+    child.proc.wait(5)
+
+
+def upload_ms(events: list[Event]) -> list[float]:
+    return [float(re.search(r"upload_ms=([0-9.]+)", e.detail).group(1))  # type: ignore[union-attr]
+            for e in events if e.event == "mission_uploaded"]
+
+
+@pytest.mark.timeout(150)
+def test_sortie_over_a_lossy_link(stack: Stack) -> None:
+    scenario = field()
+    vehicle = stack.vehicle("--speedup", SPEEDUP)
+    port = stack.proxy("--drop", "0.2", "--dup", "0.05", "--delay-ms", "20", "--jitter-ms", "20", "--seed", "5")
+    service = stack.service(mavlink__url=f"udpout:127.0.0.1:{port}", **SERVICE)
+    users = stack.users("--count", "6", "--speedup", SPEEDUP, "--seed", "3")
+    stack.wait_event(lambda e: e.event == "landed", 120.0, "landing")
+    assert users.stop() == 0 and service.stop() == 0
+
+    sortie = check_sortie(stack, scenario, "ardupilot", [vehicle.log()])
+    proxy = next(c for c in stack.children if c.name == "sim_bridge lossy-proxy")
+    assert proxy.stop() == 0
+    stats = re.search(r"up (\{.*?\}), down (\{.*?\})", proxy.log())
+    assert stats is not None and "'dropped': 0," not in stats.group(0), proxy.log()[-500:]
+    times = upload_ms(stack.events)
+    failed = stack.rows("SELECT plan_id, result FROM missions WHERE result != 'accepted'")
+    print(f"\nlossy sortie (20 % drop each way, 5 % dup, 20+-20 ms): {len(times)} uploads accepted, "
+          f"median {statistics.median(times):.0f} ms, max {max(times):.0f} ms; {len(failed)} failed {failed}; "
+          f"{len(sortie.services)} services, {len(sortie.visits)} visits; proxy {stats.group(0)}")
+
+
+@pytest.mark.timeout(150)
+@pytest.mark.parametrize("backend, flavour", [("pymavlink", "ardupilot"), ("mavsdk", "px4")])
+def test_vehicle_restart_mid_sortie(stack: Stack, backend: str, flavour: str) -> None:
+    scenario = field()
+    state = stack.tmp / "vehicle-state.json"
+    args = ("--speedup", SPEEDUP, "--state-file", str(state), "--flavour", flavour)
+    first = stack.vehicle(*args)
+    service = stack.service(mavlink__backend=backend, mavlink__flavour=flavour, **SERVICE)
+    users = stack.users("--count", "6", "--speedup", SPEEDUP, "--seed", "3")
+    stack.wait_event(lambda e: e.event == "user_served", 60.0, "a first service")
+    kill(first)
+    time.sleep(1.0)
+    back_at = time.time()
+    second = stack.vehicle(*args)  # the same port, the same state file
+    assert "restarted from" in second.log() and "airborne" in second.log()
+    uploaded = stack.wait_event(lambda e: e.event == "mission_uploaded" and e.time_s > back_at, 30.0,
+                                "a mission after the restart")
+    resumed = stack.wait_event(lambda e: e.event == "mission_resumed", 30.0, "the mission resumed")
+    stack.wait_event(lambda e: e.event == "landed", 120.0, "landing")
+    assert users.stop() == 0 and service.stop() == 0
+
+    kinds = [e.event for e in stack.events]
+    assert "vehicle_restarted" in kinds, kinds
+    check_sortie(stack, scenario, flavour, [first.log(), second.log()])
+    print(f"\nvehicle restart ({backend}): new mission accepted {uploaded.time_s - back_at:.2f} s after the vehicle was started "
+          f"again, resumed at {resumed.time_s - back_at:.2f} s ({uploaded.detail.split(';')[0]})")
+
+
+@pytest.mark.timeout(150)
+def test_service_killed_mid_sortie_resumes_from_the_journal(stack: Stack) -> None:
+    scenario = field()
+    vehicle = stack.vehicle("--speedup", SPEEDUP)
+    first = stack.service(**SERVICE)
+    users = stack.users("--count", "6", "--speedup", SPEEDUP, "--seed", "3")
+    client = stack.client
+    assert client is not None
+    acked = [client.submit("probe-1", 250.0, 250.0, 12).request_id]
+    stack.wait_event(lambda e: e.event == "user_served", 60.0, "a first service")
+    stack.wait_event(lambda e: e.event == "mission_uploaded" and " 0 points" not in e.detail
+                     and e.time_s > max(x.time_s for x in stack.events if x.event == "user_served"), 30.0,
+                     "a mission after the first service")
+    plans_before = max(p for (p,) in stack.rows("SELECT plan_id FROM missions"))
+    kill(first)
+    assert stack.rows("SELECT COUNT(*) FROM services")[0][0] >= 1
+    back_at = time.time()
+    stack.service(**SERVICE)
+    acked.append(client.submit("probe-2", 100.0, 400.0, 15).request_id)
+    uploaded = stack.wait_event(lambda e: e.event == "mission_uploaded" and e.time_s > back_at, 30.0,
+                                "a mission after the restart")
+    stack.wait_event(lambda e: e.event == "landed", 120.0, "landing")
+    assert users.stop() == 0
+
+    plan_id = int(uploaded.detail.split(":")[0].split()[1])
+    assert plan_id > plans_before, (plan_id, plans_before)
+    acked += [int(n) for n in re.findall(r"-> request (\d+)", users.log())]
+    closed = dict(stack.rows("SELECT request_id, status FROM requests"))
+    assert all(closed.get(rid) in ("served", "replaced", "not_served") for rid in acked), \
+        [(rid, closed.get(rid)) for rid in acked if closed.get(rid) not in ("served", "replaced", "not_served")]
+    check_sortie(stack, scenario, "ardupilot", [vehicle.log()], unjournaled_commits=1)
+    print(f"\nservice SIGKILL: plan {plan_id} accepted {uploaded.time_s - back_at:.2f} s after the restart began "
+          f"(plans before the kill: {plans_before}); {len(acked)} acked requests all closed")

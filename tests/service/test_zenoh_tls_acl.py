@@ -1,0 +1,128 @@
+"""zenoh with mutual TLS and access control, from the shipped files: certificates made by
+docs/zenoh/make-certs.sh (the openssl CLI, as an operator makes them), the service started on
+docs/zenoh/service-tls-acl.json5 and users on docs/zenoh/user-tls.json5 (their paths
+substituted). A user submits and is acked; the same user's publication on the status key,
+queryable on the request key and liveliness token on the alive key reach nobody, while the
+service's status does, and a session holding the service's certificate may publish there;
+a client without a certificate, with one from another CA, or over plain TCP cannot connect."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import pytest
+import zenoh
+from stack import Stack
+
+from planner_service.service.processes import REPO, free_port
+from protocol import Keys, Status, TaskAck, decode, decode_reply
+from protocol.client import ClientError, PlannerClient, client_config
+
+DOCS = REPO / "docs" / "zenoh"
+SHIPPED_DIR = "/etc/uavmec/tls"
+
+
+def make_certs(folder: Path, *args: str) -> None:
+    subprocess.run(["sh", str(DOCS / "make-certs.sh"), str(folder), *args], check=True, capture_output=True)
+
+
+def shipped(name: str, certs: Path, out: Path, **swap: str) -> Path:
+    """The shipped config with its certificate folder (and any other text) replaced."""
+    text = (DOCS / name).read_text()
+    assert SHIPPED_DIR in text
+    text = text.replace(SHIPPED_DIR, str(certs))
+    for old, new in swap.items():
+        assert old in text
+        text = text.replace(old, new)
+    out.write_text(text)
+    return out
+
+
+def session(endpoint: str, config_file: Path) -> Any:
+    return zenoh.open(client_config([endpoint], "client", config_file=config_file))
+
+
+@pytest.mark.timeout(120)
+def test_tls_and_access_control_from_the_shipped_configs(stack: Stack, tmp_path: Path) -> None:
+    certs, rogue = tmp_path / "tls", tmp_path / "rogue"
+    make_certs(certs)
+    make_certs(certs, "--user", "phone2")
+    make_certs(rogue)  # another CA, whose user certificate looks the same
+    service_conf = shipped("service-tls-acl.json5", certs, tmp_path / "service.json5")
+    user_conf = shipped("user-tls.json5", certs, tmp_path / "user.json5")
+    user2_conf = shipped("user-tls.json5", certs, tmp_path / "user2.json5", **{"/user.": "/phone2."})
+    monitor_conf = shipped("user-tls.json5", certs, tmp_path / "monitor.json5", **{"/user.": "/service."})
+    rogue_conf = shipped("user-tls.json5", rogue, tmp_path / "rogue.json5")
+    keys = Keys()
+
+    endpoint = f"tls/127.0.0.1:{free_port()}"
+    stack.endpoint = endpoint
+    stack.vehicle()
+    stack.client = PlannerClient([endpoint], config_file=user_conf)  # the stack's client is a user
+    service = stack.service(zenoh__mode="router", zenoh__config_file=str(service_conf))
+    assert f"base {service_conf}" in service.log()
+
+    # a user with a user certificate is served: the library, and the submit command
+    ack = stack.client.submit("u-1", 100.0, 120.0, 9)
+    assert ack.request_id == 1
+    out = subprocess.run([sys.executable, "-m", "planner_service", "submit", "--user", "u-2", "--x", "50", "--y", "60",
+                          "--tasks", "4", "--connect", endpoint, "--zenoh-config", str(user2_conf)],
+                         cwd=REPO, capture_output=True, text=True, timeout=60)
+    assert out.returncode == 0 and "accepted: request 2 for u-2" in out.stdout, out.stderr
+
+    # listeners: another user and a session holding the service's certificate
+    heard: dict[str, list[bytes]] = {"user2": [], "monitor": []}
+    user2, monitor, bad = session(endpoint, user2_conf), session(endpoint, monitor_conf), session(endpoint, user_conf)
+    try:
+        for name, s in (("user2", user2), ("monitor", monitor)):
+            s.declare_subscriber(keys.status, lambda sample, n=name: heard[n].append(sample.payload.to_bytes()))
+        # the misbehaving user (a valid user certificate) impersonates the service three ways
+        bad.declare_queryable(keys.request, lambda q: (q.reply(keys.request, b'{"kind": "evil"}'), q.drop()))
+        # (a token on the alive key would merge with the service's: one more key shows it)
+        bad_tokens = [bad.liveliness().declare_token(k) for k in (keys.alive, f"{keys.prefix}/{keys.vehicle}/up")]
+        forged = json.dumps({"kind": "status", "vehicle": "forged"}).encode()
+        deadline = time.monotonic() + 2.0
+        while time.monotonic() < deadline:
+            bad.put(keys.status, forged)
+            time.sleep(0.05)
+        monitor.put(keys.status, b"from-the-service-identity")  # allowed: the service's certificate
+        time.sleep(0.5)
+
+        replies = [r.ok.payload.to_bytes() for r in user2.get(
+            keys.request, payload=json.dumps({"kind": "task_request", "user_id": "u-3", "x_m": 1.0, "y_m": 2.0,
+                                              "tasks": 1}).encode(),
+            target=zenoh.QueryTarget.ALL, consolidation=zenoh.ConsolidationMode.NONE, timeout=3.0) if r.ok]
+        # the monitor may look at every token of the vehicle (a user may only ask for the alive key)
+        tokens = [str(r.ok.key_expr) for r in monitor.liveliness().get(keys.all, timeout=1.0) if r.ok]
+        for token in bad_tokens:
+            token.undeclare()
+    finally:
+        for s in (bad, monitor, user2):
+            s.close()
+
+    statuses = {n: [p for p in payloads if p != b"from-the-service-identity"] for n, payloads in heard.items()}
+    print(f"\nstatus messages heard: user2 {len(statuses['user2'])}, monitor {len(statuses['monitor'])}; forged "
+          f"{sum(p == forged for ps in heard.values() for p in ps)}; replies to a request: {len(replies)}; "
+          f"alive tokens: {len(tokens)}")
+    for name, payloads in statuses.items():
+        assert payloads, f"{name} heard no status from the service"
+        assert all(decode(p, Status).vehicle == "uav1" for p in payloads), f"{name} heard a forged status"
+    assert b"from-the-service-identity" in heard["user2"]  # the path for a client's put exists
+    assert len(replies) == 1 and isinstance(decode_reply(replies[0]), TaskAck)  # the user's queryable got nothing
+    assert tokens == [keys.alive]
+
+    # no certificate, another CA's certificate, plain TCP: no session at all
+    no_cert = tmp_path / "no-cert.json5"
+    no_cert.write_text(json.dumps({"transport": {"link": {"tls": {"root_ca_certificate": str(certs / "ca.pem")}}}}))
+    for label, connect, conf in (("no certificate", endpoint, no_cert), ("another CA", endpoint, rogue_conf),
+                                 ("plain tcp", endpoint.replace("tls/", "tcp/"), None)):
+        with pytest.raises(ClientError, match="cannot open a zenoh session"):
+            PlannerClient([connect], mode="client", config_file=conf)
+        print(f"{label}: refused")
+    assert service.proc.poll() is None and "Traceback" not in service.log()
+    assert [r[0] for r in stack.rows("SELECT user_id FROM requests ORDER BY request_id")] == ["u-1", "u-2", "u-3"]
