@@ -122,6 +122,9 @@ class Service:
         in doubt: progress reports are then ignored until a download settles it."""
         self._counted: set[int] = set()
         """Item seqs of ``held``'s points already recorded (served, or reached and judged)."""
+        self._previous: tuple[HeldMission, int, set[int]] | None = None
+        """The mission the last upload replaced, its generation and its points counted: a
+        point it completed just before the new mission was accepted is still recorded."""
         self._doubt_reason: str | None = None
         """Why the vehicle may hold another mission than ``held``: read it back before planning."""
         self._unconfirmed: HeldMission | None = None
@@ -130,6 +133,8 @@ class Service:
         """The vehicle's mission is gone: upload even a plan of no points (return to launch)."""
         self._resume_pending = False
         """The vehicle lost its mission in the air: resume (or ask the operator) after the upload."""
+        self._vehicle_restarted = False
+        """The vehicle restarted since the mission was last read back: it came back holding."""
         self._progress_after = 0.0
         self._progress_seen = True
         self._upload_times_s: list[float] = []
@@ -339,6 +344,7 @@ class Service:
             self._urgent.set()
             self._wake.set()
         elif ev.kind == "restarted":
+            self._vehicle_restarted = True
             self._event("vehicle_restarted", detail=ev.text[:256])
             self._doubt(f"the vehicle restarted: {ev.text}")
         elif ev.kind == "reached":
@@ -360,12 +366,15 @@ class Service:
         mission is read back (before the next plan)."""
         log.warning("%s: the mission held will be read back before planning", why)
         self._doubt_reason = why
-        self._held_gen = None
+        self._held_gen, self._previous = None, None
         self._urgent.set()
         self._wake.set()
 
     def _on_current(self, ev: LinkEvent) -> None:
         held = self.held
+        if self._previous is not None and ev.mission == self._previous[1]:
+            self._progress(ev.seq, ev.mission, including=False)
+            return
         if held is None or ev.mission != self._held_gen:
             return
         self._progress_seen = True
@@ -381,20 +390,23 @@ class Service:
         """The vehicle flies item ``seq`` (or completed it): record every point before it
         (and it) not yet recorded. MISSION_ITEM_REACHED is sent once and may be lost; the
         streamed MISSION_CURRENT catches up, also after a link gap or a restart of ours."""
-        held = self.held
-        if held is None or mission != self._held_gen:
+        if self.held is not None and mission == self._held_gen:
+            held, counted = self.held, self._counted
+        elif self._previous is not None and mission == self._previous[1]:
+            held, _, counted = self._previous
+        else:
             return  # about another mission, or in doubt
-        for done in held.points_done(seq, self._counted, including=including):
-            self._reached(done)
+        for done in held.points_done(seq, counted, including=including):
+            self._reached(held, counted, done)
 
-    def _reached(self, seq: int) -> None:
-        held = self.held
-        point = held.point_at(seq) if held is not None else None
-        if point is None or seq in self._counted:
+    def _reached(self, held: HeldMission, counted: set[int], seq: int) -> None:
+        point = held.point_at(seq)
+        if point is None or seq in counted:
             return
-        self._counted.add(seq)
+        counted.add(seq)
         now = self.clock()
-        self.last_hover_index = point.hover_index
+        if held is self.held or not self._counted:  # a late report of the mission before is not where it is now
+            self.last_hover_index = point.hover_index
         self._version += 1
         services = sum(1 for s in self.journal.services() if s.user_id == point.user_id)
         request = next((r for r in self.journal.pending() if r.user_id == point.user_id), None)
@@ -566,12 +578,17 @@ class Service:
                 self._publish_plan(candidate)
             self._held_gen, self._unconfirmed = self.link.generation, None
             self._progress_seen, self._progress_after = False, time.monotonic() + PROGRESS_WAIT_S
+            # A restarted vehicle may hold our mission (uploaded to it before its restart
+            # showed) and still hover where it came back: it needs resuming all the same.
+            self._resume_pending = self._vehicle_restarted and t.airborne
+            self._vehicle_restarted = False
             log.info("%s: the vehicle holds plan %d (read back)", why, candidate.plan_id)
             return True
         lost = self.held
         self.held, self._held_gen, self._counted, self._unconfirmed = None, None, set(), None
         self._must_upload = t.airborne
         self._resume_pending = t.airborne
+        self._vehicle_restarted = False
         ours = f"plan {lost.plan_id}" if lost is not None else "a mission of ours"
         detail = f"{why}: the vehicle holds {len(items)} items, not {ours}; re-planning from where it is"
         log.warning("%s", detail)
@@ -655,6 +672,8 @@ class Service:
         self._upload_times_s = [*self._upload_times_s, upload_ms / 1e3][-UPLOAD_HISTORY:]
         self.plan_id = plan_id
         self.journal.record_mission(plan_id, [item_dict(i) for i in items], _points(path), "accepted", self.clock())
+        if self.held is not None and self._held_gen is not None:
+            self._previous = (self.held, self._held_gen, self._counted)
         self.held = HeldMission.build(plan_id, items, path.points, self.flavour)
         self._held_gen, self._counted, self._unconfirmed, self._must_upload = self.link.generation, set(), None, False
         # Reports that came between the ACK and now (the vehicle restarts the mission).

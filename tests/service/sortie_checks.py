@@ -69,7 +69,7 @@ def check_sortie(stack: Stack, scenario: Scenario, flavour: str, vehicle_logs: l
                  unjournaled_commits: int = 0) -> Sortie:
     """Every check of test_sortie.py, and the journal against what the vehicle did:
     - every request closed (served, replaced, not_served with a reason);
-    - fairness (3)/(9c) held in the journal, and no user visited beyond the limit;
+    - fairness (3)/(9c) held in the journal, and no user served beyond the limit;
     - every service recorded was a visit the vehicle made, and every visit is a service
       unless the service said why not (a ``waypoint_reached`` event);
     - the energy reserve held (no failsafe on the vehicle nor the service, landed above
@@ -96,7 +96,9 @@ def check_sortie(stack: Stack, scenario: Scenario, flavour: str, vehicle_logs: l
     unexplained = visits - served
     explained = Counter(e.user_id for e in list(stack.events) if isinstance(e, Event) and e.event == "waypoint_reached")
     assert not unexplained - explained, f"visits recorded nowhere: {unexplained - explained}; visits {sortie.visits}"
-    assert max(visits.values()) <= scenario.max_services_per_user, f"a user visited beyond the limit: {visits}"
+    # Visits are not services: a user whose newer request leaves it ineligible by the time the
+    # vehicle arrives (a repeat needs more tasks) is visited without being served, and said so
+    # above. The fairness rule is about services, checked on the journal and the visits both.
 
     joined = "\n".join(vehicle_logs)
     assert ": returning" not in joined, "the vehicle's battery failsafe fired"

@@ -14,10 +14,12 @@ message is fed to the upload or download state machine as it is handed over), an
 MISSION_ACK that accepts an upload starts a new ``generation``. A MISSION_CURRENT or
 MISSION_ITEM_REACHED the vehicle sent before that ACK but that arrives after it (a delayed
 or reordered datagram) belongs to the previous mission: the MAVLink packet sequence number
-(mod 256) says which was sent first, within ``REORDER_WINDOW_S`` of the ACK. Between our
-sending the last item and the end of the upload the vehicle may already fly the new
-mission without our knowing: reports of that span are about no known mission (dropped;
-the streamed MISSION_CURRENT tells the rest afterwards).
+(mod 256) says which was sent first, within ``REORDER_WINDOW_S`` of the ACK. Reports about
+the previous mission are passed on with its generation: a point it completed just before
+the new mission replaced it is a service all the same. Between our sending the last item
+and the end of the upload the vehicle may already fly the new mission: reports of that
+span are held back and sorted by the ACK's sequence number when it comes (all about the
+old mission if the upload fails; dropped if only a read-back could tell).
 
 A vehicle restart shows as its clock (time_boot_ms) going back by more than reordering can
 explain: a "restarted" event and a new generation (its mission is gone or stale).
@@ -86,6 +88,9 @@ class PymavlinkLink(VehicleLink):
         """(packet seq, monotonic time) of the message that began this generation."""
         self._commit_possible = False
         """An upload's last item went out: the vehicle may hold either mission until it ends."""
+        self._unsorted: list[Any] = []
+        self._generation_on_download = True
+        """Progress reports that came while ``_commit_possible``: sorted when the upload ends."""
         self._boot_s: float | None = None
         """The vehicle's clock (time_boot_ms, s): the latest reading."""
         self._acks: dict[int, asyncio.Future[int]] = {}
@@ -309,23 +314,50 @@ class PymavlinkLink(VehicleLink):
             self._set(airborne=airborne)
             if was and msg.landed_state == M.MAV_LANDED_STATE_ON_GROUND:
                 self.on_event(LinkEvent("landed"))
-        elif kind == "MISSION_CURRENT":
-            if self._commit_possible or not self._fresh(msg):
-                return  # about the mission held before the last upload, or about either
-            raw = int(getattr(msg, "total", 0) or 0)
-            # MAVLink: 0 when the autopilot does not say, UINT16_MAX when it has no mission.
-            total = -1 if raw == 0 else 0 if raw == 0xFFFF else raw
-            changed = (msg.seq, total) != (self.telemetry.mission_seq, self.telemetry.mission_total)
-            self._set(mission_seq=int(msg.seq), mission_total=total)
-            if changed:
-                self.on_event(LinkEvent("current", seq=int(msg.seq), total=total, mission=self.generation))
-        elif kind == "MISSION_ITEM_REACHED":
-            mission = self.generation if self._fresh(msg) else self.generation - 1
+        elif kind in ("MISSION_CURRENT", "MISSION_ITEM_REACHED"):
             if self._commit_possible:
-                mission = -1
-            self.on_event(LinkEvent("reached", seq=int(msg.seq), mission=mission))
+                self._unsorted.append(msg)  # about either mission: the ACK's sequence number will say
+            else:
+                self._report(msg, self.generation if self._fresh(msg) else self.generation - 1)
         elif kind == "STATUSTEXT":
             self.on_event(LinkEvent("text", text=str(msg.text)))
+
+    def _report(self, msg: Any, mission: int) -> None:
+        """A progress report about ``mission`` (a generation): the current one updates the
+        telemetry; the one before is passed on too, since the points it completed just
+        before a new mission replaced it are services all the same."""
+        if msg.get_type() == "MISSION_ITEM_REACHED":
+            self.on_event(LinkEvent("reached", seq=int(msg.seq), mission=mission))
+            return
+        raw = int(getattr(msg, "total", 0) or 0)
+        # MAVLink: 0 when the autopilot does not say, UINT16_MAX when it has no mission.
+        total = -1 if raw == 0 else 0 if raw == 0xFFFF else raw
+        if mission != self.generation:
+            self.on_event(LinkEvent("current", seq=int(msg.seq), total=total, mission=mission))
+            return
+        changed = (msg.seq, total) != (self.telemetry.mission_seq, self.telemetry.mission_total)
+        self._set(mission_seq=int(msg.seq), mission_total=total)
+        if changed:
+            self.on_event(LinkEvent("current", seq=int(msg.seq), total=total, mission=mission))
+
+    def _sort_reports(self, ack: Any | None, total: int = 0) -> None:
+        """Pass on the reports held back while an upload could commit: those the vehicle
+        sent before the ``ack`` that accepted it (packet sequence, mod 256) are about the
+        mission before; the rest about the new one (of ``total`` items). Without an ACK (the
+        upload failed) all are about the mission the vehicle kept."""
+        held, self._unsorted = self._unsorted, []
+        if ack is None:
+            for msg in held:
+                self._report(msg, self.generation)
+            return
+        before = [m for m in held if 0 < (ack.get_seq() - m.get_seq()) % 256 < 128]
+        for msg in before:
+            self._report(msg, self.generation)
+        self._new_generation(ack)
+        self._set(mission_seq=0, mission_total=total)
+        for msg in held:
+            if msg not in before:
+                self._report(msg, self.generation)
 
     def _heard(self) -> None:
         self._last_heard = time.monotonic()
@@ -355,9 +387,8 @@ class PymavlinkLink(VehicleLink):
         self._note_commit_possible(op)
         if done is not None and isinstance(op, MissionUpload) and done.accepted:
             # Accepted: from this message on the vehicle's reports are about the new mission.
-            self._new_generation(msg)
-            self._set(mission_seq=0, mission_total=len(op.items))
-        elif done is not None and isinstance(op, MissionDownload) and done.ok:
+            self._sort_reports(msg, len(op.items))
+        elif done is not None and isinstance(op, MissionDownload) and done.ok and self._generation_on_download:
             self._new_generation(msg)
             self._set(mission_seq=-1, mission_total=-1)  # the next MISSION_CURRENT is news
         if done is not None or op.sent != sent:
@@ -410,6 +441,7 @@ class PymavlinkLink(VehicleLink):
                 await self._upload(items)
             finally:
                 self._commit_possible = False
+                self._sort_reports(None)  # left over: the upload failed, the vehicle kept its mission
 
     async def _upload(self, items: Sequence[MissionItem]) -> None:
         done = await self._run(MissionUpload(items, self._send, self._target, self.settings.retries))
@@ -421,11 +453,15 @@ class PymavlinkLink(VehicleLink):
         # Every item went out and only the ACK is missing: the vehicle may hold the new
         # mission. Read it back rather than assume either way.
         try:
-            held = await self._download()
+            held = await self._download(new_generation=False)
         except LinkError as err:
+            self._unsorted.clear()  # about either mission: nobody can tell
             raise LinkError("upload_mission()", f"{done.result}; reading the mission back failed too "
                             f"({err.result}): the vehicle may hold either mission", outcome_unknown=True) from None
         if same_mission(held, items, self.settings.flavour):  # type: ignore[arg-type]
+            self._unsorted.clear()  # about either mission, sent while it committed
+            self._new_generation(None)
+            self._set(mission_seq=-1, mission_total=-1)  # the next MISSION_CURRENT is news
             return
         raise LinkError("upload_mission()", f"{done.result}; the vehicle kept its previous mission (read back)")
 
@@ -435,7 +471,10 @@ class PymavlinkLink(VehicleLink):
                 raise LinkError("download_mission()", f"NO_LINK: the autopilot is not connected{self.signing_hint()}")
             return await self._download()
 
-    async def _download(self) -> list[MissionItem]:
+    async def _download(self, *, new_generation: bool = True) -> list[MissionItem]:
+        """Read the mission back; with ``new_generation`` the vehicle's reports from then on
+        count as about what was read (an upload's read-back decides that itself)."""
+        self._generation_on_download = new_generation
         done = await self._run(MissionDownload(self._send, self._target, self.settings.retries))
         if not done.ok:
             raise LinkError("download_mission()", done.result)
