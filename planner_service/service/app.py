@@ -482,6 +482,7 @@ class Service:
         self.sortie_over = None
         # the last sortie's mission and what was judged of it (a doubt is about that mission)
         self.held, self._held_gen, self._counted, self._unconfirmed = None, None, set(), None
+        self._previous = None  # a late report of the last sortie's mission must not count in this one
         self._doubt_reason, self._must_upload, self._resume_pending = None, False, False
         self._progress_seen, self._progress_after = True, 0.0
         self.plan_msg = None
