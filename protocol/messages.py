@@ -40,7 +40,7 @@ Fraction = Annotated[float, msgspec.Meta(ge=0.0, le=1.0)]
 EventKind = Literal[
     "request_accepted", "request_rejected", "plan_updated", "mission_uploaded",
     "upload_failed", "user_served", "waypoint_reached", "returning", "landed", "link_lost",
-    "link_restored", "vehicle_restarted", "mission_resumed", "resume_needed",
+    "link_restored", "vehicle_restarted", "mission_resumed", "resume_needed", "sortie_started",
 ]
 
 

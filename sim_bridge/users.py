@@ -13,7 +13,7 @@ import logging
 import math
 import threading
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -23,6 +23,8 @@ from protocol import ProtocolError
 from protocol.client import ClientError, PlannerClient
 
 log = logging.getLogger("sim_bridge.users")
+ONE_SORTIE = "flies one sortie"
+"""In the service's refusal after the landing when it is configured for one sortie only."""
 
 
 @dataclass
@@ -36,7 +38,9 @@ class Walker:
     pause_s: float = 0.0
     submitted: int = 0
     acked: int = 0
-    refused: list[str] = field(default_factory=list)
+    refused: int = 0
+    last_refusal: str = ""
+    """Counted, not kept: a user process runs through any number of sorties."""
     done: bool = False
 
 
@@ -79,7 +83,8 @@ def step(w: Walker, dt_s: float, params: WalkParams, rng: np.random.Generator) -
 def run_users(client: PlannerClient, scenario: Scenario, count: int, interval_s: float, speedup: float,
               seed: int, stop: threading.Event, duration_s: float | None = None) -> list[Walker]:
     """Walk and submit until ``stop`` is set, ``duration_s`` (wall) passes, or the service
-    refuses every user because its sortie is over."""
+    refuses every user because it flies no more sorties. Between two sorties the service
+    refuses requests too ("sortie over: waiting for ..."): users keep walking and asking."""
     rng = np.random.default_rng(seed)
     params = WalkParams(scenario.area_side_m)
     walkers = new_walkers(count, scenario, params, rng)
@@ -106,13 +111,15 @@ def run_users(client: PlannerClient, scenario: Scenario, count: int, interval_s:
             try:
                 ack = client.submit(w.user_id, x, y, int(tasks[0]), client_ref=f"{w.user_id}#{w.submitted}")
             except ClientError as err:
-                w.refused.append(f"{err.field}: {err.message}")
+                w.refused += 1
+                w.last_refusal = f"{err.field}: {err.message}"
                 log.info("%s refused: %s: %s", w.user_id, err.field, err.message)
-                if err.field == "service" and "sortie over" in err.message:
+                if err.field == "service" and ONE_SORTIE in err.message:
                     w.done = True
                 continue
             except ProtocolError as err:
-                w.refused.append(str(err))
+                w.refused += 1
+                w.last_refusal = str(err)
                 continue
             w.acked += 1
             log.info("%s at (%.0f, %.0f): %d tasks -> request %d", w.user_id, x, y, tasks[0], ack.request_id)

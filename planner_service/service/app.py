@@ -88,7 +88,7 @@ class Service:
         self.origin = config.origin_point()
         self.keys = config.keys()
         self.flavour = config.mavlink.flavour
-        self.journal = Journal(config.journal.path, config.journal.synchronous)
+        self.journal = Journal(config.journal.path, config.journal.synchronous, now_s=clock())
         self.intake = Intake(self.journal, self.area, clock, config.intake)
         self._refusal_events = RateLimit(REFUSAL_EVENTS_PER_S, time.monotonic())
         self._refusals_unreported = 0
@@ -140,16 +140,18 @@ class Service:
         self._upload_times_s: list[float] = []
         """Wall time of the last accepted uploads (a lossy link makes them seconds long)."""
         self.plan_msg: Plan | None = None
-        self.sortie_over = self.journal.get_meta("sortie_over")
+        sortie = self.journal.current_sortie()
+        self.sortie_over: str | None = (sortie.why or "ended") if sortie.over else None
+        """Why the current sortie ended; None while it runs (or waits for its first plan)."""
         if self.sortie_over:
-            self.intake.closed_reason = f"sortie over: {self.sortie_over}"
+            self.intake.closed_reason = self._closed_reason()
         self.started = False
         self.flown = False
         """The vehicle has been airborne during this sortie (so a landing ends it)."""
         services = self.journal.services()
         self.last_hover_index = services[-1].hover_index if services else -1
         last = self.journal.last_mission()
-        self.plan_id = max((m.plan_id for m in self.journal.missions()), default=0)
+        self.plan_id = self.journal.last_plan_id()
         if last is not None:
             self._restore_held(last.plan_id, last.items, last.points)
             assert self.held is not None
@@ -182,8 +184,9 @@ class Service:
         if opened:
             log.info("zenoh %s session on %s (connect %s%s); keys %s/**", z.mode, list(z.listen), list(z.connect),
                      f"; base {z.config_file}" if z.config_file else "", f"{self.keys.prefix}/{self.keys.vehicle}")
-            log.info("ready: %d pending requests, %d services in the journal %s", len(self.journal.pending()),
-                     len(self.journal.services()), self.cfg.journal.path)
+            log.info("ready: sortie %d (%s): %d pending requests, %d services in the journal %s",
+                     self.journal.sortie, f"over: {self.sortie_over}" if self.sortie_over else "running",
+                     len(self.journal.pending()), len(self.journal.services()), self.cfg.journal.path)
         await self.stopping.wait()
         await self._shutdown()
         return 0
@@ -290,6 +293,7 @@ class Service:
             if self.link.telemetry.airborne:
                 self.flown = True
             self.zio.publish("status", encode(self._status()))
+            self._maybe_begin_sortie()
             self._log_busy()
             await self._safety_check()
             await asyncio.sleep(period)
@@ -427,7 +431,8 @@ class Service:
         self._wake.set()
 
     def _end_sortie(self, why: str) -> None:
-        """Close the sortie: every pending request is reported not served, with its reason."""
+        """Close the sortie: every pending request is reported not served, with its reason;
+        the intake refuses requests until the next sortie begins (``_maybe_begin_sortie``)."""
         if self.sortie_over:
             return
         counts: dict[str, int] = {}
@@ -437,14 +442,59 @@ class Service:
                                                    f"sortie ended before its turn ({why})")
                    for r in self.journal.pending()}
         now = self.clock()
-        self.journal.close_pending(reasons, now)
+        self.journal.end_sortie(why, reasons, now)
+        self._version += 1  # a plan still being searched belongs to the sortie that ended
         for rid, reason in reasons.items():
             self._event("request_rejected", request_id=rid, detail=f"not served: {reason}"[:256])
         self.sortie_over = why
-        self.journal.set_meta("sortie_over", why)
-        self.intake.closed_reason = f"sortie over: {why}"
-        self._event("landed", detail=why)
-        log.info("sortie over: %s; %d services, %d requests not served", why, len(self.journal.services()), len(reasons))
+        self.intake.closed_reason = self._closed_reason()
+        self._event("landed", detail=f"sortie {self.journal.sortie}: {why}")
+        log.info("sortie %d over: %s; %d services, %d requests not served", self.journal.sortie, why,
+                 len(self.journal.services()), len(reasons))
+
+    def _closed_reason(self) -> str:
+        """What a request hears between sorties."""
+        if not self.cfg.sortie.repeat:
+            return f"sortie over: {self.sortie_over}; this service flies one sortie (sortie.repeat = false)"
+        return (f"sortie over: waiting for the battery (at least {self.cfg.sortie.next_battery_fraction:.0%}) "
+                f"with the vehicle on the ground and disarmed before sortie {self.journal.sortie + 1}")
+
+    def _maybe_begin_sortie(self) -> None:
+        """Begin the next sortie once the last one is over and the vehicle is ready to fly
+        again: on the ground, disarmed, its battery swapped or charged."""
+        t = self.link.telemetry
+        if not self.sortie_over or not self.cfg.sortie.repeat or self.stopping.is_set():
+            return
+        if not (t.valid and t.connected) or t.airborne or t.armed:
+            return
+        if t.battery_fraction < self.cfg.sortie.next_battery_fraction:
+            return
+        self._begin_sortie(t.battery_fraction)
+
+    def _begin_sortie(self, battery_fraction: float) -> None:
+        """A fresh sortie: nothing held, nothing planned, started at the base, fairness
+        counts from zero (the journal's queries read the new sortie), intake open."""
+        try:
+            number = self.journal.begin_sortie(self.clock())
+        except JournalError as err:
+            log.error("could not begin the next sortie: %s", err)
+            return
+        self.sortie_over = None
+        # the last sortie's mission and what was judged of it (a doubt is about that mission)
+        self.held, self._held_gen, self._counted, self._unconfirmed = None, None, set(), None
+        self._previous = None  # a late report of the last sortie's mission must not count in this one
+        self._doubt_reason, self._must_upload, self._resume_pending = None, False, False
+        self._progress_seen, self._progress_after = True, 0.0
+        self.plan_msg = None
+        self.last_hover_index = -1
+        self.started = self.flown = False
+        self._version += 1
+        self._last_plan_t = -math.inf
+        self.planner.new_sortie()
+        self.intake.new_sortie()
+        self._event("sortie_started", detail=f"sortie {number}: battery at {battery_fraction:.0%}")
+        log.info("sortie %d begins: battery at %.0f%%", number, 100 * battery_fraction)
+        self._wake.set()
 
     # --- planning ------------------------------------------------------------------------------------
     async def _planning_loop(self) -> None:

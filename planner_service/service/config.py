@@ -144,6 +144,16 @@ class SafetyConfig:
 
 
 @dataclass(frozen=True)
+class SortieConfig:
+    repeat: bool = True
+    """After a landing, begin the next sortie once the vehicle is ready again; false: one
+    sortie per journal, the intake stays closed after the landing."""
+    next_battery_fraction: float = 0.95
+    """The next sortie begins when the vehicle is on the ground, disarmed and its battery
+    is back at or above this fraction (swapped or charged)."""
+
+
+@dataclass(frozen=True)
 class ServiceConfig:
     zenoh: ZenohConfig = field(default_factory=ZenohConfig)
     intake: IntakeConfig = field(default_factory=IntakeConfig)
@@ -152,6 +162,7 @@ class ServiceConfig:
     journal: JournalConfig = field(default_factory=JournalConfig)
     origin: OriginConfig = field(default_factory=OriginConfig)
     safety: SafetyConfig = field(default_factory=SafetyConfig)
+    sortie: SortieConfig = field(default_factory=SortieConfig)
     scenario_preset: str = "field"
     scenario_overrides: tuple[tuple[str, Any], ...] = ()
     """(name, value) pairs from the [scenario] section besides ``preset``."""
@@ -176,7 +187,7 @@ class ServiceConfig:
 
 
 _SECTIONS = {"zenoh": ZenohConfig, "intake": IntakeConfig, "mavlink": MavlinkConfig, "planner": PlannerConfig,
-             "journal": JournalConfig, "origin": OriginConfig, "safety": SafetyConfig}
+             "journal": JournalConfig, "origin": OriginConfig, "safety": SafetyConfig, "sortie": SortieConfig}
 
 
 def _text(value: Any) -> str:
@@ -337,6 +348,9 @@ def validate(c: ServiceConfig) -> None:
         raise ConfigError("safety.energy_margin_j", "must not be negative")
     if not 0.0 <= s.rtl_battery_fraction < 1.0:
         raise ConfigError("safety.rtl_battery_fraction", "must lie in [0, 1)")
+    if not s.rtl_battery_fraction < c.sortie.next_battery_fraction <= 1.0:
+        raise ConfigError("sortie.next_battery_fraction", f"must lie in (safety.rtl_battery_fraction = "
+                          f"{s.rtl_battery_fraction}, 1]: a sortie must not begin at the return threshold")
     try:
         area = c.area()
         c.origin_point()

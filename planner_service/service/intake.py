@@ -61,6 +61,11 @@ class Intake:
         does not scan the journal on every request."""
         self._rate = RateLimit(limits.max_requests_per_s, clock())
 
+    def new_sortie(self) -> None:
+        """The journal began a new sortie: open, and count that sortie's users."""
+        self.closed_reason = None
+        self._users = self.journal.user_ids()
+
     def handle(self, payload: bytes | None) -> Accepted | Rejected:
         ref = client_ref(payload)
         if self.closed_reason is not None:

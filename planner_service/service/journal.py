@@ -8,19 +8,34 @@ are still pending, service counts (the fairness rule) and the last mission are k
 Request life: ``pending`` -> ``served`` (a service row names it), ``replaced`` (the user's
 newer request took its place) or ``not_served`` (the sortie ended without it; ``reason``
 says why). Nothing is ever deleted.
+
+Sorties: one file holds every sortie of a service's life. ``sorties`` has a row per sortie
+(number, started, ended, why); requests, services and missions carry the sortie they
+belong to, and every query the service makes (pending, services, users, missions, the last
+mission) reads the current sortie only, through an index, so the work and memory of a
+decision stay bounded however many sorties the file holds. Fairness counts are per sortie
+(the paper's rule (3), (9c) is per sortie). Plan and request ids run on across sorties.
+
+Schema versions (``meta.schema_version``): 1, one sortie per file (no version row);
+2, sorties. A version-1 file is migrated in place on open (its rows become sortie 1,
+ended if its meta said ``sortie_over``); a file from a newer version is refused.
 """
 
 from __future__ import annotations
 
 import json
 import sqlite3
+import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Iterable
 
 from .errors import JournalError
 
-SCHEMA = """
+SCHEMA_VERSION = 2
+"""The layout this module writes (``meta.schema_version``)."""
+
+TABLES = """
 CREATE TABLE IF NOT EXISTS requests (
     request_id INTEGER PRIMARY KEY AUTOINCREMENT,
     user_id TEXT NOT NULL,
@@ -31,11 +46,9 @@ CREATE TABLE IF NOT EXISTS requests (
     status TEXT NOT NULL DEFAULT 'pending'
         CHECK (status IN ('pending', 'served', 'replaced', 'not_served')),
     reason TEXT NOT NULL DEFAULT '',
-    closed_at_s REAL
+    closed_at_s REAL,
+    sortie INTEGER NOT NULL DEFAULT 1
 );
-CREATE INDEX IF NOT EXISTS requests_by_user ON requests (user_id, status);
--- pending() runs for every request and status: without it a long journal is scanned each time
-CREATE INDEX IF NOT EXISTS requests_by_status ON requests (status);
 CREATE TABLE IF NOT EXISTS services (
     service_id INTEGER PRIMARY KEY AUTOINCREMENT,
     request_id INTEGER NOT NULL REFERENCES requests (request_id),
@@ -46,7 +59,8 @@ CREATE TABLE IF NOT EXISTS services (
     x_m REAL NOT NULL, y_m REAL NOT NULL, z_m REAL NOT NULL,
     reward REAL NOT NULL,
     battery_j REAL NOT NULL,
-    time_s REAL NOT NULL
+    time_s REAL NOT NULL,
+    sortie INTEGER NOT NULL DEFAULT 1
 );
 CREATE TABLE IF NOT EXISTS missions (
     mission_id INTEGER PRIMARY KEY AUTOINCREMENT,
@@ -54,10 +68,32 @@ CREATE TABLE IF NOT EXISTS missions (
     time_s REAL NOT NULL,
     result TEXT NOT NULL,
     items TEXT NOT NULL,
-    points TEXT NOT NULL
+    points TEXT NOT NULL,
+    sortie INTEGER NOT NULL DEFAULT 1
+);
+CREATE TABLE IF NOT EXISTS sorties (
+    number INTEGER PRIMARY KEY,
+    started_at_s REAL NOT NULL,
+    ended_at_s REAL,
+    why TEXT NOT NULL DEFAULT ''
 );
 CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
 """
+
+INDEXES = """
+CREATE INDEX IF NOT EXISTS requests_by_user ON requests (user_id, status);
+-- pending(), users() and the fairness counts run for every request and decision: through
+-- these indexes they read the current sortie only, however long the journal
+CREATE INDEX IF NOT EXISTS requests_by_sortie ON requests (sortie, status, user_id);
+CREATE INDEX IF NOT EXISTS services_by_sortie ON services (sortie, user_id);
+CREATE INDEX IF NOT EXISTS missions_by_sortie ON missions (sortie, result);
+"""
+MIGRATE_1_TO_2 = [
+    "ALTER TABLE requests ADD COLUMN sortie INTEGER NOT NULL DEFAULT 1",
+    "ALTER TABLE services ADD COLUMN sortie INTEGER NOT NULL DEFAULT 1",
+    "ALTER TABLE missions ADD COLUMN sortie INTEGER NOT NULL DEFAULT 1",
+]
+"""Version 1 had one sortie per file: every row belongs to sortie 1."""
 
 
 @dataclass(frozen=True)
@@ -111,10 +147,27 @@ class MissionRow:
     points: list[dict[str, Any]]
 
 
-class Journal:
-    """One SQLite connection, used from one thread (the service's event loop)."""
+@dataclass(frozen=True)
+class SortieRow:
+    """One sortie: ``ended_at_s`` is None while it runs; ``why`` says how it ended."""
 
-    def __init__(self, path: str | Path, synchronous: str = "FULL") -> None:
+    number: int
+    started_at_s: float
+    ended_at_s: float | None
+    why: str
+
+    @property
+    def over(self) -> bool:
+        return self.ended_at_s is not None
+
+
+class Journal:
+    """One SQLite connection, used from one thread (the service's event loop).
+
+    ``sortie`` is the current sortie's number: the last one in the file, running or over.
+    A new file starts sortie 1 at ``now_s`` (default: the wall clock)."""
+
+    def __init__(self, path: str | Path, synchronous: str = "FULL", now_s: float | None = None) -> None:
         self.path = str(path)
         try:
             if self.path != ":memory:":
@@ -123,9 +176,65 @@ class Journal:
             self._db.execute("PRAGMA journal_mode=WAL")
             self._db.execute(f"PRAGMA synchronous={synchronous.upper()}")
             self._db.execute("PRAGMA foreign_keys=ON")
-            self._db.executescript(SCHEMA)
         except sqlite3.Error as err:
             raise JournalError(f"cannot open the journal {self.path}: {err}") from None
+        try:
+            self._open_schema(time.time() if now_s is None else now_s)
+            (number,) = self._db.execute("SELECT MAX(number) FROM sorties").fetchone()
+        except (sqlite3.Error, JournalError) as err:
+            self._db.close()
+            if isinstance(err, JournalError):
+                raise
+            raise JournalError(f"cannot open the journal {self.path}: {err}") from None
+        self.sortie = int(number)
+
+    def _schema_version(self) -> int:
+        """0 for a new file, 1 for the one-sortie layout (it had no version row)."""
+        tables = {name for (name,) in self._db.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
+        if "requests" not in tables:
+            return 0
+        row = self._db.execute("SELECT value FROM meta WHERE key = 'schema_version'").fetchone() \
+            if "meta" in tables else None
+        if row is None:
+            return 1
+        try:
+            return int(row[0])
+        except ValueError:
+            raise JournalError(f"the journal {self.path} has schema version {row[0]!r}, not a number") from None
+
+    def _open_schema(self, now_s: float) -> None:
+        """Create, migrate (1 -> 2) or check the layout, in one transaction."""
+        version = self._schema_version()
+        if version > SCHEMA_VERSION:
+            raise JournalError(f"the journal {self.path} has schema version {version}; this service reads "
+                               f"versions up to {SCHEMA_VERSION}: run a newer service or use another file")
+        self._db.execute("BEGIN IMMEDIATE")
+        try:
+            for statement in TABLES.split(";"):
+                if statement.strip():
+                    self._db.execute(statement)
+            if version == 1:
+                for statement in MIGRATE_1_TO_2:
+                    self._db.execute(statement)
+                over = self._db.execute("SELECT value FROM meta WHERE key = 'sortie_over'").fetchone()
+                started, ended = self._db.execute(
+                    "SELECT MIN(accepted_at_s), MAX(closed_at_s) FROM requests").fetchone()
+                self._db.execute(
+                    "INSERT INTO sorties (number, started_at_s, ended_at_s, why) VALUES (1, ?, ?, ?)",
+                    (now_s if started is None else started,
+                     None if over is None else (now_s if ended is None else ended), "" if over is None else over[0]))
+                self._db.execute("DELETE FROM meta WHERE key = 'sortie_over'")  # now sorties.why
+            elif version == 0:
+                self._db.execute("INSERT INTO sorties (number, started_at_s) VALUES (1, ?)", (now_s,))
+            self._db.execute("INSERT OR REPLACE INTO meta (key, value) VALUES ('schema_version', ?)",
+                             (str(SCHEMA_VERSION),))
+            for statement in INDEXES.split(";"):
+                if statement.strip():
+                    self._db.execute(statement)
+            self._db.execute("COMMIT")
+        except BaseException:
+            self._db.execute("ROLLBACK")
+            raise
 
     # --- writing --------------------------------------------------------------------------
     def _write(self, what: str, statements: Iterable[tuple[str, tuple[Any, ...]]]) -> list[int]:
@@ -146,15 +255,18 @@ class Journal:
 
     def accept(self, user_id: str, x_m: float, y_m: float, z_m: float, tasks: int,
                client_ref: str | None, now_s: float) -> tuple[int, list[int]]:
-        """Journal a validated request; the user's pending requests become ``replaced``.
-        Returns (the new request id, the ids it replaced)."""
+        """Journal a validated request in the current sortie; the user's pending requests
+        become ``replaced``. Returns (the new request id, the ids it replaced)."""
+        if self.current_sortie().over:
+            raise JournalError(f"accept: sortie {self.sortie} is over; no request joins it")
         older = [r.request_id for r in self.pending() if r.user_id == user_id]
         try:
             self._db.execute("BEGIN IMMEDIATE")
             try:
                 request_id = int(self._db.execute(
-                    "INSERT INTO requests (user_id, x_m, y_m, z_m, tasks, client_ref, accepted_at_s) "
-                    "VALUES (?, ?, ?, ?, ?, ?, ?)", (user_id, x_m, y_m, z_m, tasks, client_ref, now_s)).lastrowid)
+                    "INSERT INTO requests (user_id, x_m, y_m, z_m, tasks, client_ref, accepted_at_s, sortie) "
+                    "VALUES (?, ?, ?, ?, ?, ?, ?, ?)",
+                    (user_id, x_m, y_m, z_m, tasks, client_ref, now_s, self.sortie)).lastrowid)
                 for rid in older:
                     self._db.execute(
                         "UPDATE requests SET status = 'replaced', reason = ?, closed_at_s = ? "
@@ -175,79 +287,125 @@ class Journal:
             raise JournalError(f"record_service: request {request_id} is not pending")
         service_id, _ = self._write("record_service", [
             ("INSERT INTO services (request_id, user_id, tasks, bits, hover_index, x_m, y_m, z_m, reward, "
-             "battery_j, time_s) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
-             (request_id, row.user_id, tasks, bits, hover_index, *xyz, reward, battery_j, now_s)),
+             "battery_j, time_s, sortie) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+             (request_id, row.user_id, tasks, bits, hover_index, *xyz, reward, battery_j, now_s, self.sortie)),
             ("UPDATE requests SET status = 'served', closed_at_s = ? WHERE request_id = ?", (now_s, request_id)),
         ])
         return service_id
 
     def close_pending(self, reasons: dict[int, str], now_s: float) -> None:
         """Pending requests the sortie will not serve, each with its reason."""
-        self._write("close_pending", [(
-            "UPDATE requests SET status = 'not_served', reason = ?, closed_at_s = ? "
-            "WHERE request_id = ? AND status = 'pending'", (reason, now_s, rid)) for rid, reason in reasons.items()])
+        self._write("close_pending", _closing(reasons, now_s))
+
+    def end_sortie(self, why: str, reasons: dict[int, str], now_s: float) -> None:
+        """End the current sortie: its pending requests closed with their reasons, the
+        sortie row marked ended, in one transaction."""
+        self._write("end_sortie", [*_closing(reasons, now_s), (
+            "UPDATE sorties SET ended_at_s = ?, why = ? WHERE number = ? AND ended_at_s IS NULL",
+            (now_s, why, self.sortie))])
+
+    def begin_sortie(self, now_s: float) -> int:
+        """Start the next sortie (the current one must be over); its number."""
+        if not self.current_sortie().over:
+            raise JournalError(f"begin_sortie: sortie {self.sortie} has not ended")
+        self._write("begin_sortie", [(
+            "INSERT INTO sorties (number, started_at_s) VALUES (?, ?)", (self.sortie + 1, now_s))])
+        self.sortie += 1
+        return self.sortie
 
     def record_mission(self, plan_id: int, items: list[dict[str, Any]], points: list[dict[str, Any]],
                        result: str, now_s: float) -> int:
         (mission_id,) = self._write("record_mission", [(
-            "INSERT INTO missions (plan_id, time_s, result, items, points) VALUES (?, ?, ?, ?, ?)",
-            (plan_id, now_s, result, json.dumps(items), json.dumps(points)))])
+            "INSERT INTO missions (plan_id, time_s, result, items, points, sortie) VALUES (?, ?, ?, ?, ?, ?)",
+            (plan_id, now_s, result, json.dumps(items), json.dumps(points), self.sortie))])
         return mission_id
 
     def set_meta(self, key: str, value: str) -> None:
         self._write("set_meta", [("INSERT OR REPLACE INTO meta (key, value) VALUES (?, ?)", (key, value))])
 
-    # --- reading --------------------------------------------------------------------------
+    # --- reading (``sortie``: None is the current one) ---------------------------------------
     def _rows(self, sql: str, args: tuple[Any, ...] = ()) -> list[tuple[Any, ...]]:
         try:
             return self._db.execute(sql, args).fetchall()
         except sqlite3.Error as err:
             raise JournalError(f"read: {err}") from None
 
+    def current_sortie(self) -> SortieRow:
+        row = self.sortie_row(self.sortie)
+        if row is None:  # the constructor made or found it; only a foreign writer could remove it
+            raise JournalError(f"read: sortie {self.sortie} is missing from {self.path}")
+        return row
+
+    def sortie_row(self, number: int) -> SortieRow | None:
+        rows = self._rows("SELECT number, started_at_s, ended_at_s, why FROM sorties WHERE number = ?", (number,))
+        return SortieRow(*rows[0]) if rows else None
+
+    def sorties(self) -> list[SortieRow]:
+        return [SortieRow(*r) for r in self._rows(
+            "SELECT number, started_at_s, ended_at_s, why FROM sorties ORDER BY number")]
+
     def request(self, request_id: int) -> RequestRow | None:
         rows = self._rows(f"SELECT {_REQ} FROM requests WHERE request_id = ?", (request_id,))
         return RequestRow(*rows[0]) if rows else None
 
-    def requests(self) -> list[RequestRow]:
-        return [RequestRow(*r) for r in self._rows(f"SELECT {_REQ} FROM requests ORDER BY request_id")]
+    def requests(self, sortie: int | None = None) -> list[RequestRow]:
+        return [RequestRow(*r) for r in self._rows(
+            f"SELECT {_REQ} FROM requests WHERE sortie = ? ORDER BY request_id", (self._n(sortie),))]
 
     def pending(self) -> list[RequestRow]:
-        """Pending requests in arrival order (at most one per user)."""
+        """The current sortie's pending requests in arrival order (at most one per user)."""
         return [RequestRow(*r) for r in self._rows(
-            f"SELECT {_REQ} FROM requests WHERE status = 'pending' ORDER BY request_id")]
+            f"SELECT {_REQ} FROM requests WHERE sortie = ? AND status = 'pending' ORDER BY request_id",
+            (self.sortie,))]
 
     def pending_count(self) -> int:
-        return int(self._rows("SELECT COUNT(*) FROM requests WHERE status = 'pending'")[0][0])
+        """How many requests of the current sortie are pending."""
+        return int(self._rows("SELECT COUNT(*) FROM requests WHERE sortie = ? AND status = 'pending'",
+                              (self.sortie,))[0][0])
 
     def user_ids(self) -> set[str]:
-        """Every user id that has a request in the journal."""
-        return {r[0] for r in self._rows("SELECT DISTINCT user_id FROM requests")}
+        """Every user id with a request in the current sortie."""
+        return {r[0] for r in self._rows("SELECT DISTINCT user_id FROM requests WHERE sortie = ?", (self.sortie,))}
 
-    def users(self) -> list[UserRow]:
-        """Every user heard from, in order of first request; position from its latest."""
+    def users(self, sortie: int | None = None) -> list[UserRow]:
+        """Every user heard from in the sortie, in order of first request; position from its
+        latest; services counted in that sortie."""
+        n = self._n(sortie)
         rows = self._rows(
             "SELECT r.user_id, r.x_m, r.y_m, r.z_m, "
-            "(SELECT COUNT(*) FROM services s WHERE s.user_id = r.user_id) "
+            "(SELECT COUNT(*) FROM services s WHERE s.sortie = ? AND s.user_id = r.user_id) "
             "FROM requests r JOIN (SELECT user_id, MIN(request_id) AS first, MAX(request_id) AS last "
-            "FROM requests GROUP BY user_id) u ON r.request_id = u.last ORDER BY u.first")
+            "FROM requests WHERE sortie = ? GROUP BY user_id) u ON r.request_id = u.last ORDER BY u.first", (n, n))
         return [UserRow(*r) for r in rows]
 
-    def services(self) -> list[ServiceRow]:
+    def services(self, sortie: int | None = None) -> list[ServiceRow]:
         return [ServiceRow(*r) for r in self._rows(
             "SELECT service_id, request_id, user_id, tasks, bits, hover_index, x_m, y_m, z_m, reward, "
-            "battery_j, time_s FROM services ORDER BY service_id")]
+            "battery_j, time_s FROM services WHERE sortie = ? ORDER BY service_id", (self._n(sortie),))]
 
-    def missions(self) -> list[MissionRow]:
-        return [MissionRow(r[0], r[1], r[2], r[3], json.loads(r[4]), json.loads(r[5])) for r in self._rows(
-            "SELECT mission_id, plan_id, time_s, result, items, points FROM missions ORDER BY mission_id")]
+    def missions(self, sortie: int | None = None) -> list[MissionRow]:
+        return [_mission(r) for r in self._rows(
+            "SELECT mission_id, plan_id, time_s, result, items, points FROM missions WHERE sortie = ? "
+            "ORDER BY mission_id", (self._n(sortie),))]
 
     def last_mission(self, result: str | None = "accepted") -> MissionRow | None:
-        rows = [m for m in self.missions() if result is None or m.result == result]
-        return rows[-1] if rows else None
+        """The current sortie's last mission (with ``result``; None: any)."""
+        rows = self._rows(
+            "SELECT mission_id, plan_id, time_s, result, items, points FROM missions WHERE sortie = ? "
+            "AND (? IS NULL OR result = ?) ORDER BY mission_id DESC LIMIT 1", (self.sortie, result, result))
+        return _mission(rows[0]) if rows else None
+
+    def last_plan_id(self) -> int:
+        """The highest plan id of any sortie (plan ids run on across sorties); 0 if none."""
+        (value,) = self._rows("SELECT COALESCE(MAX(plan_id), 0) FROM missions")[0]
+        return int(value)
 
     def get_meta(self, key: str, default: str | None = None) -> str | None:
         rows = self._rows("SELECT value FROM meta WHERE key = ?", (key,))
         return rows[0][0] if rows else default
+
+    def _n(self, sortie: int | None) -> int:
+        return self.sortie if sortie is None else sortie
 
     def close(self) -> None:
         """Checkpoint the WAL into the main file and close."""
@@ -259,3 +417,12 @@ class Journal:
 
 
 _REQ = "request_id, user_id, x_m, y_m, z_m, tasks, client_ref, accepted_at_s, status, reason"
+
+
+def _mission(r: tuple[Any, ...]) -> MissionRow:
+    return MissionRow(r[0], r[1], r[2], r[3], json.loads(r[4]), json.loads(r[5]))
+
+
+def _closing(reasons: dict[int, str], now_s: float) -> list[tuple[str, tuple[Any, ...]]]:
+    return [("UPDATE requests SET status = 'not_served', reason = ?, closed_at_s = ? "
+             "WHERE request_id = ? AND status = 'pending'", (reason, now_s, rid)) for rid, reason in reasons.items()]

@@ -212,6 +212,12 @@ class Planner:
         self._planner: MctsPlanner | None = None
         self._users = -1
 
+    def new_sortie(self) -> None:
+        """Forget the search tree: a new sortie starts from the base with fresh counts, which
+        the tree of the last one knows nothing about (the generator runs on)."""
+        if self._planner is not None:
+            self._planner.reset()
+
     def scenario_for(self, num_users: int) -> Scenario:
         return self.base.replace(num_users=max(num_users, 1))
 

@@ -23,16 +23,21 @@ def fairness_violations(scenario: Scenario, services: list[tuple[str, int]]) -> 
     return bad
 
 
-def sortie_summary(journal: Journal, scenario: Scenario, final_battery_j: float | None) -> dict[str, Any]:
-    services = journal.services()
-    requests = journal.requests()
+def sortie_summary(journal: Journal, scenario: Scenario, final_battery_j: float | None,
+                   sortie: int | None = None) -> dict[str, Any]:
+    """The figures of one sortie (None: the journal's current one)."""
+    number = journal.sortie if sortie is None else sortie
+    row = journal.sortie_row(number)
+    services = journal.services(number)
+    requests = journal.requests(number)
     n = len(services)
     tasks = [s.tasks for s in services]
     statuses = Counter(r.status for r in requests)
     reasons = Counter(r.reason for r in requests if r.status == "not_served")
-    missions = journal.missions()
+    missions = journal.missions(number)
     floor = scenario.energy_floor_j
     return {
+        "sortie": number,
         "intervals": n,
         "throughput_tasks_per_interval": sum(tasks) / n if n else 0.0,
         "throughput_bits_per_interval": sum(s.bits for s in services) / n if n else 0.0,
@@ -50,5 +55,5 @@ def sortie_summary(journal: Journal, scenario: Scenario, final_battery_j: float 
         "not_served_reasons": dict(reasons),
         "missions_uploaded": sum(1 for m in missions if m.result == "accepted"),
         "upload_failures": sum(1 for m in missions if m.result != "accepted"),
-        "sortie_over": journal.get_meta("sortie_over"),
+        "sortie_over": row.why if row is not None and row.over else None,
     }

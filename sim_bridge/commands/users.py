@@ -1,6 +1,7 @@
 """Simulated ground users: each walks by random waypoint and submits a task request over
 zenoh every interval. Stops on SIGINT/SIGTERM, after --duration, or when the service says
-its sortie is over. Logs go to stderr; a one-line summary per user at the end."""
+it flies no more sorties (between two sorties it refuses requests and the users keep
+asking). Logs go to stderr; a one-line summary per user at the end."""
 
 from __future__ import annotations
 
@@ -63,5 +64,5 @@ def run(args: argparse.Namespace) -> int:
                 return 0
         walkers = run_users(client, scenario, args.count, args.interval, args.speedup, args.seed, stop, args.duration)
     for w in walkers:
-        print(f"{w.user_id}: {w.submitted} submitted, {w.acked} acked, {len(w.refused)} refused", file=sys.stderr)
+        print(f"{w.user_id}: {w.submitted} submitted, {w.acked} acked, {w.refused} refused", file=sys.stderr)
     return 0

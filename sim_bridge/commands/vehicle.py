@@ -46,6 +46,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
                         help="save the flight (position, battery, armed, mode, time, home) here a few times a "
                              "second and, if the file exists at start, resume from it as after a reboot: in the "
                              "air it holds position, its mission lost; time_boot_ms restarts from 0")
+    parser.add_argument("--recharge-s", type=float, default=None, metavar="SECONDS",
+                        help="battery swap: SECONDS of simulated time after landing and disarming, the battery "
+                             "is full again (default: never)")
     parser.add_argument("--log-level", default="INFO", choices=("DEBUG", "INFO", "WARNING", "ERROR"))
 
 
@@ -68,7 +71,7 @@ def run(args: argparse.Namespace) -> int:
             max_retries=args.retries, fence_margin_m=args.fence_margin,
             max_mission_items=args.max_mission_items,
             signing_key_file=args.signing_key, signing_timestamp_file=args.signing_timestamp_file,
-            state_file=args.state_file,
+            state_file=args.state_file, recharge_s=args.recharge_s,
         )
         vehicle = Vehicle(config)
     except (ScenarioError, MissionError, VehicleError, SigningError) as exc:

@@ -14,6 +14,10 @@ Energy (planner_service.model.energy, the same functions the planner's playouts 
   hold time was planned for).
 When the battery reaches ``battery_threshold * battery_j`` in the air the aircraft returns
 to launch, as an autopilot's battery failsafe does.
+
+Battery swap (``recharge_s``): ``recharge_s`` simulated seconds after the aircraft is on
+the ground and disarmed, its battery is full again (a crew swapped or charged it) and the
+failsafe is cleared, so it can fly the next sortie. Arming restarts the wait; None: never.
 """
 
 from __future__ import annotations
@@ -69,7 +73,8 @@ class FlightSnapshot:
 @dataclass(frozen=True)
 class FlightEvent:
     """Something the link reports: ``kind`` is one of reached, current, mode, landed,
-    disarmed, battery_low, mission_done; ``seq`` the mission item when it applies."""
+    disarmed, battery_low, battery_swapped, mission_done; ``seq`` the mission item when it
+    applies."""
 
     kind: str
     seq: int = -1
@@ -86,6 +91,8 @@ class Flight:
     flavour: str = "ardupilot"
     climb_mps: float = 5.0
     rtl_min_alt_m: float = 15.0
+    recharge_s: float | None = None
+    """Simulated seconds on the ground, disarmed, until the battery is full again."""
 
     def __post_init__(self) -> None:
         self.p = pack(self.scenario)
@@ -112,6 +119,11 @@ class Flight:
         self.flight_j = 0.0
         self.hover_j = 0.0
         self.compute_j = 0.0
+        self.ground_s = 0.0
+        """Simulated seconds on the ground and disarmed since the battery was last used."""
+        self.swaps = 0
+        if self.recharge_s is not None and not (math.isfinite(self.recharge_s) and self.recharge_s >= 0):
+            raise VehicleError("recharge_s", f"must be a finite number of seconds >= 0, got {self.recharge_s}")
         self._warm_up()
 
     def _warm_up(self) -> None:
@@ -151,6 +163,7 @@ class Flight:
         if self.energy_j <= self.energy_floor_j:
             return "battery below the return threshold"
         self.armed = True
+        self.ground_s = 0.0
         return None
 
     def disarm(self, force: bool = False) -> str | None:
@@ -279,6 +292,7 @@ class Flight:
     def _advance(self, budget: float, events: list[FlightEvent]) -> float:
         if not self.armed:
             self.vel = (0.0, 0.0, 0.0)
+            self._recharge(budget, events)
             return budget
         if self.mode is Mode.AUTO and self.started:
             return self._auto(budget, events)
@@ -398,6 +412,20 @@ class Flight:
         self.armed = False
         events.append(FlightEvent("disarmed"))
         return 0.0
+
+    def _recharge(self, dt: float, events: list[FlightEvent]) -> None:
+        """The battery swap: full again once on the ground and disarmed for ``recharge_s``."""
+        if self.recharge_s is None or not self.landed or self.energy_j >= self.scenario.battery_j:
+            self.ground_s = 0.0
+            return
+        self.ground_s += dt
+        if self.ground_s + EPS_S < self.recharge_s:
+            return
+        self.energy_j = float(self.scenario.battery_j)
+        self.failsafe = False
+        self.ground_s = 0.0
+        self.swaps += 1
+        events.append(FlightEvent("battery_swapped", text=f"battery swapped (swap {self.swaps})"))
 
     def _near_xy(self, target: tuple[float, float, float]) -> bool:
         return math.hypot(target[0] - self.pos[0], target[1] - self.pos[1]) < 1e-6

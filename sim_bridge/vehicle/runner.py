@@ -8,6 +8,7 @@ run on wall time, since they concern the link, not the flight.
 from __future__ import annotations
 
 import logging
+import math
 import threading
 import time
 from pathlib import Path
@@ -78,6 +79,9 @@ class VehicleConfig:
     state_file: str | None = None
     """Save the flight here a few times a second and resume from it at start (a restart
     in the air comes back holding position, its mission lost)."""
+    recharge_s: float | None = None
+    """Battery swap: simulated seconds on the ground, disarmed, until the battery is full
+    again; None: never (one sortie's battery)."""
 
     def __post_init__(self) -> None:
         if self.flavour not in ("ardupilot", "px4"):
@@ -90,6 +94,8 @@ class VehicleConfig:
             raise VehicleError("timing", "tick_s and item_timeout_s must be positive, max_retries >= 0")
         if not 1 <= self.max_mission_items <= 65535:
             raise VehicleError("max_mission_items", f"must lie in 1..65535, got {self.max_mission_items}")
+        if self.recharge_s is not None and not (math.isfinite(self.recharge_s) and self.recharge_s >= 0):
+            raise VehicleError("recharge_s", f"must be a finite number of seconds >= 0, got {self.recharge_s}")
 
 
 class Vehicle:
@@ -98,7 +104,7 @@ class Vehicle:
     def __init__(self, config: VehicleConfig, clock: Callable[[], float] = time.monotonic) -> None:
         self.config = config
         self.clock = clock
-        self.flight = Flight(config.scenario, config.origin, config.flavour)
+        self.flight = Flight(config.scenario, config.origin, config.flavour, recharge_s=config.recharge_s)
         self.signer = self._signer(config)
         try:
             self.link = Link(config.url, config.system_id, config.component_id, clock, self.signer)
@@ -177,10 +183,15 @@ class Vehicle:
             log.debug("late tick: %.3f s of wall time; simulating %.3f", dt_wall, MAX_STEP_TICKS * self.config.tick_s)
             dt_wall = MAX_STEP_TICKS * self.config.tick_s
         before = self.flight.energy_j
+        was_landed = self.flight.landed
         dt_sim = dt_wall * self.config.speedup
         events = self.flight.step(dt_sim)
         if dt_sim > 0:
             self._power_w = (before - self.flight.energy_j) / dt_sim
+        if was_landed and not self.flight.landed:
+            # Report the takeoff at once, as the landing is: at a high speed-up a short
+            # flight can begin and end between two periodic reports.
+            self._send_to(tm.extended_sys_state(self.flight), None)
         for event in events:
             self._report(event)
         if self.flight.mode is not self._last_mode or self.flight.armed != self._last_armed:
@@ -222,6 +233,11 @@ class Vehicle:
         elif event.kind == "mission_done":
             self._send_to(tm.mission_current(self.flight, event.seq, M.MISSION_STATE_COMPLETE), None)
             self._send_to(tm.statustext(M.MAV_SEVERITY_INFO, "Mission complete"), None)
+        elif event.kind == "battery_swapped":
+            log.info("%s at t=%.1f s (sim): battery %.1f%%", event.text, self.flight.time_s,
+                     100 * self.flight.battery_fraction)
+            self._send_to(tm.statustext(M.MAV_SEVERITY_INFO, "Battery swapped: full"), None)
+            self._send_to(tm.battery_status(self.flight, 0.0), None)
         elif event.kind == "battery_low":
             log.warning("%s", event.text)
             self._send_to(tm.statustext(M.MAV_SEVERITY_CRITICAL, event.text), None)

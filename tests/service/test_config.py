@@ -48,6 +48,9 @@ def test_file_then_overrides(tmp_path: Path) -> None:
     ({"safety.max_altitude_m": "50"}, "safety.max_altitude_m"),
     ({"safety.energy_margin_j": "-1"}, "safety.energy_margin_j"),
     ({"journal.synchronous": "SOMETIMES"}, "journal.synchronous"),
+    ({"sortie.next_battery_fraction": "1.2"}, "sortie.next_battery_fraction"),
+    ({"sortie.next_battery_fraction": "0.1"}, "sortie.next_battery_fraction"),  # at the RTL threshold
+    ({"sortie.repeat": "maybe"}, "sortie.repeat"),
     ({"nosuch.key": "1"}, "nosuch"),
 ])
 def test_bad_values_name_their_key(overrides: dict[str, str], key: str) -> None:

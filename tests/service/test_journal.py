@@ -1,13 +1,15 @@
-"""The journal: requests, replacement, services, missions, and resuming from the file."""
+"""The journal: requests, replacement, services, missions, sorties, resuming from the file, and
+migrating a file of the one-sortie layout."""
 
 from __future__ import annotations
 
+import sqlite3
 from pathlib import Path
 
 import pytest
 
 from planner_service.service.errors import JournalError
-from planner_service.service.journal import Journal
+from planner_service.service.journal import Journal, SortieRow
 
 
 def test_newer_request_replaces_older(tmp_path: Path) -> None:
@@ -45,3 +47,99 @@ def test_service_and_not_served_and_resume(tmp_path: Path) -> None:
     again.close_pending({2: "fairness: test"}, 5.0)
     closed = again.request(2)
     assert closed is not None and closed.status == "not_served" and closed.reason == "fairness: test"
+
+
+def test_sorties_keep_their_rows_apart(tmp_path: Path) -> None:
+    path = tmp_path / "j.sqlite"
+    j = Journal(path, now_s=10.0)
+    assert j.sortie == 1 and j.current_sortie() == SortieRow(1, 10.0, None, "")
+    j.accept("u1", 10.0, 20.0, 0.0, 5, None, 11.0)
+    j.accept("u2", 30.0, 40.0, 0.0, 7, None, 12.0)
+    j.record_service(1, 4, (20.0, 20.0, 100.0), 5, 5e5, 0.25, 90_000.0, 13.0)
+    j.record_mission(1, [{"seq": 0}], [{"hover_index": 4}], "accepted", 12.5)
+    with pytest.raises(JournalError, match="has not ended"):
+        j.begin_sortie(14.0)
+    j.end_sortie("the vehicle landed", {2: "sortie ended before its turn"}, 20.0)
+    assert j.current_sortie() == SortieRow(1, 10.0, 20.0, "the vehicle landed")
+    with pytest.raises(JournalError, match="sortie 1 is over"):
+        j.accept("u3", 1.0, 1.0, 0.0, 3, None, 21.0)
+
+    assert j.begin_sortie(30.0) == 2
+    # a new sortie: nothing pending, nobody served, no mission held; ids run on
+    assert (j.pending(), j.services(), j.users(), j.missions(), j.last_mission()) == ([], [], [], [], None)
+    assert j.last_plan_id() == 1
+    rid, _ = j.accept("u1", 50.0, 60.0, 0.0, 9, None, 31.0)
+    assert rid == 3
+    assert [(u.user_id, u.x_m, u.services) for u in j.users()] == [("u1", 50.0, 0)]  # fairness counts restart
+    j.record_service(3, 2, (50.0, 60.0, 100.0), 9, 9e5, 0.3, 80_000.0, 32.0)
+    assert [(u.user_id, u.services) for u in j.users()] == [("u1", 1)]
+    # the earlier sortie is still there to read
+    assert [r.status for r in j.requests(1)] == ["served", "not_served"]
+    assert [(u.user_id, u.services) for u in j.users(1)] == [("u1", 1), ("u2", 0)]
+    assert [s.request_id for s in j.services(1)] == [1] and [s.request_id for s in j.services()] == [3]
+    j.close()
+
+    again = Journal(path)  # a restart resumes the running sortie 2
+    assert again.sortie == 2 and not again.current_sortie().over
+    assert [s.request_id for s in again.services()] == [3]
+    assert [r.number for r in again.sorties()] == [1, 2]
+    again.end_sortie("the vehicle landed", {}, 40.0)
+    again.close()
+    assert Journal(path).current_sortie().over  # and a restart between sorties knows it
+
+
+# The layout before sorties (schema version 1), as the previous service wrote it.
+V1_SCHEMA = """
+CREATE TABLE requests (request_id INTEGER PRIMARY KEY AUTOINCREMENT, user_id TEXT NOT NULL,
+    x_m REAL NOT NULL, y_m REAL NOT NULL, z_m REAL NOT NULL, tasks INTEGER NOT NULL, client_ref TEXT,
+    accepted_at_s REAL NOT NULL, status TEXT NOT NULL DEFAULT 'pending'
+        CHECK (status IN ('pending', 'served', 'replaced', 'not_served')),
+    reason TEXT NOT NULL DEFAULT '', closed_at_s REAL);
+CREATE INDEX requests_by_user ON requests (user_id, status);
+CREATE TABLE services (service_id INTEGER PRIMARY KEY AUTOINCREMENT,
+    request_id INTEGER NOT NULL REFERENCES requests (request_id), user_id TEXT NOT NULL, tasks INTEGER NOT NULL,
+    bits REAL NOT NULL, hover_index INTEGER NOT NULL, x_m REAL NOT NULL, y_m REAL NOT NULL, z_m REAL NOT NULL,
+    reward REAL NOT NULL, battery_j REAL NOT NULL, time_s REAL NOT NULL);
+CREATE TABLE missions (mission_id INTEGER PRIMARY KEY AUTOINCREMENT, plan_id INTEGER NOT NULL,
+    time_s REAL NOT NULL, result TEXT NOT NULL, items TEXT NOT NULL, points TEXT NOT NULL);
+CREATE TABLE meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
+INSERT INTO requests (user_id, x_m, y_m, z_m, tasks, accepted_at_s, status, closed_at_s)
+    VALUES ('u1', 1, 2, 0, 5, 100.0, 'served', 110.0), ('u2', 3, 4, 0, 6, 101.0, 'pending', NULL);
+INSERT INTO services (request_id, user_id, tasks, bits, hover_index, x_m, y_m, z_m, reward, battery_j, time_s)
+    VALUES (1, 'u1', 5, 5e5, 3, 1, 2, 100, 0.2, 90000, 110.0);
+INSERT INTO missions (plan_id, time_s, result, items, points) VALUES (7, 105.0, 'accepted', '[]', '[]');
+"""
+
+
+@pytest.mark.parametrize("landed", [False, True])
+def test_a_version_1_journal_is_migrated(tmp_path: Path, landed: bool) -> None:
+    path = tmp_path / "v1.sqlite"
+    db = sqlite3.connect(path)
+    db.executescript(V1_SCHEMA + ("INSERT INTO meta VALUES ('sortie_over', 'the vehicle landed');" if landed else ""))
+    db.close()
+    j = Journal(path, now_s=500.0)
+    assert j.get_meta("schema_version") == "2" and j.get_meta("sortie_over") is None
+    assert j.sortie == 1
+    if landed:  # ended when its last request was closed, for the reason it gave
+        assert j.current_sortie() == SortieRow(1, 100.0, 110.0, "the vehicle landed")
+    else:
+        assert j.current_sortie() == SortieRow(1, 100.0, None, "")
+    assert [r.request_id for r in j.pending()] == [2]
+    assert [(u.user_id, u.services) for u in j.users()] == [("u1", 1), ("u2", 0)]
+    last = j.last_mission()
+    assert last is not None and last.plan_id == 7 and j.last_plan_id() == 7
+    j.close()
+    assert Journal(path).get_meta("schema_version") == "2"  # opening again changes nothing
+
+
+def test_a_newer_or_foreign_journal_is_refused(tmp_path: Path) -> None:
+    path = tmp_path / "j.sqlite"
+    j = Journal(path)
+    j.set_meta("schema_version", "3")
+    j.close()
+    with pytest.raises(JournalError, match="schema version 3; this service reads versions up to 2"):
+        Journal(path)
+    junk = tmp_path / "junk.sqlite"
+    junk.write_bytes(b"not a database at all" * 100)
+    with pytest.raises(JournalError, match="cannot open the journal"):
+        Journal(junk)

@@ -212,5 +212,5 @@ def test_another_autopilot_on_the_network_is_not_followed(stack: Stack, fake: Fa
             time.sleep(0.05)
     time.sleep(0.5)
     assert status_now(stack) == before
-    assert stack.rows("SELECT value FROM meta WHERE key = 'sortie_over'") == []
+    assert stack.rows("SELECT number, ended_at_s FROM sorties") == [(1, None)]  # sortie 1 still runs
     assert service.proc.poll() is None

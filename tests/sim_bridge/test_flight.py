@@ -10,6 +10,7 @@ from planner_service.model import pack, preset
 from planner_service.model.energy import flight_energy_j
 from protocol.geodesy import GeoOrigin
 from protocol.mission import HoverPoint, encode_path, item_local
+from sim_bridge.vehicle.errors import VehicleError
 from sim_bridge.vehicle.flight import Flight
 from sim_bridge.vehicle.modes import Mode
 
@@ -99,3 +100,41 @@ def test_commands() -> None:
     events = flight.step(5.0)
     assert [e.kind for e in events] == ["landed", "disarmed"]
     assert math.isclose(flight.pos[2], 0.0)
+
+
+def test_battery_swap_after_landing_and_disarming() -> None:
+    scenario = preset("field").replace(battery_j=60_000.0)
+    flight = Flight(scenario, ORIGIN, "px4", recharge_s=120.0)
+    flight.set_mission(encode_path([HoverPoint(400.0, 300.0, 50.0, 3000.0)], ORIGIN, "px4"))
+    flight.arm()
+    flight.set_mode(Mode.AUTO)
+    events = fly(flight)  # the failsafe brings it home below the threshold
+    assert "battery_low" in [e.kind for e in events] and flight.landed and not flight.armed
+    drained = flight.energy_j
+    assert flight.arm() is not None and flight.failsafe
+    # no swap before 120 s on the ground, disarmed; the swap at 120 s, to exactly full
+    assert flight.step(119.0) == [] and flight.energy_j == drained
+    events = flight.step(1.5)
+    assert [e.kind for e in events] == ["battery_swapped"]
+    assert flight.energy_j == scenario.battery_j and flight.swaps == 1 and not flight.failsafe
+    assert flight.step(500.0) == [] and flight.swaps == 1  # a full battery is not swapped again
+    # and it flies the next sortie
+    flight.set_mission(encode_path([HoverPoint(100.0, 100.0, 50.0, 10.0)], ORIGIN, "px4"))
+    assert flight.arm() is None and flight.set_mode(Mode.AUTO) is None
+    assert "landed" in [e.kind for e in fly(flight)]
+    assert flight.energy_j < scenario.battery_j
+
+
+def test_arming_restarts_the_swap_wait_and_none_never_swaps() -> None:
+    scenario = preset("field")
+    flight = Flight(scenario, ORIGIN, "ardupilot", recharge_s=60.0)
+    flight.energy_j = 50_000.0  # a used battery on the ground
+    flight.step(50.0)
+    assert flight.arm() is None and flight.disarm() is None  # armed on the ground: the wait restarts
+    assert flight.step(50.0) == [] and flight.energy_j == 50_000.0
+    assert [e.kind for e in flight.step(10.0)] == ["battery_swapped"]
+    never = Flight(scenario, ORIGIN, "ardupilot")
+    never.energy_j = 50_000.0
+    assert never.step(1e6) == [] and never.energy_j == 50_000.0
+    with pytest.raises(VehicleError, match="recharge_s"):
+        Flight(scenario, ORIGIN, "ardupilot", recharge_s=-1.0)
