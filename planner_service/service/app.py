@@ -52,6 +52,8 @@ GRACE_S = 5.0
 RETRY_S = 1.0
 """Wait before re-trying a failed plan, upload or start."""
 CONNECT_TIMEOUT_S = 10.0
+FLOWN_KEY = "flown_sortie"
+"""Journal meta key: the number of the last sortie in which the vehicle was airborne."""
 REFUSAL_EVENTS_PER_S = 5.0
 """At most this many ``request_rejected`` events a second for refused requests (a flood of
 bad requests must not become a flood of events); the rest are counted in the next one."""
@@ -146,8 +148,9 @@ class Service:
         if self.sortie_over:
             self.intake.closed_reason = self._closed_reason()
         self.started = False
-        self.flown = False
-        """The vehicle has been airborne during this sortie (so a landing ends it)."""
+        self.flown = self.journal.get_meta(FLOWN_KEY) == str(sortie.number)
+        """The vehicle has been airborne during this sortie (so a landing ends it); kept in
+        the journal, so that a landing while the service was down still ends the sortie."""
         services = self.journal.services()
         self.last_hover_index = services[-1].hover_index if services else -1
         last = self.journal.last_mission()
@@ -291,7 +294,8 @@ class Service:
         period = 1.0 / self.cfg.zenoh.status_hz
         while True:
             if self.link.telemetry.airborne:
-                self.flown = True
+                self._mark_flown()
+            self._landed_unseen()
             self.zio.publish("status", encode(self._status()))
             self._maybe_begin_sortie()
             self._log_busy()
@@ -331,7 +335,8 @@ class Service:
         if ev.kind == "connected":
             log.info("autopilot connected (%s)", ev.text)
             if t.airborne:
-                self.started = self.flown = True
+                self.started = True
+                self._mark_flown()
             if self.held is not None:  # from the journal: does the vehicle still fly it?
                 self._doubt(f"the service started with plan {self.held.plan_id} in its journal")
             self._wake.set()
@@ -359,7 +364,24 @@ class Service:
         elif ev.kind == "text":
             log.info("autopilot: %s", ev.text)
         if t.airborne:
-            self.flown = True
+            self._mark_flown()
+
+    def _mark_flown(self) -> None:
+        if self.flown or self.sortie_over:
+            return
+        self.flown = True
+        try:
+            self.journal.set_meta(FLOWN_KEY, str(self.journal.current_sortie().number))
+        except JournalError as err:
+            log.error("could not note that the sortie has flown: %s", err)
+
+    def _landed_unseen(self) -> None:
+        """A sortie that has flown ends when the vehicle is found on the ground, disarmed,
+        even if its landing was never seen (it landed while the service was down or the
+        link was out): otherwise the next plan would fly a second sortie in this one."""
+        t = self.link.telemetry
+        if self.flown and not self.sortie_over and t.connected and t.landed_known and not (t.airborne or t.armed):
+            self._end_sortie("the vehicle was found landed")
 
     def _doubt(self, why: str) -> None:
         """The vehicle may no longer hold ``held``: ignore its progress reports until the
@@ -524,6 +546,12 @@ class Service:
             return False
         if not t.connected or not t.valid:  # no vehicle yet: look again soon
             asyncio.get_running_loop().call_later(RETRY_S / 2, self._wake.set)
+            return False
+        if self.flown and not t.landed_known:  # in the air or landed meanwhile? know first
+            asyncio.get_running_loop().call_later(RETRY_S / 2, self._wake.set)
+            return False
+        self._landed_unseen()
+        if self.sortie_over:
             return False
         if not self._progress_seen and time.monotonic() < self._progress_after:
             # The mission was just read back: its MISSION_CURRENT first, so that points

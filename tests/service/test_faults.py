@@ -16,9 +16,12 @@ import pytest
 from planner_service.model import field
 from planner_service.service.processes import Child
 from protocol import Event
+from protocol.client import ClientError
 
-from sortie_checks import check_sortie
+from sortie_checks import check_sortie  # (puts tests/sim_bridge on the path for gcs)
 from stack import Stack
+
+from gcs import M, GroundStation  # noqa: E402
 
 SPEEDUP = "40"
 SERVICE = {"mavlink__start_mission": "true", "planner__min_requests": "5"}
@@ -118,3 +121,45 @@ def test_service_killed_mid_sortie_resumes_from_the_journal(stack: Stack) -> Non
     check_sortie(stack, scenario, "ardupilot", [vehicle.log()], unjournaled_commits=1)
     print(f"\nservice SIGKILL: plan {plan_id} accepted {uploaded.time_s - back_at:.2f} s after the restart began "
           f"(plans before the kill: {plans_before}); {len(acked)} acked requests all closed")
+
+
+@pytest.mark.timeout(120)
+def test_a_landing_while_the_service_is_down_ends_the_sortie(stack: Stack) -> None:
+    """The service never sees the landing (it is dead meanwhile): started again, it finds the
+    vehicle on the ground and disarmed after a sortie that flew, and ends the sortie rather
+    than plan a second flight into it."""
+    vehicle = stack.vehicle("--speedup", SPEEDUP)
+    settings = {**SERVICE, "planner__min_requests": "1", "sortie__repeat": "false"}
+    first = stack.service(**settings)
+    client = stack.client
+    assert client is not None
+    served = client.submit("u1", 120.0, 150.0, 12).request_id
+    stack.wait_event(lambda e: e.event == "user_served" and e.request_id == served, 60.0, "the first service")
+    waiting = client.submit("u2", 400.0, 420.0, 14).request_id
+    kill(first)
+    gcs = GroundStation(f"udpout:127.0.0.1:{stack.mav_port}")
+    try:
+        gcs.wait_vehicle()
+        assert gcs.command(M.MAV_CMD_NAV_LAND) == M.MAV_RESULT_ACCEPTED
+        deadline = time.monotonic() + 30.0
+        while "disarmed at" not in vehicle.log():
+            assert time.monotonic() < deadline, vehicle.log()[-2000:]
+            time.sleep(0.1)
+    finally:
+        gcs.close()
+    plans_before = max(p for (p,) in stack.rows("SELECT plan_id FROM missions"))
+    commands_before = vehicle.log().count("command ")
+    stack.service(**settings)
+    deadline = time.monotonic() + 20.0
+    while not stack.rows("SELECT ended_at_s FROM sorties WHERE number = 1 AND ended_at_s IS NOT NULL"):
+        assert time.monotonic() < deadline, stack.children[-1].log()[-3000:]
+        time.sleep(0.1)
+    (why,) = stack.rows("SELECT why FROM sorties WHERE number = 1")[0]
+    assert why == "the vehicle was found landed"
+    (status, reason) = stack.rows(f"SELECT status, reason FROM requests WHERE request_id = {waiting}")[0]
+    assert status == "not_served" and "sortie ended" in reason, (status, reason)
+    with pytest.raises(ClientError, match="sortie over"):
+        client.submit("u3", 200.0, 200.0, 9)
+    time.sleep(1.0)  # a plan, an upload or an arm command would have come by now
+    assert max(p for (p,) in stack.rows("SELECT plan_id FROM missions")) == plans_before
+    assert vehicle.log().count("command ") == commands_before, vehicle.log()[-1500:]

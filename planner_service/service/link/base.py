@@ -47,6 +47,8 @@ class Telemetry:
     """From BATTERY_STATUS.energy_consumed (hJ) when the autopilot reports it."""
     armed: bool = False
     airborne: bool = False
+    landed_known: bool = False
+    """The vehicle has said whether it is in the air (``airborne`` is a guess before)."""
     mode: str = ""
     mission_seq: int = 0
     mission_total: int = 0

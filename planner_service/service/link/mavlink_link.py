@@ -311,7 +311,7 @@ class PymavlinkLink(VehicleLink):
         elif kind == "EXTENDED_SYS_STATE":
             airborne = msg.landed_state in AIRBORNE_STATES
             was = self.telemetry.airborne
-            self._set(airborne=airborne)
+            self._set(airborne=airborne, landed_known=True)
             if was and msg.landed_state == M.MAV_LANDED_STATE_ON_GROUND:
                 self.on_event(LinkEvent("landed"))
         elif kind in ("MISSION_CURRENT", "MISSION_ITEM_REACHED"):

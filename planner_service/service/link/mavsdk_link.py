@@ -170,7 +170,7 @@ class MavsdkLink(VehicleLink):
 
     def _on_in_air(self, in_air: Any) -> None:
         was = self.telemetry.airborne
-        self._set(airborne=bool(in_air))
+        self._set(airborne=bool(in_air), landed_known=True)
         if was and not in_air:
             self.on_event(LinkEvent("landed"))
 
