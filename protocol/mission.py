@@ -231,6 +231,14 @@ def encode_path(
     return items
 
 
+def max_points(max_items: int, flavour: Flavour = "ardupilot") -> int:
+    """The most hovering points ``encode_path`` fits in ``max_items`` mission items: the
+    items around them are ArduPilot's home, the takeoff and the return to launch."""
+    _check_flavour(flavour)
+    around = 3 if flavour == "ardupilot" else 2
+    return max(max_items - around, 0)
+
+
 def _check_point(where: str, point: HoverPoint) -> None:
     """Refuse what cannot be encoded at all (the area and altitude limits are
     ``validate_mission``'s): non-finite values, a hold out of range, a point beyond

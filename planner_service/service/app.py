@@ -28,6 +28,7 @@ import numpy as np
 from protocol import (Event, HoverPoint, PendingRequest, Plan, PlanPoint, State, Status, encode, encode_path,
                       global_to_local, same_mission, validate_mission)
 from protocol.errors import MissionError
+from protocol.mission import max_points
 
 from ..mcts import MctsConfig
 from ..model import pack
@@ -97,7 +98,7 @@ class Service:
         self._busy_logged = (time.monotonic(), 0)
         budget = config.planner.budget_ms
         self.planner = Planner(self.scenario, MctsConfig(iterations=config.planner.iterations or None, budget_ms=budget),
-                               config.planner.seed)
+                               config.planner.seed, max_points(config.mavlink.max_mission_items, self.flavour))
         self.zio = ZenohIO(config.zenoh, self.keys)
         m = config.mavlink
         self.link = open_link(m.backend, LinkSettings(m.url, m.flavour, m.item_timeout_s, m.retries, m.link_timeout_s,

@@ -119,14 +119,20 @@ def hold_time_s(p: np.ndarray, hover_xyz: np.ndarray, user_xyz: np.ndarray, bits
     return float(bits / upload_rate_bps(p, channel_gain(p, hover_xyz, user_xyz)))
 
 
-def predict_path(scenario: Scenario, points: np.ndarray, assembled: Assembled, line: tuple[int, ...]) -> PlannedPath:
-    """Step a copy of the state along ``line`` (hovering-point indices) with the model."""
+def predict_path(scenario: Scenario, points: np.ndarray, assembled: Assembled, line: tuple[int, ...],
+                 max_points: int | None = None) -> PlannedPath:
+    """Step a copy of the state along ``line`` (hovering-point indices) with the model, at
+    most ``max_points`` of them (what the autopilot's mission holds): a shorter path is
+    safe, since every step kept the energy for the way home from its point."""
     p = pack(scenario)
     state = assembled.state.copy()
     uav, hover_index, battery = state.uav_xyz.copy(), state.hover_index, state.battery_j
     out: list[PlannedPoint] = []
     reason = "the planned line ends"
     for k in line:
+        if max_points is not None and len(out) >= max_points:
+            reason = "the autopilot's mission capacity"
+            break
         if not 0 <= k < len(points):
             raise PlanningError("line", f"hovering point {k} does not exist (K = {len(points)})")
         if k == hover_index and not scenario.allow_stay:
@@ -204,9 +210,11 @@ def should_return(battery_fraction: float, airborne: bool, returning: bool, thre
 class Planner:
     """The MCTS planner for the current set of users; rebuilt when that set grows."""
 
-    def __init__(self, scenario: Scenario, config: MctsConfig, seed: int) -> None:
+    def __init__(self, scenario: Scenario, config: MctsConfig, seed: int, max_points: int | None = None) -> None:
         self.base = scenario
         self.config = config
+        self.max_points = max_points
+        """The most hovering points one mission holds (the autopilot's capacity)."""
         self.points = hover_points(scenario)
         self.rng = np.random.default_rng(seed)
         self._planner: MctsPlanner | None = None
@@ -235,4 +243,4 @@ class Planner:
             decision = self._planner.plan(assembled.state)
         except ValueError:  # no hovering point allowed: nobody eligible or no energy
             return None, predict_path(scenario, self.points, assembled, ())
-        return decision, predict_path(scenario, self.points, assembled, decision.line)
+        return decision, predict_path(scenario, self.points, assembled, decision.line, self.max_points)

@@ -58,6 +58,16 @@ def test_path_steps_the_model_along_the_line() -> None:
     assert path.predicted_energy_j == pytest.approx(sum(p.energy_j for p in path.points) + home, rel=1e-9)
 
 
+def test_path_is_cut_to_the_mission_capacity() -> None:
+    a = users_below(5, 11, (10, 12))
+    whole = predict_path(S, HP, a, (5, 11))
+    cut = predict_path(S, HP, a, (5, 11), max_points=1)
+    assert cut.points == whole.points[:1] and cut.stop_reason == "the autopilot's mission capacity"
+    home = flight_energy_j(P, math.dist(HP[5], (0.0, 0.0, 100.0)))  # home from the last point kept
+    assert cut.predicted_energy_j == pytest.approx(cut.points[0].energy_j + home, rel=1e-9)
+    assert predict_path(S, HP, a, (5, 11), max_points=2).points == whole.points
+
+
 def test_path_stops_where_nobody_known_is_eligible() -> None:
     a = users_below(5, 11, (10, 0))
     path = predict_path(S, HP, a, (5, 11, 3))
