@@ -13,13 +13,15 @@ Which mission a report is about: the mission protocol runs on the reader's order
 message is fed to the upload or download state machine as it is handed over), and the
 MISSION_ACK that accepts an upload starts a new ``generation``. A MISSION_CURRENT or
 MISSION_ITEM_REACHED the vehicle sent before that ACK but that arrives after it (a delayed
-or reordered datagram) belongs to the previous mission: the MAVLink packet sequence number
-(mod 256) says which was sent first, within ``REORDER_WINDOW_S`` of the ACK. Reports about
-the previous mission are passed on with its generation: a point it completed just before
-the new mission replaced it is a service all the same. Between our sending the last item
-and the end of the upload the vehicle may already fly the new mission: reports of that
-span are held back and sorted by the ACK's sequence number when it comes (all about the
-old mission if the upload fails; dropped if only a read-back could tell).
+or reordered datagram) is not about the new one: the MAVLink packet sequence number
+(mod 256) says which was sent first, within ``REORDER_WINDOW_S`` of the ACK. A
+MISSION_ITEM_REACHED sent before the ACK is passed on with the previous mission's
+generation (a point completed just before the new mission replaced it is a service all the
+same); a MISSION_CURRENT sent before it is dropped, since an autopilot may announce the
+new mission's current item just before acking it (the stub does). Between our sending the
+last item and the end of the upload the vehicle may already fly the new mission: reports
+of that span are held back and sorted by the ACK's sequence number when it comes (all
+about the old mission if the upload fails; dropped if only a read-back could tell).
 
 A vehicle restart shows as its clock (time_boot_ms) going back by more than reordering can
 explain: a "restarted" event and a new generation (its mission is gone or stale).
@@ -317,8 +319,11 @@ class PymavlinkLink(VehicleLink):
         elif kind in ("MISSION_CURRENT", "MISSION_ITEM_REACHED"):
             if self._commit_possible:
                 self._unsorted.append(msg)  # about either mission: the ACK's sequence number will say
-            else:
-                self._report(msg, self.generation if self._fresh(msg) else self.generation - 1)
+            elif self._fresh(msg):
+                self._report(msg, self.generation)
+            elif kind == "MISSION_ITEM_REACHED":
+                self._report(msg, self.generation - 1)
+            # else a MISSION_CURRENT sent before the ACK: about either mission (below)
         elif kind == "STATUSTEXT":
             self.on_event(LinkEvent("text", text=str(msg.text)))
 
@@ -341,10 +346,13 @@ class PymavlinkLink(VehicleLink):
             self.on_event(LinkEvent("current", seq=int(msg.seq), total=total, mission=mission))
 
     def _sort_reports(self, ack: Any | None, total: int = 0) -> None:
-        """Pass on the reports held back while an upload could commit: those the vehicle
-        sent before the ``ack`` that accepted it (packet sequence, mod 256) are about the
-        mission before; the rest about the new one (of ``total`` items). Without an ACK (the
-        upload failed) all are about the mission the vehicle kept."""
+        """Pass on the reports held back while an upload could commit: a MISSION_ITEM_REACHED
+        the vehicle sent before the ``ack`` that accepted it (packet sequence, mod 256) is
+        about the mission before; what it sent after, about the new one (of ``total``
+        items). A MISSION_CURRENT sent before the ACK is about either (an autopilot may
+        announce the new mission's current item just before it acks it): dropped, the
+        stream repeats it. Without an ACK (the upload failed) all are about the mission the
+        vehicle kept."""
         held, self._unsorted = self._unsorted, []
         if ack is None:
             for msg in held:
@@ -352,7 +360,8 @@ class PymavlinkLink(VehicleLink):
             return
         before = [m for m in held if 0 < (ack.get_seq() - m.get_seq()) % 256 < 128]
         for msg in before:
-            self._report(msg, self.generation)
+            if msg.get_type() == "MISSION_ITEM_REACHED":
+                self._report(msg, self.generation)
         self._new_generation(ack)
         self._set(mission_seq=0, mission_total=total)
         for msg in held:
