@@ -6,6 +6,8 @@ from __future__ import annotations
 import argparse
 import sys
 
+from protocol.client_args import DEFAULT_ENDPOINT, add_client_arguments
+
 HELP = "a zenoh client that submits one task request"
 
 
@@ -15,13 +17,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--y", type=float, required=True, help="north position, local metres")
     parser.add_argument("--z", type=float, default=0.0, help="height, local metres (default 0)")
     parser.add_argument("--tasks", type=int, required=True, help="number of tasks to offload")
-    parser.add_argument("--connect", action="append", default=None, metavar="ENDPOINT",
-                        help="zenoh endpoint of the service (default tcp/127.0.0.1:7447; repeatable)")
-    parser.add_argument("--zenoh-config", default=None, metavar="FILE",
-                        help="zenoh configuration file (JSON5) as the session's base, e.g. TLS certificates "
-                             "(docs/zenoh/user-tls.json5); --connect is applied on top")
-    parser.add_argument("--prefix", default="uavmec", help="key prefix (default uavmec)")
-    parser.add_argument("--vehicle", default="uav1", help="vehicle id (default uav1)")
+    add_client_arguments(parser)
     parser.add_argument("--timeout", type=float, default=5.0, help="seconds to wait for the service (default 5)")
 
 
@@ -35,7 +31,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"error: {err}", file=sys.stderr)
         return 2
     try:
-        client = PlannerClient(args.connect or ["tcp/127.0.0.1:7447"], keys, timeout_s=args.timeout,
+        client = PlannerClient(args.connect or [DEFAULT_ENDPOINT], keys, timeout_s=args.timeout,
                                config_file=args.zenoh_config)
     except ProtocolError as err:  # a refused config file, or no session (ClientError)
         print(f"error: {err}", file=sys.stderr)

@@ -11,6 +11,8 @@ import signal
 import sys
 import threading
 
+from protocol.client_args import DEFAULT_ENDPOINT, add_client_arguments
+
 HELP = "simulated ground users that move by random waypoint and submit requests over zenoh"
 
 
@@ -23,13 +25,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--speedup", type=float, default=1.0, help="simulated seconds per wall second (default 1)")
     parser.add_argument("--seed", type=int, default=0, help="seed of the walks and task draws (default 0)")
     parser.add_argument("--duration", type=float, default=None, help="stop after this many wall seconds")
-    parser.add_argument("--connect", action="append", default=None, metavar="ENDPOINT",
-                        help="zenoh endpoint of the service (default tcp/127.0.0.1:7447; repeatable)")
-    parser.add_argument("--zenoh-config", default=None, metavar="FILE",
-                        help="zenoh configuration file (JSON5) as the session's base, e.g. TLS certificates "
-                             "(docs/zenoh/user-tls.json5); --connect is applied on top")
-    parser.add_argument("--prefix", default="uavmec")
-    parser.add_argument("--vehicle", default="uav1")
+    add_client_arguments(parser)
     parser.add_argument("--log-level", default="INFO", choices=("DEBUG", "INFO", "WARNING", "ERROR"))
 
 
@@ -53,7 +49,7 @@ def run(args: argparse.Namespace) -> int:
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: stop.set())
     try:
-        client = PlannerClient(args.connect or ["tcp/127.0.0.1:7447"], keys, config_file=args.zenoh_config)
+        client = PlannerClient(args.connect or [DEFAULT_ENDPOINT], keys, config_file=args.zenoh_config)
     except ProtocolError as err:  # a refused config file, or no session (ClientError)
         print(f"error: {err}", file=sys.stderr)
         return 1
