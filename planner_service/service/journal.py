@@ -26,9 +26,10 @@ from __future__ import annotations
 import json
 import sqlite3
 import time
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Iterable
+from typing import Any, Iterable, Iterator
 
 from .errors import JournalError
 
@@ -208,8 +209,7 @@ class Journal:
         if version > SCHEMA_VERSION:
             raise JournalError(f"the journal {self.path} has schema version {version}; this service reads "
                                f"versions up to {SCHEMA_VERSION}: run a newer service or use another file")
-        self._db.execute("BEGIN IMMEDIATE")
-        try:
+        with self._transaction():
             for statement in TABLES.split(";"):
                 if statement.strip():
                     self._db.execute(statement)
@@ -231,24 +231,26 @@ class Journal:
             for statement in INDEXES.split(";"):
                 if statement.strip():
                     self._db.execute(statement)
+
+    # --- writing --------------------------------------------------------------------------
+    @contextmanager
+    def _transaction(self) -> Iterator[None]:
+        """One write transaction: committed at the end of the block, rolled back on any error."""
+        self._db.execute("BEGIN IMMEDIATE")
+        try:
+            yield
             self._db.execute("COMMIT")
         except BaseException:
             self._db.execute("ROLLBACK")
             raise
 
-    # --- writing --------------------------------------------------------------------------
     def _write(self, what: str, statements: Iterable[tuple[str, tuple[Any, ...]]]) -> list[int]:
         """Run ``statements`` in one transaction; the lastrowid of each."""
         ids: list[int] = []
         try:
-            self._db.execute("BEGIN IMMEDIATE")
-            try:
+            with self._transaction():
                 for sql, args in statements:
                     ids.append(int(self._db.execute(sql, args).lastrowid or 0))
-                self._db.execute("COMMIT")
-            except BaseException:
-                self._db.execute("ROLLBACK")
-                raise
         except sqlite3.Error as err:
             raise JournalError(f"{what}: {err}") from None
         return ids
@@ -261,8 +263,7 @@ class Journal:
             raise JournalError(f"accept: sortie {self.sortie} is over; no request joins it")
         older = [r.request_id for r in self.pending() if r.user_id == user_id]
         try:
-            self._db.execute("BEGIN IMMEDIATE")
-            try:
+            with self._transaction():  # the replaced rows name the new id: not one _write
                 request_id = int(self._db.execute(
                     "INSERT INTO requests (user_id, x_m, y_m, z_m, tasks, client_ref, accepted_at_s, sortie) "
                     "VALUES (?, ?, ?, ?, ?, ?, ?, ?)",
@@ -271,10 +272,6 @@ class Journal:
                     self._db.execute(
                         "UPDATE requests SET status = 'replaced', reason = ?, closed_at_s = ? "
                         "WHERE request_id = ? AND status = 'pending'", (f"replaced by request {request_id}", now_s, rid))
-                self._db.execute("COMMIT")
-            except BaseException:
-                self._db.execute("ROLLBACK")
-                raise
         except sqlite3.Error as err:
             raise JournalError(f"accept: {err}") from None
         return request_id, older
