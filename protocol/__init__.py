@@ -3,22 +3,23 @@
 from .area import Area
 from .errors import MissionError, ProtocolError, SigningError
 from .geodesy import GeoOrigin, global_to_local, local_to_global
-from .keys import DEFAULT_PREFIX, Keys
+from .keys import DEFAULT_PREFIX, Keys, check_user_id
 from .messages import (
     MAX_PAYLOAD_BYTES, SCHEMA_VERSION, ErrorReply, Event, Plan, PlanPoint, PendingRequest, State,
-    Status, TaskAck, TaskRequest, decode, decode_reply, decode_request, encode,
+    Status, TaskAck, TaskRequest, UserPlace, decode, decode_reply, decode_request, encode,
 )
 from .mission import (
     FLAVOURS, Flavour, HoverPoint, MissionItem, MissionPlan, decode_path, encode_path, mission_digest,
     same_items, same_mission, validate_mission,
 )
 from .mission_files import read_plan, read_wpl, write_plan, write_wpl
+from .text import escape_text
 
 __all__ = [
     "Area", "DEFAULT_PREFIX", "ErrorReply", "Event", "FLAVOURS", "Flavour", "GeoOrigin",
     "HoverPoint", "Keys", "MAX_PAYLOAD_BYTES", "MissionError", "MissionItem", "MissionPlan",
     "PendingRequest", "Plan", "PlanPoint", "ProtocolError", "SCHEMA_VERSION", "SigningError", "State", "Status",
-    "TaskAck", "TaskRequest", "decode", "decode_path", "decode_reply", "decode_request", "encode",
-    "encode_path", "global_to_local", "local_to_global", "mission_digest", "read_plan", "read_wpl",
+    "TaskAck", "TaskRequest", "UserPlace", "check_user_id", "decode", "decode_path", "decode_reply", "decode_request", "encode",
+    "encode_path", "escape_text", "global_to_local", "local_to_global", "mission_digest", "read_plan", "read_wpl",
     "same_items", "same_mission", "validate_mission", "write_plan", "write_wpl",
 ]

@@ -1,5 +1,14 @@
 """A small zenoh client of the planner service: submit a task request and await the ack,
-follow status, plans and events, read the state snapshot.
+follow status, plans, events and a user's place, read the state snapshot.
+
+``submit`` sends on the user's own request key (``{prefix}/{vehicle}/request/{user_id}``,
+which access control can give to that user's certificate alone) with a ``client_ref`` (one is
+made when the caller gives none), and takes as its answer only a reply that answers this
+request: the same ``client_ref`` and, for an ack, the same user. A reply that does not (a
+queryable that is not the service, a misrouted answer) is refused with ``ClientError("reply",
+...)``, as are two answers that disagree. A rogue queryable that reads the request can still
+echo both: only access control (no user may declare a queryable on the request keys) stops
+it (docs/PROTOCOL.md, "Who may do what").
 
 zenoh-python's API is synchronous (callbacks on zenoh's threads); so is this client. An
 asyncio program can run ``submit`` in a thread (``asyncio.to_thread``).
@@ -7,6 +16,7 @@ asyncio program can run ``submit`` in a thread (``asyncio.to_thread``).
 
 from __future__ import annotations
 
+import secrets
 import time
 from pathlib import Path
 from typing import Any, Callable
@@ -15,18 +25,25 @@ import zenoh
 
 from .errors import ProtocolError
 from .keys import Keys
-from .messages import ErrorReply, Event, Plan, State, Status, TaskAck, TaskRequest, decode, decode_reply, encode
+from .messages import (ErrorReply, Event, Plan, State, Status, TaskAck, TaskRequest, UserPlace, decode, decode_reply,
+                       encode)
+from .text import escape_text
 from .zenoh_config import error_text, session_config
 
 
 class ClientError(ProtocolError):
-    """The service refused a request (``field`` names why) or did not answer
-    (``field`` is ``service``)."""
+    """The service refused a request (``field`` names why), did not answer (``field`` is
+    ``service``), or what answered is not an answer to this request (``field`` is ``reply``)."""
 
     @property
     def busy(self) -> bool:
         """The service was too busy to take it: the same request may succeed later."""
         return self.field == "service" and self.message.startswith("busy:")
+
+
+def new_client_ref() -> str:
+    """A fresh correlation id: 16 random hex digits."""
+    return secrets.token_hex(8)
 
 
 def client_config(connect: list[str] | tuple[str, ...], mode: str = "peer", multicast_scouting: bool = False,
@@ -85,24 +102,36 @@ class PlannerClient:
 
     # --- requests ------------------------------------------------------------------------------
     def _query(self, key: str, payload: bytes | None, timeout_s: float | None) -> bytes | None:
-        replies = self.session.get(key, payload=payload, timeout=timeout_s or self.timeout_s)
-        for reply in replies:
-            if reply.ok is not None:
-                return reply.ok.payload.to_bytes()
-        return None
+        replies = self._replies(key, payload, timeout_s)
+        return replies[0] if replies else None
 
-    def submit_raw(self, payload: bytes, timeout_s: float | None = None) -> TaskAck | ErrorReply:
-        """Send any payload to the request queryable; the service's reply."""
-        data = self._query(self.keys.request, payload, timeout_s)
+    def _replies(self, key: str, payload: bytes | None, timeout_s: float | None) -> list[bytes]:
+        """Every reply of every queryable on ``key`` (not only the first nor the nearest: an
+        answer from the service is not hidden behind another queryable's)."""
+        replies = self.session.get(key, payload=payload, timeout=timeout_s or self.timeout_s,
+                                   target=zenoh.QueryTarget.ALL, consolidation=zenoh.ConsolidationMode.NONE)
+        return [reply.ok.payload.to_bytes() for reply in replies if reply.ok is not None]
+
+    def submit_raw(self, payload: bytes, timeout_s: float | None = None, key: str | None = None) -> TaskAck | ErrorReply:
+        """Send any payload on a request key (default: the plain one); the first reply."""
+        key = key or self.keys.request
+        data = self._query(key, payload, timeout_s)
         if data is None:
-            raise ClientError("service", f"no reply on {self.keys.request} within {timeout_s or self.timeout_s:g} s")
+            raise ClientError("service", f"no reply on {key} within {timeout_s or self.timeout_s:g} s")
         return decode_reply(data)
 
     def submit(self, user_id: str, x_m: float, y_m: float, tasks: int, z_m: float = 0.0,
                client_ref: str | None = None, timeout_s: float | None = None) -> TaskAck:
-        """Submit a request and await the ack; ``ClientError`` names the field if refused."""
-        request = TaskRequest(user_id=user_id, x_m=x_m, y_m=y_m, tasks=tasks, z_m=z_m, client_ref=client_ref)
-        reply = self.submit_raw(encode(request), timeout_s)
+        """Submit ``user_id``'s backlog (``tasks``: all it has waiting; 0: nothing more) and
+        position on its own request key and await the ack. ``ClientError`` names the field if
+        refused, ``ClientError("reply", ...)`` if no reply answers this request."""
+        ref = new_client_ref() if client_ref is None else client_ref
+        request = TaskRequest(user_id=user_id, x_m=x_m, y_m=y_m, tasks=tasks, z_m=z_m, client_ref=ref)
+        key = self.keys.user_request(user_id)
+        replies = self._replies(key, encode(request), timeout_s)
+        if not replies:
+            raise ClientError("service", f"no reply on {key} within {timeout_s or self.timeout_s:g} s")
+        reply = answer(replies, user_id, ref)
         if isinstance(reply, ErrorReply):
             raise ClientError(reply.field, reply.message)
         return reply
@@ -136,3 +165,54 @@ class PlannerClient:
 
     def follow_events(self, callback: Callable[[Event], None]) -> None:
         self._follow(self.keys.events, Event, callback)
+
+    def follow_place(self, user_id: str, callback: Callable[[UserPlace], None]) -> None:
+        """``user_id``'s place in the plan, each time the service publishes it."""
+        self._follow_places(self.keys.user(user_id), callback)
+
+    def follow_places(self, callback: Callable[[UserPlace], None]) -> None:
+        """Every user's place (a simulator of many users; under access control a user may
+        follow only its own)."""
+        self._follow_places(self.keys.users, callback)
+
+    def _follow_places(self, key: str, callback: Callable[[UserPlace], None]) -> None:
+        def checked(place: UserPlace, key_user: str | None) -> None:
+            if key_user == place.user_id:  # a place published under another user's key is not theirs
+                callback(place)
+
+        def handler(sample: Any) -> None:
+            try:
+                place = decode(sample.payload.to_bytes(), UserPlace)
+            except ProtocolError:
+                return
+            checked(place, self.keys.place_user(str(sample.key_expr)))
+        self._subs.append(self.session.declare_subscriber(key, handler))
+
+
+def answer(replies: list[bytes], user_id: str, client_ref: str) -> TaskAck | ErrorReply:
+    """The one reply of ``replies`` that answers the request of ``user_id`` and
+    ``client_ref``: an ack of that user with that ref, or an error with that ref.
+    ``ClientError("reply", ...)`` if none does, or if the ones that do disagree."""
+    answers: list[TaskAck | ErrorReply] = []
+    others: list[str] = []
+    for data in replies:
+        try:
+            reply = decode_reply(data)
+        except ProtocolError as err:
+            others.append(f"not a reply ({err.field}: {err.message})")
+            continue
+        if reply.client_ref == client_ref and (isinstance(reply, ErrorReply) or reply.user_id == user_id):
+            if reply not in answers:
+                answers.append(reply)
+            continue
+        who = f"user_id '{reply.user_id}', " if isinstance(reply, TaskAck) else ""
+        others.append(f"{reply.__struct_config__.tag} for {who}client_ref '{reply.client_ref}'")
+    if len(answers) == 1:
+        return answers[0]
+    wanted = f"user_id '{user_id}', client_ref '{client_ref}'"
+    if answers:
+        raise ClientError("reply", escape_text(
+            f"{len(answers)} different replies answer the request of {wanted}: two queryables answer on "
+            f"the request key (a rogue one, or two services for one vehicle)"))
+    raise ClientError("reply", escape_text(
+        f"no reply answers the request of {wanted} (a forged or misrouted reply?): got {'; '.join(others)}", 400))

@@ -1,4 +1,7 @@
-"""Zenoh key expressions of one vehicle: ``{prefix}/{vehicle}/{leaf}``."""
+"""Zenoh key expressions of one vehicle: ``{prefix}/{vehicle}/{leaf}``, and the per-user
+keys below it: ``{prefix}/{vehicle}/request/{user_id}`` (a user's own request key, which
+access control can give to that user's certificate alone) and
+``{prefix}/{vehicle}/users/{user_id}`` (that user's place in the plan)."""
 
 from __future__ import annotations
 
@@ -14,11 +17,20 @@ DEFAULT_VEHICLE = "uav1"
 # like "a/*" would silently subscribe to every vehicle.
 # fullmatch, not match with "$", which accepts a trailing newline ("uav1\n").
 _CHUNK = re.compile(r"[A-Za-z0-9_.\-]{1,64}")
+_USER_ID = re.compile(r"[A-Za-z0-9_.:\-]{1,64}")
+"""A user id (``protocol.messages.UserId``): also a key chunk (":" is no zenoh separator)."""
 
 
 def _check_chunk(field: str, value: str) -> str:
     if not isinstance(value, str) or not _CHUNK.fullmatch(value):
         raise ProtocolError(field, f"{value!r} is not a key chunk (1-64 of A-Z a-z 0-9 _ . -)")
+    return value
+
+
+def check_user_id(value: str, field: str = "user_id") -> str:
+    """``value`` if it is a user id (1-64 of A-Z a-z 0-9 _ . : -), else ``ProtocolError``."""
+    if not isinstance(value, str) or not _USER_ID.fullmatch(value):
+        raise ProtocolError(field, f"{value!r} is not a user id (1-64 of A-Z a-z 0-9 _ . : -)")
     return value
 
 
@@ -40,6 +52,44 @@ class Keys:
     def request(self) -> str:
         """Queryable: a user's task request in, an ack or an error out."""
         return self._key("request")
+
+    def user_request(self, user_id: str) -> str:
+        """Queryable: ``user_id``'s own request key (the service checks that a request on it
+        is that user's; under access control only that user's certificate may query it)."""
+        return self._key(f"request/{check_user_id(user_id)}")
+
+    @property
+    def user_requests(self) -> str:
+        """Every user's request key (the service's queryable for them)."""
+        return self._key("request/*")
+
+    def request_user(self, key_expr: str) -> str | None:
+        """Whose request key ``key_expr`` (a query's key) is: None for the plain request
+        key, the user id for ``request/{user_id}``; ``ProtocolError("key", ...)`` for any
+        other key (a wildcard, another vehicle's), which names no single user."""
+        if key_expr == self.request:
+            return None
+        head = self.request + "/"
+        user = key_expr[len(head):] if key_expr.startswith(head) else None
+        if user is None or not _USER_ID.fullmatch(user):
+            raise ProtocolError("key", f"{key_expr!r} is neither {self.request} nor {head}USER_ID "
+                                       f"(a request names one vehicle and at most one user, without wildcards)")
+        return user
+
+    def user(self, user_id: str) -> str:
+        """Publication: ``user_id``'s place in the plan (``user_place``)."""
+        return self._key(f"users/{check_user_id(user_id)}")
+
+    @property
+    def users(self) -> str:
+        """Every user's place publication, for a subscriber that follows them all."""
+        return self._key("users/*")
+
+    def place_user(self, key_expr: str) -> str | None:
+        """The user id of a ``users/{user_id}`` key, or None for any other key."""
+        head = self._key("users/")
+        user = key_expr[len(head):] if key_expr.startswith(head) else ""
+        return user if _USER_ID.fullmatch(user) else None
 
     @property
     def status(self) -> str:

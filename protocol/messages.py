@@ -52,7 +52,9 @@ class _Message(
 
 
 class TaskRequest(_Message, tag="task_request"):
-    """A ground user asks to offload ``tasks`` tasks from where it stands."""
+    """A ground user's data waiting to be offloaded: ``tasks`` is its whole backlog now (not
+    an increment), ``x_m``/``y_m``/``z_m`` where it stands. Its newest request is the one in
+    force; ``tasks`` 0 means nothing (more) to offload (docs/PROTOCOL.md, "Requests")."""
 
     user_id: UserId
     x_m: float
@@ -64,13 +66,42 @@ class TaskRequest(_Message, tag="task_request"):
 
 
 class TaskAck(_Message, tag="task_ack"):
-    """The service accepted (and journalled) a request; ``request_id`` is the service's id."""
+    """The service accepted (and journalled) a request; ``request_id`` is the service's id
+    of this request, which is now the user's request in force. The optional fields say what
+    the service knows of the user at the time: its sortie, the tasks of it served in that
+    sortie, its place in the current plan and the vehicle seconds until its service begins
+    as estimated when that plan was made (the ``user_place`` publication says when), and a
+    ``note`` when the request cannot be served in this sortie (no tasks, the fairness rule)."""
 
     request_id: Annotated[int, msgspec.Meta(ge=1)]
     user_id: UserId
     accepted_at_s: float = 0.0
     queue_position: Count = 0
     client_ref: Annotated[str, msgspec.Meta(max_length=64)] | None = None
+    sortie: Annotated[int, msgspec.Meta(ge=1)] | None = None
+    served_tasks: Count | None = None
+    place: Annotated[int, msgspec.Meta(ge=1)] | None = None
+    eta_s: Annotated[float, msgspec.Meta(ge=0.0)] | None = None
+    note: ShortText = ""
+
+
+class UserPlace(_Message, tag="user_place"):
+    """One user's standing, published on ``{prefix}/{vehicle}/users/{user_id}`` whenever the
+    plan changes: its place in the planned order (1: the next user served, or the one being
+    served; None: not in this plan), the estimated vehicle seconds from ``time_s`` until its
+    hold begins (None: not in the plan), the request in force (None: none in this sortie),
+    the backlog the service counts for it, and what it was served in this sortie."""
+
+    user_id: UserId
+    sortie: Annotated[int, msgspec.Meta(ge=1)] = 1
+    plan_id: Count = 0
+    time_s: float = 0.0
+    place: Annotated[int, msgspec.Meta(ge=1)] | None = None
+    eta_s: Annotated[float, msgspec.Meta(ge=0.0)] | None = None
+    request_id: Annotated[int, msgspec.Meta(ge=1)] | None = None
+    backlog: Count = 0
+    served_tasks: Count = 0
+    services: Count = 0
 
 
 class ErrorReply(_Message, tag="error"):
@@ -153,7 +184,7 @@ class _NoMessage(_Message, tag="-"):
     would read as a default Status, Plan, Event or State."""
 
 
-Message = Union[TaskRequest, TaskAck, ErrorReply, Status, Plan, Event, State]
+Message = Union[TaskRequest, TaskAck, ErrorReply, Status, Plan, Event, State, UserPlace]
 Reply = Union[TaskAck, ErrorReply]
 """What the request queryable answers."""
 

@@ -25,7 +25,7 @@ from hypothesis import strategies as st
 
 MAX_PAYLOAD_BYTES = 4096
 ID_CHARS = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789_.:-"
-KINDS = ("task_request", "task_ack", "error", "status", "plan", "event", "state")
+KINDS = ("task_request", "task_ack", "error", "status", "plan", "event", "state", "user_place")
 PHASES = ("idle", "planning", "flying", "returning", "landed", "lost")
 EVENTS = ("request_accepted", "request_rejected", "plan_updated", "mission_uploaded", "upload_failed",
           "user_served", "waypoint_reached", "returning", "landed", "link_lost", "link_restored")
@@ -165,7 +165,12 @@ def valid_message(kind: str, rng: random.Random, side_m: float = 500.0, max_alt_
     if kind == "task_ack":
         f.update(request_id=dump(rng.randint(1, 10 ** 9)), user_id=_id(rng))
         return _optional(rng, f, {"accepted_at_s": lambda: _float(rng), "queue_position": lambda: _count(rng),
-                                  "client_ref": lambda: rng.choice(["null", _text(rng, 64)])})
+                                  "client_ref": lambda: rng.choice(["null", _text(rng, 64)]),
+                                  "sortie": lambda: rng.choice(["null", dump(rng.randint(1, 10 ** 6))]),
+                                  "served_tasks": lambda: rng.choice(["null", _count(rng)]),
+                                  "place": lambda: rng.choice(["null", dump(rng.randint(1, 200))]),
+                                  "eta_s": lambda: rng.choice(["null", _float(rng, 0.0, 1e6)]),
+                                  "note": lambda: _text(rng)})
     if kind == "error":
         f.update(field=_text(rng), message=_text(rng))
         return _optional(rng, f, {"client_ref": lambda: rng.choice(["null", _text(rng, 64)])})
@@ -189,6 +194,15 @@ def valid_message(kind: str, rng: random.Random, side_m: float = 500.0, max_alt_
         return _optional(rng, f, {"status": lambda: _struct(valid_message("status", rng)),
                                   "plan": lambda: rng.choice(["null", _struct(valid_message("plan", rng))]),
                                   "pending": lambda: _list(rng, _pending)})
+    if kind == "user_place":
+        f.update(user_id=_id(rng))
+        return _optional(rng, f, {"sortie": lambda: dump(rng.randint(1, 10 ** 6)), "plan_id": lambda: _count(rng),
+                                  "time_s": lambda: _float(rng),
+                                  "place": lambda: rng.choice(["null", dump(rng.randint(1, 200))]),
+                                  "eta_s": lambda: rng.choice(["null", _float(rng, 0.0, 1e6)]),
+                                  "request_id": lambda: rng.choice(["null", dump(rng.randint(1, 10 ** 9))]),
+                                  "backlog": lambda: _count(rng), "served_tasks": lambda: _count(rng),
+                                  "services": lambda: _count(rng)})
     raise ValueError(f"unknown kind {kind!r}")
 
 

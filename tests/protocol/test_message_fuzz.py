@@ -1,5 +1,5 @@
 """Hostile payloads into the client-side decoders (what ``protocol.client`` decodes: the
-request queryable's reply, status, plan, events and the state snapshot): at least 10 000
+request queryable's reply, status, plan, events, the state snapshot and a user's place): at least 10 000
 generated payloads per type. Each decoder returns a message of its type or raises
 ``ProtocolError`` naming a field; nothing else escapes. A decoded message holds only
 finite numbers and survives a re-encode; a valid message decodes; a message with one
@@ -18,7 +18,8 @@ import pytest
 from hostile_payloads import Case, batches, field_root
 from hypothesis import HealthCheck, given, settings
 
-from protocol import ErrorReply, Event, Plan, ProtocolError, State, Status, TaskAck, decode, decode_reply, encode
+from protocol import (ErrorReply, Event, Plan, ProtocolError, State, Status, TaskAck, UserPlace, decode, decode_reply,
+                      encode)
 
 PAYLOADS = 10_000
 BATCH = 10
@@ -32,6 +33,7 @@ DECODERS: dict[str, tuple[Callable[[bytes], Any], tuple[type, ...]]] = {
     "plan": (lambda p: decode(p, Plan), (Plan,)),
     "event": (lambda p: decode(p, Event), (Event,)),
     "state": (lambda p: decode(p, State), (State,)),
+    "user_place": (lambda p: decode(p, UserPlace), (UserPlace,)),
 }
 
 

@@ -8,7 +8,7 @@ import pytest
 
 from protocol import (
     MAX_PAYLOAD_BYTES, Area, ErrorReply, Event, Keys, Plan, PlanPoint, ProtocolError, State, Status,
-    TaskAck, TaskRequest, decode, decode_reply, decode_request, encode,
+    TaskAck, TaskRequest, UserPlace, decode, decode_reply, decode_request, encode,
 )
 from protocol.messages import MAX_TASKS
 
@@ -108,3 +108,55 @@ def test_keys() -> None:
         with pytest.raises(ProtocolError) as err:
             Keys(vehicle=bad)
         assert err.value.field == "vehicle"
+
+
+def test_the_ack_s_optional_fields_and_the_user_place_round_trip() -> None:
+    ack = TaskAck(request_id=17, user_id="a", accepted_at_s=3.5, queue_position=2, client_ref="r1", sortie=3,
+                  served_tasks=12, place=2, eta_s=61.5, note="cannot be served in this sortie: no tasks to offload")
+    assert decode_reply(encode(ack)) == ack
+    assert decode_reply(b'{"kind": "task_ack", "request_id": 1, "user_id": "a"}') == \
+        TaskAck(request_id=1, user_id="a")  # an ack without them is still one: None, None, ...
+    place = UserPlace(user_id="u:1", sortie=2, plan_id=7, time_s=9.0, place=1, eta_s=0.0, request_id=4, backlog=3,
+                      served_tasks=20, services=1)
+    wire = encode(place)
+    assert json.loads(wire)["kind"] == "user_place" and decode(wire, UserPlace) == place
+    assert decode(b'{"kind": "user_place", "user_id": "u"}', UserPlace) == UserPlace(user_id="u")
+
+
+@pytest.mark.parametrize("body, field", [
+    ({"kind": "user_place"}, "user_id"),
+    ({"kind": "user_place", "user_id": "u", "place": 0}, "place"),
+    ({"kind": "user_place", "user_id": "u", "eta_s": -1.0}, "eta_s"),
+    ({"kind": "user_place", "user_id": "u", "sortie": 0}, "sortie"),
+    ({"kind": "user_place", "user_id": "u", "backlog": -1}, "backlog"),
+    ({"kind": "user_place", "user_id": "u", "queue": 1}, "queue"),
+    ('{"kind": "user_place", "user_id": "u", "eta_s": Infinity}', "eta_s"),
+    ({"kind": "task_ack", "request_id": 1, "user_id": "u", "place": 0}, "place"),
+    ({"kind": "task_ack", "request_id": 1, "user_id": "u", "eta_s": -0.5}, "eta_s"),
+    ({"kind": "task_ack", "request_id": 1, "user_id": "u", "note": "x" * 257}, "note"),
+])
+def test_bad_places_name_the_field(body: dict | str, field: str) -> None:
+    text = body if isinstance(body, str) else json.dumps(body)
+    kind = UserPlace if '"user_place"' in text else TaskAck
+    assert refused(text, kind).field == field
+
+
+def test_per_user_keys() -> None:
+    keys = Keys(prefix="uavmec", vehicle="uav7")
+    assert keys.user_request("u:1") == "uavmec/uav7/request/u:1" and keys.user_requests == "uavmec/uav7/request/*"
+    assert keys.user("u:1") == "uavmec/uav7/users/u:1" and keys.users == "uavmec/uav7/users/*"
+    assert keys.request_user("uavmec/uav7/request") is None
+    assert keys.request_user("uavmec/uav7/request/u:1") == "u:1"
+    for bad in ("uavmec/uav7/request/*", "uavmec/uav7/request/**", "uavmec/uav7/**", "uavmec/*/request",
+                "uavmec/uav7/request/a/b", "uavmec/uav8/request/u", "uavmec/uav7/request/", "uavmec/uav7/requests/u"):
+        with pytest.raises(ProtocolError) as err:
+            keys.request_user(bad)
+        assert err.value.field == "key", bad
+    for bad_user in ("a/b", "*", "", "x" * 65, "u-1\n", "$*"):
+        with pytest.raises(ProtocolError) as err:
+            keys.user_request(bad_user)
+        assert err.value.field == "user_id"
+        with pytest.raises(ProtocolError):
+            keys.user(bad_user)
+    assert keys.place_user("uavmec/uav7/users/u:1") == "u:1"
+    assert keys.place_user("uavmec/uav7/users/*") is None and keys.place_user("uavmec/uav7/status") is None

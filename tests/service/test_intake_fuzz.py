@@ -118,12 +118,14 @@ def test_hostile_requests_are_refused_naming_a_field_and_change_nothing(tmp_path
           f"duplicate keys) in {elapsed:.1f} s")
     assert seen["payloads"] >= PAYLOADS
     assert seen["accepted"] >= 100, "the strategies should also produce valid requests"
-    # The journal holds exactly the oracle's valid requests, each user's newest pending.
+    # The journal holds exactly the oracle's valid requests, each user's newest pending
+    # (closed at once if it has no tasks: nothing is waiting), the older ones replaced.
     rows = journal.requests()
     assert [(r.user_id, r.x_m, r.y_m, r.z_m, r.tasks, r.client_ref) for r in rows] == \
         [(e["user_id"], e["x_m"], e["y_m"], e["z_m"], e["tasks"], e["client_ref"]) for e in expected]
     newest = {r.user_id: r.request_id for r in rows}
-    assert all(r.status == ("pending" if newest[r.user_id] == r.request_id else "replaced") for r in rows)
+    assert all(r.status == ("not_served" if r.tasks == 0 else "pending" if newest[r.user_id] == r.request_id
+                            else "replaced") for r in rows)
     assert journal.services() == [] and journal.missions() == []
     watcher.close()
     journal.close()
