@@ -36,7 +36,7 @@ from ..model.fairness import is_eligible
 from ..model.reward import interval_reward
 from .config import ServiceConfig
 from .errors import JournalError, LinkError, PlanningError
-from .intake import Accepted, Intake
+from .intake import Accepted, Intake, fairness_rule
 from .journal import Journal
 from .link import LinkEvent, LinkSettings, open_link
 from .link.base import HOLDING_MODES, MISSION_MODES, RETURNING_MODES
@@ -92,7 +92,8 @@ class Service:
         self.keys = config.keys()
         self.flavour = config.mavlink.flavour
         self.journal = Journal(config.journal.path, config.journal.synchronous, now_s=clock())
-        self.intake = Intake(self.journal, self.area, clock, config.intake)
+        self.intake = Intake(self.journal, self.area, clock, config.intake, keys=self.keys,
+                             unservable=fairness_rule(self.scenario))
         self._refusal_events = RateLimit(REFUSAL_EVENTS_PER_S, time.monotonic())
         self._refusals_unreported = 0
         self._busy_logged = (time.monotonic(), 0)
@@ -236,22 +237,23 @@ class Service:
     # --- zenoh handlers (on the loop's thread) -------------------------------------------------
     def _on_request(self, query: Any) -> None:
         payload = query.payload.to_bytes() if query.payload is not None else None
-        outcome = self.intake.handle(payload)
-        reply_and_drop(query, self.keys.request, encode(outcome.reply))
+        key = str(query.key_expr)  # the plain request key or a user's own (which binds its user id)
+        outcome = self.intake.handle(payload, key)
+        reply_and_drop(query, key, encode(outcome.reply))
         if isinstance(outcome, Accepted):
-            detail = f"{outcome.tasks} tasks" + (f"; replaces {list(outcome.replaced)}" if outcome.replaced else "")
-            self._event("request_accepted", user_id=outcome.user_id, request_id=outcome.request_id, detail=detail)
+            self._event("request_accepted", user_id=outcome.user_id, request_id=outcome.request_id,
+                        detail=outcome.describe()[:256])
             self._wake.set()
         elif self._refusal_events.take(time.monotonic()):
             unreported = f"[{self._refusals_unreported} more refused, not reported] " if self._refusals_unreported else ""
             self._refusals_unreported = 0
-            self._event("request_rejected", detail=f"{unreported}{outcome.reply.field}: {outcome.reply.message}"[:256])
+            self._event("request_rejected", detail=f"{unreported}{outcome.describe()}"[:256])
         else:
             self._refusals_unreported += 1
 
     def _on_state(self, query: Any) -> None:
         pending = [PendingRequest(request_id=r.request_id, user_id=r.user_id, x_m=r.x_m, y_m=r.y_m, z_m=r.z_m,
-                                  tasks=r.tasks) for r in self.journal.pending()]
+                                  tasks=r.backlog) for r in self.journal.pending()]
         state = State(status=self._status(), plan=self.plan_msg, pending=pending)
         reply_and_drop(query, self.keys.state, encode(state))
 
@@ -436,7 +438,7 @@ class Service:
         xyz = (point.x_m, point.y_m, point.z_m)
         # The hold was sized for the planned request's tasks: a newer request of the same
         # user uploads at most that many in it.
-        tasks = min(request.tasks, point.tasks) if request is not None else 0
+        tasks = min(request.backlog, point.tasks) if request is not None else 0
         if request is None or not is_eligible(self.p, tasks, services):
             why = "no pending request" if request is None else f"not eligible with {tasks} tasks"
             self._event("waypoint_reached", user_id=point.user_id, detail=f"point {point.hover_index}: {why}")
@@ -461,7 +463,7 @@ class Service:
         counts: dict[str, int] = {}
         for s in self.journal.services():
             counts[s.user_id] = counts.get(s.user_id, 0) + 1
-        reasons = {r.request_id: not_served_reason(self.scenario, r.tasks, counts.get(r.user_id, 0),
+        reasons = {r.request_id: not_served_reason(self.scenario, r.backlog, counts.get(r.user_id, 0),
                                                    f"sortie ended before its turn ({why})")
                    for r in self.journal.pending()}
         now = self.clock()

@@ -55,14 +55,15 @@ class ZenohConfig:
 @dataclass(frozen=True)
 class IntakeConfig:
     max_pending_requests: int = 100
-    """Pending requests the journal holds; beyond it a user without a pending request is
-    refused "busy: ..." (a user replacing its own pending request is still taken)."""
+    """Pending requests that can be served; beyond it a servable request from a user without
+    one is refused "busy: ..." (a user replacing its own pending request is still taken; a
+    request of no tasks or one the fairness rule leaves out of the sortie holds no place)."""
     max_users: int = 200
     """Distinct user ids in one sortie; a request from a new id beyond it is refused "full: ..."
     (bounds the journal's users and the planner's size)."""
     max_requests_per_s: float = 50.0
-    """Accepted requests per second, over a one-second burst; beyond it "busy: ..." (bounds
-    the journal's growth and the fsyncs a flood costs)."""
+    """Accepted requests per second, over a one-second burst, on the monotonic clock; beyond
+    it "busy: ..." (bounds the journal's growth and the fsyncs a flood costs)."""
 
 
 @dataclass(frozen=True)

@@ -1,41 +1,103 @@
 """Request intake: validate -> journal -> ack. Pure: no event loop, no zenoh; the caller
-gives it the payload bytes and a clock and sends back the reply it returns.
+gives it the payload bytes, the query's key and clocks, and sends back the reply it returns.
 
-A bad request gets an ``ErrorReply`` naming the field and changes nothing. A good one is in
-the journal before the ack exists; a user's newer request replaces its pending one.
+A request is a user's data waiting (docs/PROTOCOL.md, "Requests"): its newest request is
+its request in force (the journal keeps the older ones, ``replaced``); a request of no tasks
+says it has nothing (more) to offload and closes as it arrives. A bad request gets an
+``ErrorReply`` naming the field and changes nothing. A good one is in the journal before
+the ack exists.
 
-Bounds (``IntakeConfig``), so that a flood on the request key cannot grow the journal, the
-planner or the fsync load without limit: pending requests (a new user beyond it is refused
-"busy: ..."; replacing one's own pending request is always allowed), distinct users in the
-sortie ("full: ..."), accepted requests per second ("busy: ...", a one-second token bucket).
+On a user's own request key (``{prefix}/{vehicle}/request/{user_id}``), which access
+control can give to that user's certificate alone, the request must be that user's: the
+key binds the user id. The plain key (``.../request``) binds none, for deployments without
+access control.
+
+Bounds (``IntakeConfig``), so that a flood on the request keys cannot grow the journal, the
+planner or the fsync load without limit: pending requests that can be served (a new one
+beyond it is refused "busy: ..."; replacing one's own is always allowed; a request that
+cannot be served in this sortie -- no tasks, or the fairness rule leaves its user out --
+holds no place), distinct users in the sortie ("full: ..."), accepted requests per second
+("busy: ...", a one-second token bucket on the monotonic clock: a wall clock stepped back
+refuses nothing; the wall clock only stamps the journal).
 """
 
 from __future__ import annotations
 
 import json
+import time
 from dataclasses import dataclass
-from typing import Callable
+from typing import Callable, Mapping
 
-from protocol import MAX_PAYLOAD_BYTES, Area, ErrorReply, ProtocolError, TaskAck, decode_request
+from protocol import MAX_PAYLOAD_BYTES, Area, ErrorReply, Keys, ProtocolError, TaskAck, decode_request, escape_text
 
+from ..model import Scenario, pack
+from ..model._jit import py
+from ..model.fairness import is_eligible
 from .config import IntakeConfig
 from .errors import JournalError
-from .journal import Journal
+from .journal import NO_TASKS, Journal, RequestRow
+from .places import Place
 from .throttle import RateLimit
 
 BUSY = "busy: "
 """Start of the message of a refusal that a retry later can get past."""
 
+Unservable = Callable[[int, int], "str | None"]
+"""(backlog, services of the user in the sortie) -> why such a request cannot be served in
+this sortie, or None if it can."""
+
+
+def no_tasks(tasks: int, services: int) -> str | None:
+    """The rule without a model: only a request of no tasks cannot be served."""
+    return NO_TASKS if tasks <= 0 else None
+
+
+def fairness_rule(scenario: Scenario) -> Unservable:
+    """The model's rule (3), (9c): no tasks, the user served ``max_services_per_user`` times,
+    or a repeat asking no more than ``fairness_threshold_tasks``. The model's own rule, run
+    uncompiled: a first call must not stall the event loop compiling it."""
+    p = pack(scenario)
+    eligible = py(is_eligible)
+
+    def unservable(tasks: int, services: int) -> str | None:
+        if eligible(p, tasks, services):
+            return None
+        if tasks <= 0:
+            return NO_TASKS
+        if services >= scenario.max_services_per_user:
+            return f"fairness: already served {services} times (limit {scenario.max_services_per_user})"
+        return f"fairness: a repeat needs more than {scenario.fairness_threshold_tasks:g} tasks, asked {tasks}"
+    return unservable
+
 
 @dataclass(frozen=True)
 class Accepted:
-    """A request went into the journal."""
+    """A request went into the journal and is now its user's request in force."""
 
     request_id: int
     user_id: str
     tasks: int
+    """The user's whole backlog, as it says."""
     replaced: tuple[int, ...]
     reply: TaskAck
+    unservable: str | None = None
+    """Why this request cannot be served in this sortie (it holds no pending place); None
+    if it can."""
+
+    @property
+    def done(self) -> bool:
+        """The user has nothing (more) to offload: its wait ends; if it is being served, its
+        upload is done (the loop may end the hold)."""
+        return self.tasks == 0
+
+    def describe(self) -> str:
+        """One line for a log or an event, wire text escaped."""
+        text = f"{self.tasks} tasks" + (f"; replaces {list(self.replaced)}" if self.replaced else "")
+        if self.unservable:
+            text += f"; cannot be served in this sortie: {self.unservable}"
+        if self.reply.client_ref is not None:
+            text += f"; client_ref {escape_text(self.reply.client_ref)}"
+        return text
 
 
 @dataclass(frozen=True)
@@ -44,65 +106,111 @@ class Rejected:
 
     reply: ErrorReply
 
+    def describe(self) -> str:
+        """One line for a log or an event, wire text (a field's name, the client's ref) escaped."""
+        text = f"{escape_text(self.reply.field)}: {escape_text(self.reply.message)}"
+        if self.reply.client_ref is not None:
+            text += f" (client_ref {escape_text(self.reply.client_ref)})"
+        return text
+
 
 class Intake:
-    """Turns request payloads into journal rows and replies."""
+    """Turns request payloads into journal rows and replies.
+
+    ``clock`` is the wall clock stamped in the journal and the ack (``accepted_at_s``);
+    ``monotonic`` times the rate bound; ``unservable`` is the fairness rule (default: only
+    a request of no tasks cannot be served; the service passes ``fairness_rule(scenario)``)."""
 
     def __init__(self, journal: Journal, area: Area, clock: Callable[[], float],
-                 limits: IntakeConfig = IntakeConfig()) -> None:
+                 limits: IntakeConfig = IntakeConfig(), *, keys: Keys = Keys(),
+                 monotonic: Callable[[], float] = time.monotonic, unservable: Unservable = no_tasks) -> None:
         self.journal = journal
         self.area = area
         self.clock = clock
+        self.monotonic = monotonic
         self.limits = limits
+        self.keys = keys
+        self.unservable = unservable
         self.closed_reason: str | None = None
         """When set, every request is refused with this message (shutdown, sortie over)."""
         self._users = journal.user_ids()
         """Users of this sortie (at most ``limits.max_users``), kept here so that the check
         does not scan the journal on every request."""
-        self._rate = RateLimit(limits.max_requests_per_s, clock())
+        self._rate = RateLimit(limits.max_requests_per_s, monotonic())
+        self.places: Mapping[str, Place] = {}
+        """Every user's place in the current plan (``places.plan_places``), for the ack."""
 
     def new_sortie(self) -> None:
-        """The journal began a new sortie: open, and count that sortie's users."""
+        """The journal began a new sortie: open, count that sortie's users, no plan yet."""
         self.closed_reason = None
         self._users = self.journal.user_ids()
+        self.places = {}
 
-    def handle(self, payload: bytes | None) -> Accepted | Rejected:
+    def set_places(self, places: Mapping[str, Place]) -> None:
+        """The places of the plan just made (the loop calls it on every re-plan)."""
+        self.places = dict(places)
+
+    def handle(self, payload: bytes | None, key: str | None = None) -> Accepted | Rejected:
+        """One query on a request key: ``key`` is the query's key expression (None: the
+        plain request key)."""
         ref = client_ref(payload)
         if self.closed_reason is not None:
             return Rejected(ErrorReply(field="service", message=self.closed_reason, client_ref=ref))
+        try:
+            key_user = None if key is None else self.keys.request_user(key)
+        except ProtocolError as err:
+            return Rejected(ErrorReply(field=err.field, message=_sendable(err.message), client_ref=ref))
         if payload is None:
             return Rejected(ErrorReply(field="payload", message="a task request needs a payload", client_ref=ref))
         try:
             request = decode_request(payload, self.area)
         except ProtocolError as err:
             return Rejected(ErrorReply(field=_sendable(err.field), message=_sendable(err.message), client_ref=ref))
-        now = self.clock()
-        refusal = self._over_limit(request.user_id, now)
+        if key_user is not None and request.user_id != key_user:
+            return Rejected(ErrorReply(field="user_id", client_ref=request.client_ref, message=(
+                f"this request key is user {key_user}'s ({self.keys.user_request(key_user)}); "
+                f"a request on it must carry that user_id")))
+        try:
+            services = self.journal.service_counts()
+            pending = self.journal.pending()
+        except JournalError as err:
+            return Rejected(ErrorReply(field="journal", message=_sendable(str(err)), client_ref=request.client_ref))
+        why_not = self.unservable(request.tasks, services.get(request.user_id, 0))
+        refusal = self._over_limit(request.user_id, why_not is None, pending, services)
         if refusal is not None:
             return Rejected(ErrorReply(field="service", message=refusal, client_ref=request.client_ref))
+        now = self.clock()
         try:
             request_id, replaced = self.journal.accept(
                 request.user_id, request.x_m, request.y_m, request.z_m, request.tasks, request.client_ref, now)
-            position = len(self.journal.pending())
+            position = next((i for i, r in enumerate(self.journal.pending(), 1) if r.request_id == request_id), 0)
+            served = self.journal.served_tasks(request.user_id)
         except JournalError as err:
             return Rejected(ErrorReply(field="journal", message=_sendable(str(err)), client_ref=request.client_ref))
         self._users.add(request.user_id)
-        ack = TaskAck(request_id=request_id, user_id=request.user_id, accepted_at_s=now,
-                      queue_position=position, client_ref=request.client_ref)
-        return Accepted(request_id, request.user_id, request.tasks, tuple(replaced), ack)
+        place = self.places.get(request.user_id)
+        ack = TaskAck(request_id=request_id, user_id=request.user_id, accepted_at_s=now, queue_position=position,
+                      client_ref=request.client_ref, sortie=self.journal.sortie, served_tasks=served,
+                      place=None if place is None else place.place, eta_s=None if place is None else place.eta_s,
+                      note="" if why_not is None else f"cannot be served in this sortie: {why_not}"[:256])
+        return Accepted(request_id, request.user_id, request.tasks, tuple(replaced), ack, why_not)
 
-    def _over_limit(self, user_id: str, now_s: float) -> str | None:
+    def _over_limit(self, user_id: str, servable: bool, pending: list[RequestRow],
+                    services: dict[str, int]) -> str | None:
         """Why this valid request cannot be taken now, or None. Checked in this order so that
-        a refused request costs no rate token."""
+        a refused request costs no rate token. Only requests that can be served count
+        against the pending bound (each user's own is left out: it is replaced)."""
         lim = self.limits
         if user_id not in self._users and len(self._users) >= lim.max_users:
             return (f"full: this sortie already has {len(self._users)} users (intake.max_users); "
                     f"a new user id is not taken")
-        pending = self.journal.pending()
-        if len(pending) >= lim.max_pending_requests and all(r.user_id != user_id for r in pending):
-            return (f"{BUSY}{len(pending)} requests pending (intake.max_pending_requests); "
-                    f"retry once some are served")
-        if not self._rate.take(now_s):
+        if servable:
+            waiting = sum(1 for r in pending if r.user_id != user_id
+                          and self.unservable(r.backlog, services.get(r.user_id, 0)) is None)
+            if waiting >= lim.max_pending_requests:
+                return (f"{BUSY}{waiting} requests pending (intake.max_pending_requests); "
+                        f"retry once some are served")
+        if not self._rate.take(self.monotonic()):
             return (f"{BUSY}over {lim.max_requests_per_s:g} requests/s (intake.max_requests_per_s); "
                     f"retry in a second")
         return None

@@ -5,9 +5,20 @@ ack is a promise that survives a crash. WAL mode lets readers (a test, the demo'
 read while the service writes. A restart opens the same file and resumes: pending requests
 are still pending, service counts (the fairness rule) and the last mission are kept.
 
-Request life: ``pending`` -> ``served`` (a service row names it), ``replaced`` (the user's
-newer request took its place) or ``not_served`` (the sortie ended without it; ``reason``
-says why). Nothing is ever deleted.
+Requests are data waiting (docs/PROTOCOL.md, "Requests"): each request a user sends is a
+row, the statement of its whole backlog then, and its newest row is the request in force;
+the ack's request id names that row, and the older rows stay as the history. Request life:
+``pending`` (waiting; ``tasks`` less the tasks of the services that name it is the backlog
+left) -> ``served`` (services consumed all of it, or the sortie ended after a service of
+part of it; ``reason`` says what was left), ``replaced`` (the user's newer request took
+its place; ``reason`` names it) or ``not_served`` (a request of no tasks, closed as it
+arrives, or the sortie ended without serving it; ``reason`` says why). Nothing is ever
+deleted.
+
+A service names the request in force when its hold began (the loop binds to it); it
+consumes its tasks from that request's backlog while the request is in force. A newer
+request from the user is its whole backlog as the user knows it then, and replaces the
+older one's backlog as it stands.
 
 Sorties: one file holds every sortie of a service's life. ``sorties`` has a row per sortie
 (number, started, ended, why); requests, services and missions carry the sortie they
@@ -24,6 +35,7 @@ ended if its meta said ``sortie_over``); a file from a newer version is refused.
 from __future__ import annotations
 
 import json
+import math
 import sqlite3
 import time
 from contextlib import contextmanager
@@ -88,6 +100,8 @@ CREATE INDEX IF NOT EXISTS requests_by_user ON requests (user_id, status);
 CREATE INDEX IF NOT EXISTS requests_by_sortie ON requests (sortie, status, user_id);
 CREATE INDEX IF NOT EXISTS services_by_sortie ON services (sortie, user_id);
 CREATE INDEX IF NOT EXISTS missions_by_sortie ON missions (sortie, result);
+-- a request's backlog is its tasks less those of the services that name it
+CREATE INDEX IF NOT EXISTS services_by_request ON services (request_id);
 """
 MIGRATE_1_TO_2 = [
     "ALTER TABLE requests ADD COLUMN sortie INTEGER NOT NULL DEFAULT 1",
@@ -99,6 +113,9 @@ MIGRATE_1_TO_2 = [
 
 @dataclass(frozen=True)
 class RequestRow:
+    """One request as the user sent it (``tasks``: its backlog then) and what became of it:
+    ``served_tasks`` of it were served (by services naming it), ``backlog`` are left."""
+
     request_id: int
     user_id: str
     x_m: float
@@ -109,6 +126,25 @@ class RequestRow:
     accepted_at_s: float
     status: str
     reason: str
+    served_tasks: int = 0
+
+    @property
+    def backlog(self) -> int:
+        """Tasks of this request not yet served."""
+        return max(self.tasks - self.served_tasks, 0)
+
+
+@dataclass(frozen=True)
+class UserBacklog:
+    """A user of the current sortie as the service counts it: its request in force (its
+    newest), the backlog left on it (0 once it is served or closed), its services and the
+    tasks they served in the sortie."""
+
+    user_id: str
+    request_id: int
+    backlog: int
+    services: int
+    served_tasks: int
 
 
 @dataclass(frozen=True)
@@ -257,17 +293,25 @@ class Journal:
 
     def accept(self, user_id: str, x_m: float, y_m: float, z_m: float, tasks: int,
                client_ref: str | None, now_s: float) -> tuple[int, list[int]]:
-        """Journal a validated request in the current sortie; the user's pending requests
-        become ``replaced``. Returns (the new request id, the ids it replaced)."""
+        """Journal a validated request in the current sortie: it becomes the user's request
+        in force and its pending requests become ``replaced``. A request of no tasks closes
+        as it arrives (``not_served``, "no tasks to offload"): nothing is waiting. Returns
+        (the new request id, the ids it replaced)."""
         if self.current_sortie().over:
             raise JournalError(f"accept: sortie {self.sortie} is over; no request joins it")
-        older = [r.request_id for r in self.pending() if r.user_id == user_id]
+        older = [int(r[0]) for r in self._rows(
+            "SELECT request_id FROM requests WHERE sortie = ? AND user_id = ? AND status = 'pending'",
+            (self.sortie, user_id))]
         try:
             with self._transaction():  # the replaced rows name the new id: not one _write
                 request_id = int(self._db.execute(
                     "INSERT INTO requests (user_id, x_m, y_m, z_m, tasks, client_ref, accepted_at_s, sortie) "
                     "VALUES (?, ?, ?, ?, ?, ?, ?, ?)",
                     (user_id, x_m, y_m, z_m, tasks, client_ref, now_s, self.sortie)).lastrowid)
+                if tasks <= 0:
+                    self._db.execute(
+                        "UPDATE requests SET status = 'not_served', reason = ?, closed_at_s = ? WHERE request_id = ?",
+                        (NO_TASKS, now_s, request_id))
                 for rid in older:
                     self._db.execute(
                         "UPDATE requests SET status = 'replaced', reason = ?, closed_at_s = ? "
@@ -278,15 +322,29 @@ class Journal:
 
     def record_service(self, request_id: int, hover_index: int, xyz: tuple[float, float, float], tasks: int,
                        bits: float, reward: float, battery_j: float, now_s: float) -> int:
-        """The vehicle served ``tasks`` tasks of ``request_id`` at hovering point ``hover_index``."""
-        row = self.request(request_id)
-        if row is None or row.status != "pending":
-            raise JournalError(f"record_service: request {request_id} is not pending")
-        service_id, _ = self._write("record_service", [
+        """The vehicle served ``tasks`` tasks of ``request_id`` (the request in force when
+        the hold began) at hovering point ``hover_index``. They are consumed from that
+        request's backlog: if it is still in force (pending) and nothing is left it becomes
+        ``served``, else it stays pending with the rest. If the user sent a newer request
+        meanwhile (it is ``replaced``), the service is recorded against the request it was
+        bound to and the newer one, the user's own count, is left as it is."""
+        rows = self._rows(f"SELECT {_REQ}, sortie FROM requests WHERE request_id = ?", (request_id,))
+        if not rows or rows[0][-1] != self.sortie:
+            raise JournalError(f"record_service: request {request_id} is not a request of sortie {self.sortie}")
+        row = RequestRow(*rows[0][:-1])
+        if row.status not in ("pending", "replaced"):
+            raise JournalError(f"record_service: request {request_id} is {row.status}, not pending (nor replaced during "
+                               f"the hold): no service can be recorded on it")
+        if not 1 <= tasks <= row.backlog:
+            raise JournalError(f"record_service: {tasks} tasks served of request {request_id}, whose backlog is "
+                               f"{row.backlog} ({row.served_tasks} of its {row.tasks} already served)")
+        done = row.status == "pending" and tasks == row.backlog
+        service_id, *_ = self._write("record_service", [
             ("INSERT INTO services (request_id, user_id, tasks, bits, hover_index, x_m, y_m, z_m, reward, "
              "battery_j, time_s, sortie) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
              (request_id, row.user_id, tasks, bits, hover_index, *xyz, reward, battery_j, now_s, self.sortie)),
-            ("UPDATE requests SET status = 'served', closed_at_s = ? WHERE request_id = ?", (now_s, request_id)),
+            *([("UPDATE requests SET status = 'served', closed_at_s = ? WHERE request_id = ?", (now_s, request_id))]
+              if done else []),
         ])
         return service_id
 
@@ -344,6 +402,44 @@ class Journal:
     def request(self, request_id: int) -> RequestRow | None:
         rows = self._rows(f"SELECT {_REQ} FROM requests WHERE request_id = ?", (request_id,))
         return RequestRow(*rows[0]) if rows else None
+
+    def request_in_force(self, user_id: str, at_s: float | None = None) -> RequestRow | None:
+        """The user's request in force at ``at_s`` (the journal's clock, as ``accepted_at_s``;
+        None: now) in the current sortie: its newest request accepted by then, whatever has
+        become of it since (``status`` is today's), with ``served_tasks`` counting the
+        services recorded on it by then, so that ``backlog`` is what the user had waiting at
+        ``at_s``. None if the user had sent no request in this sortie by then. A request of no
+        tasks in force means the user has nothing to offload."""
+        until = math.inf if at_s is None else at_s
+        rows = self._rows(
+            f"SELECT {_REQ_COLUMNS}, (SELECT COALESCE(SUM(s.tasks), 0) FROM services s "
+            "WHERE s.request_id = requests.request_id AND s.time_s <= ?) FROM requests "
+            "WHERE sortie = ? AND user_id = ? AND accepted_at_s <= ? ORDER BY request_id DESC LIMIT 1",
+            (until, self.sortie, user_id, until))
+        return RequestRow(*rows[0]) if rows else None
+
+    def user_backlogs(self) -> list[UserBacklog]:
+        """Every user of the current sortie, in order of first request: its request in force,
+        the backlog left on it, its services and the tasks they served."""
+        rows = self._rows(
+            "SELECT r.user_id, r.request_id, CASE WHEN r.status = 'pending' THEN MAX(r.tasks - "
+            "(SELECT COALESCE(SUM(s.tasks), 0) FROM services s WHERE s.request_id = r.request_id), 0) ELSE 0 END, "
+            "(SELECT COUNT(*) FROM services s WHERE s.sortie = ? AND s.user_id = r.user_id), "
+            "(SELECT COALESCE(SUM(s.tasks), 0) FROM services s WHERE s.sortie = ? AND s.user_id = r.user_id) "
+            "FROM requests r JOIN (SELECT user_id, MIN(request_id) AS first, MAX(request_id) AS last "
+            "FROM requests WHERE sortie = ? GROUP BY user_id) u ON r.request_id = u.last ORDER BY u.first",
+            (self.sortie, self.sortie, self.sortie))
+        return [UserBacklog(*r) for r in rows]
+
+    def served_tasks(self, user_id: str) -> int:
+        """The tasks of ``user_id`` served in the current sortie."""
+        return int(self._rows("SELECT COALESCE(SUM(tasks), 0) FROM services WHERE sortie = ? AND user_id = ?",
+                              (self.sortie, user_id))[0][0])
+
+    def service_counts(self) -> dict[str, int]:
+        """How many times each user was served in the current sortie (the fairness count)."""
+        return {user: int(n) for user, n in self._rows(
+            "SELECT user_id, COUNT(*) FROM services WHERE sortie = ? GROUP BY user_id", (self.sortie,))}
 
     def requests(self, sortie: int | None = None) -> list[RequestRow]:
         return [RequestRow(*r) for r in self._rows(
@@ -413,7 +509,12 @@ class Journal:
             raise JournalError(f"close: {err}") from None
 
 
-_REQ = "request_id, user_id, x_m, y_m, z_m, tasks, client_ref, accepted_at_s, status, reason"
+_REQ_COLUMNS = "request_id, user_id, x_m, y_m, z_m, tasks, client_ref, accepted_at_s, status, reason"
+_REQ = (f"{_REQ_COLUMNS}, (SELECT COALESCE(SUM(s.tasks), 0) FROM services s "
+        "WHERE s.request_id = requests.request_id)")
+"""The columns of a ``RequestRow``, ``served_tasks`` counted from the services naming it."""
+NO_TASKS = "no tasks to offload"
+"""The reason of a request of no tasks (closed as it arrives)."""
 
 
 def _mission(r: tuple[Any, ...]) -> MissionRow:
@@ -421,5 +522,11 @@ def _mission(r: tuple[Any, ...]) -> MissionRow:
 
 
 def _closing(reasons: dict[int, str], now_s: float) -> list[tuple[str, tuple[Any, ...]]]:
-    return [("UPDATE requests SET status = 'not_served', reason = ?, closed_at_s = ? "
-             "WHERE request_id = ? AND status = 'pending'", (reason, now_s, rid)) for rid, reason in reasons.items()]
+    """Pending requests closed with their reasons: ``served`` if a service consumed part of
+    one (the reason says how much was left), else ``not_served``."""
+    return [("UPDATE requests SET status = CASE WHEN EXISTS (SELECT 1 FROM services s WHERE s.request_id = "
+             "requests.request_id) THEN 'served' ELSE 'not_served' END, reason = CASE WHEN EXISTS (SELECT 1 FROM "
+             "services s WHERE s.request_id = requests.request_id) THEN (tasks - (SELECT SUM(s.tasks) FROM services s "
+             "WHERE s.request_id = requests.request_id)) || ' of ' || tasks || ' tasks left: ' || ? ELSE ? END, "
+             "closed_at_s = ? WHERE request_id = ? AND status = 'pending'", (reason, reason, now_s, rid))
+            for rid, reason in reasons.items()]

@@ -96,7 +96,7 @@ def assemble(scenario: Scenario, users: list[UserRow], pending: list[RequestRow]
     request_ids = [0] * n
     for row in pending:
         i = index[row.user_id]
-        tasks[i] = row.tasks
+        tasks[i] = row.backlog  # what is left of it: a service may have consumed part
         request_ids[i] = row.request_id
         positions[i] = (row.x_m, row.y_m, row.z_m)
     served = np.array([u.services for u in users], dtype=np.int64)

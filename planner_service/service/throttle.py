@@ -1,6 +1,8 @@
 """A token bucket, for the service's rate bounds (accepted requests, refusal events).
 
-Pure: the caller passes the time, so tests pin it; a clock going back adds no tokens.
+Pure: the caller passes the time, so tests pin it. Give it a monotonic clock: a clock going
+back adds no tokens, and the bucket counts on from where it went (it does not wait for the
+clock to catch up again), so a wall clock stepped back an hour refuses nothing for an hour.
 """
 
 from __future__ import annotations
@@ -20,7 +22,7 @@ class RateLimit:
     def take(self, now_s: float) -> bool:
         """Spend one token if there is one."""
         self.tokens = min(self.burst, self.tokens + max(now_s - self._t, 0.0) * self.rate_per_s)
-        self._t = max(self._t, now_s)
+        self._t = now_s
         if self.tokens < 1.0:
             return False
         self.tokens -= 1.0

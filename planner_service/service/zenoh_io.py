@@ -17,11 +17,11 @@ from __future__ import annotations
 import asyncio
 import logging
 import threading
-from typing import Any, Callable, Sequence
+from typing import Any, Callable, Iterable, Sequence
 
 import zenoh
 
-from protocol import ErrorReply, Keys, ProtocolError, encode
+from protocol import ErrorReply, Keys, ProtocolError, UserPlace, encode
 from protocol.zenoh_config import error_text
 from protocol.zenoh_config import session_config as _session_config
 
@@ -87,6 +87,7 @@ class ZenohIO:
         self.session: Any = None
         self.in_flight = InFlight(cfg.max_queries_in_flight)
         self._request_q: Any = None
+        self._user_request_q: Any = None
         self._state_q: Any = None
         self._pubs: dict[str, Any] = {}
         self._token: Any = None
@@ -134,6 +135,10 @@ class ZenohIO:
         self._pubs = {name: s.declare_publisher(getattr(self.keys, name)) for name in ("status", "plan", "events")}
         self._state_q = s.declare_queryable(self.keys.state, self._hand_over(loop, on_state, self.keys.state))
         self._request_q = s.declare_queryable(self.keys.request, self._hand_over(loop, on_request, self.keys.request))
+        # every user's own request key (request/{user_id}), which access control can bind to
+        # that user's certificate; the same handler (it reads the user id from the key)
+        self._user_request_q = s.declare_queryable(self.keys.user_requests,
+                                                   self._hand_over(loop, on_request, self.keys.user_requests))
         self._token = s.liveliness().declare_token(self.keys.alive)
         return True
 
@@ -151,7 +156,7 @@ class ZenohIO:
 
         def callback(query: Any) -> None:
             if not gate.enter():
-                self._busy(query, key)
+                self._busy(query)
                 return
             try:
                 loop.call_soon_threadsafe(run, query)
@@ -160,13 +165,13 @@ class ZenohIO:
                 query.drop()
         return callback
 
-    def _busy(self, query: Any, key: str) -> None:
+    def _busy(self, query: Any) -> None:
         payload = query.payload.to_bytes() if query.payload is not None else None
         reply = ErrorReply(field="service", message=(
             f"{BUSY}{self.in_flight.limit} queries are already waiting (zenoh.max_queries_in_flight); "
             f"retry in a moment"), client_ref=client_ref(payload))
         try:
-            reply_and_drop(query, key, encode(reply))
+            reply_and_drop(query, str(query.key_expr), encode(reply))  # the query's key: a user's own
         except zenoh.ZError:  # the client went away meanwhile: nothing to answer
             pass
 
@@ -175,11 +180,20 @@ class ZenohIO:
         if pub is not None:
             pub.put(payload)
 
+    def publish_places(self, places: Iterable[UserPlace]) -> None:
+        """Each user's ``user_place`` on its own key, ``{prefix}/{vehicle}/users/{user_id}``
+        (under access control only that user may subscribe to it)."""
+        if self.session is None:
+            return
+        for place in places:
+            self.session.put(self.keys.user(place.user_id), encode(place))
+
     def stop_intake(self) -> None:
-        """Undeclare the request queryable: no new request reaches the service."""
-        if self._request_q is not None:
-            self._request_q.undeclare()
-            self._request_q = None
+        """Undeclare the request queryables: no new request reaches the service."""
+        for q in (self._request_q, self._user_request_q):
+            if q is not None:
+                q.undeclare()
+        self._request_q = self._user_request_q = None
 
     def close(self) -> None:
         self.stop_intake()

@@ -69,3 +69,83 @@ def test_closed_intake_refuses_with_the_reason(tmp_path: Path) -> None:
     assert isinstance(out, Rejected) and out.reply.field == "service"
     assert out.reply.message == "the service is shutting down" and out.reply.client_ref == "my-42"
     assert journal.requests() == []
+
+
+# --- requests as data waiting (issue 13.1) -----------------------------------------------------
+def test_a_newer_request_is_the_backlog_in_force_and_the_older_stays_as_history(tmp_path: Path) -> None:
+    intake, journal = make(tmp_path)
+    first = intake.handle(request(tasks=12, client_ref="a"))
+    second = intake.handle(request(tasks=15, x_m=130.0, client_ref="b"))
+    assert isinstance(first, Accepted) and isinstance(second, Accepted)
+    assert (second.request_id, second.replaced, second.reply.request_id) == (2, (1,), 2)
+    assert [(r.request_id, r.status, r.tasks, r.reason) for r in journal.requests()] == [
+        (1, "replaced", 12, "replaced by request 2"), (2, "pending", 15, "")]
+    in_force = journal.request_in_force("u-7")
+    assert in_force is not None and (in_force.request_id, in_force.x_m, in_force.backlog) == (2, 130.0, 15)
+
+
+def test_a_request_of_no_tasks_ends_the_wait(tmp_path: Path) -> None:
+    intake, journal = make(tmp_path)
+    intake.handle(request(tasks=12))
+    done = intake.handle(request(tasks=0, client_ref="done"))
+    assert isinstance(done, Accepted) and done.done and done.replaced == (1,)
+    assert done.reply.queue_position == 0 and done.reply.note == "cannot be served in this sortie: no tasks to offload"
+    assert journal.pending() == []
+    row = journal.request(done.request_id)
+    assert row is not None and (row.status, row.reason) == ("not_served", "no tasks to offload")
+    assert journal.request(1).status == "replaced"  # type: ignore[union-attr]
+
+
+def test_the_ack_says_the_sortie_what_was_served_and_the_place(tmp_path: Path) -> None:
+    from planner_service.service.places import Place
+
+    intake, journal = make(tmp_path)
+    first = intake.handle(request(tasks=20))
+    assert isinstance(first, Accepted)
+    assert (first.reply.sortie, first.reply.served_tasks, first.reply.place, first.reply.eta_s, first.reply.note) == \
+        (1, 0, None, None, "")
+    journal.record_service(first.request_id, 3, (1.0, 2.0, 100.0), 12, 1.2e6, 0.3, 9e4, NOW)
+    intake.set_places({"u-7": Place(2, 95.5), "u-8": Place(1, 10.0)})
+    second = intake.handle(request(tasks=14))
+    assert isinstance(second, Accepted)
+    assert (second.reply.served_tasks, second.reply.place, second.reply.eta_s) == (12, 2, 95.5)
+    intake.new_sortie()  # a new plan is needed before a place is known again
+    assert intake.handle(request(tasks=3)).reply.place is None  # type: ignore[union-attr]
+
+
+# --- a user's own request key binds its user id (issue 14.5) ------------------------------------
+@pytest.mark.parametrize("key, outcome, field", [
+    ("uavmec/uav1/request", Accepted, None),
+    ("uavmec/uav1/request/u-7", Accepted, None),
+    ("uavmec/uav1/request/u-8", Rejected, "user_id"),
+    ("uavmec/uav1/request/*", Rejected, "key"),
+    ("uavmec/uav1/request/**", Rejected, "key"),
+    ("uavmec/uav1/**", Rejected, "key"),
+    ("uavmec/*/request", Rejected, "key"),
+    ("uavmec/uav2/request/u-7", Rejected, "key"),
+])
+def test_the_request_key_binds_the_user_id(tmp_path: Path, key: str, outcome: type, field: str | None) -> None:
+    intake, journal = make(tmp_path)
+    out = intake.handle(request(), key)
+    assert isinstance(out, outcome), out
+    if isinstance(out, Rejected):
+        assert out.reply.field == field and out.reply.client_ref == "my-42"
+        assert journal.requests() == []
+    if field == "user_id":
+        assert out.reply.message == ("this request key is user u-8's (uavmec/uav1/request/u-8); "  # type: ignore[union-attr]
+                                     "a request on it must carry that user_id")
+
+
+# --- wire text reaches a log line escaped (issue 14.6) ------------------------------------------
+def test_wire_text_is_described_without_control_characters(tmp_path: Path) -> None:
+    intake, _ = make(tmp_path)
+    forged = "x\n2026-01-01 planner_service ERROR \x1b[31mfake\u2028"
+    accepted = intake.handle(request(client_ref=forged[:64]))
+    refused = intake.handle(json.dumps({"kind": "task_request", "user_id": "u-7", "x_m": 1, "y_m": 1, "tasks": 1,
+                                        "client_ref": "r\r\n", "bad\nfield\x1b": 1}).encode())
+    assert isinstance(accepted, Accepted) and isinstance(refused, Rejected)
+    assert accepted.reply.client_ref == forged[:64]  # the reply echoes it as it came
+    for line in (accepted.describe(), refused.describe()):
+        assert not any(c in line for c in "\n\r\x1b\u2028"), line
+    assert "client_ref x\\x0a2026-01-01" in accepted.describe()
+    assert refused.describe().startswith("bad\\x0afield\\x1b: ") and refused.describe().endswith("(client_ref r\\x0d\\x0a)")
