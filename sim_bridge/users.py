@@ -1,47 +1,52 @@
-"""Simulated ground users: each walks by random waypoint over the service area and submits
-a task request over zenoh every interval (simulated seconds; ``speedup`` simulated seconds
-pass per wall second, as in the vehicle stub).
+"""Simulated ground users: each walks by random waypoint over the service area and keeps a
+backlog of tasks that it asks the service to take (simulated seconds; ``speedup`` simulated
+seconds pass per wall second, as in the vehicle stub).
 
-Start positions are the scenario's user layout (the paper's two rows); task counts are the
-model's draws (N(mean, phi^2), rounded, clipped to [0, u_max]). The walk is pure (``step``
-with an explicit generator); ``run_users`` adds the clock and the zenoh client.
+Start positions are the scenario's user layout (the paper's two rows). Tasks follow one of
+two laws (``TaskParams.law``), both drawing from the model (``draw_tasks``: N(mean, phi^2),
+rounded, clipped to [0, u_max]) once per interval:
+
+- ``backlog`` (default): the draw is the tasks that *arrive* in the interval; they are added
+  to the user's backlog, capped at ``backlog_max``; what the service serves is taken off.
+  The user sends its whole backlog and position when the service's count of it differs from
+  its own (new tasks, a service it learnt of, a request that crossed a service on the
+  wire), when it has moved ``resend_m`` since its last request, and at least once an
+  interval while it has tasks; a backlog of 0 is sent only to end a wait the service still
+  counts ("nothing more to offload").
+- ``redraw`` (the paper's experiments): the draw replaces the task count every interval and
+  is sent then, whatever was served.
+
+A user learns what was served from its ack (``served_tasks`` in its ``sortie``) and from its
+``user_place`` publication (which also says the service's count of its backlog); counts are
+per sortie. The walk and the task law are pure (functions of a ``Walker``, the time and an
+explicit generator); ``run_users`` adds the clock and the zenoh client.
 """
 
 from __future__ import annotations
 
 import logging
 import math
+import queue
 import threading
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from typing import Literal
 
 import numpy as np
 
 from planner_service.model import Scenario, pack, user_rows
 from planner_service.model.mobility import draw_tasks
-from protocol import ProtocolError
+from protocol import ProtocolError, TaskAck, UserPlace, escape_text
 from protocol.client import ClientError, PlannerClient
 
 log = logging.getLogger("sim_bridge.users")
 ONE_SORTIE = "flies one sortie"
 """In the service's refusal after the landing when it is configured for one sortie only."""
+TICK_S = 0.05
+"""Wall seconds between two looks at every user."""
 
-
-@dataclass
-class Walker:
-    """One user's random-waypoint walk (metres, seconds)."""
-
-    user_id: str
-    xy: np.ndarray
-    target: np.ndarray
-    speed_mps: float
-    pause_s: float = 0.0
-    submitted: int = 0
-    acked: int = 0
-    refused: int = 0
-    last_refusal: str = ""
-    """Counted, not kept: a user process runs through any number of sorties."""
-    done: bool = False
+Law = Literal["backlog", "redraw"]
+LAWS: tuple[Law, ...] = ("backlog", "redraw")
 
 
 @dataclass(frozen=True)
@@ -52,10 +57,73 @@ class WalkParams:
     pause_max_s: float = 20.0
 
 
-def new_walkers(count: int, scenario: Scenario, params: WalkParams, rng: np.random.Generator) -> list[Walker]:
+@dataclass(frozen=True)
+class TaskParams:
+    """How tasks arrive and when a user speaks (simulated seconds, metres)."""
+
+    interval_s: float = 40.0
+    """One draw of the model per interval; the longest silence of a user with tasks."""
+    law: Law = "backlog"
+    backlog_max: int = 20
+    """The most tasks a user holds (``backlog``); arrivals beyond it are lost."""
+    resend_m: float = 50.0
+    """A user with tasks that has moved this far since its last request sends a new one."""
+    retry_s: float = 40.0
+    """After a refusal, the wait before the next try."""
+
+
+@dataclass
+class Walker:
+    """One user: its random-waypoint walk (metres, seconds) and its tasks."""
+
+    user_id: str
+    xy: np.ndarray
+    target: np.ndarray
+    speed_mps: float
+    pause_s: float = 0.0
+    backlog: int = 0
+    """Tasks waiting, as this user knows them."""
+    next_draw_s: float = 0.0
+    """Simulated time of the next draw of the model."""
+    fresh: bool = False
+    """``redraw``: a draw not sent yet."""
+    view: int | None = None
+    """The service's count of this user's backlog, as last heard (None: nothing in force in
+    this sortie that it knows of)."""
+    view_request: int = 0
+    """The request ``view`` is about."""
+    sortie: int | None = None
+    served_seen: int = 0
+    """Tasks served in ``sortie``, as last heard."""
+    sent_xy: np.ndarray | None = None
+    sent_at_s: float = -math.inf
+    wait_until_s: float = -math.inf
+    """After a refusal: no request before this simulated time."""
+    arrived: int = 0
+    lost: int = 0
+    """Tasks that arrived to a full backlog."""
+    served: int = 0
+    """Tasks the service served, as learnt, over every sortie."""
+    submitted: int = 0
+    acked: int = 0
+    refused: int = 0
+    last_refusal: str = ""
+    """Counted, not kept: a user process runs through any number of sorties."""
+    done: bool = False
+    request_id: int = 0
+    """This user's last acked request."""
+    history: list[tuple[float, int]] = field(default_factory=list)
+    """(simulated time, backlog) of each request sent, for the tests."""
+
+
+def new_walkers(count: int, scenario: Scenario, params: WalkParams, rng: np.random.Generator,
+                first_within_s: float = 0.0) -> list[Walker]:
+    """``count`` users at the scenario's layout, each with its first draw within
+    ``first_within_s`` simulated seconds (so that the first plan sees every user)."""
     start = user_rows(count, scenario.area_side_m)[:, :2]
     return [Walker(f"user-{i}", start[i].copy(), rng.uniform(0.0, params.side_m, 2),
-                   float(rng.uniform(params.speed_min_mps, params.speed_max_mps))) for i in range(count)]
+                   float(rng.uniform(params.speed_min_mps, params.speed_max_mps)),
+                   next_draw_s=float(rng.uniform(0.0, first_within_s))) for i in range(count)]
 
 
 def step(w: Walker, dt_s: float, params: WalkParams, rng: np.random.Generator) -> None:
@@ -80,51 +148,150 @@ def step(w: Walker, dt_s: float, params: WalkParams, rng: np.random.Generator) -
         w.speed_mps = float(rng.uniform(params.speed_min_mps, params.speed_max_mps))
 
 
-def run_users(client: PlannerClient, scenario: Scenario, count: int, interval_s: float, speedup: float,
+def arrive(w: Walker, now_s: float, p: np.ndarray, tp: TaskParams, rng: np.random.Generator) -> None:
+    """Every draw due by ``now_s``: one draw of the model per interval, added to the backlog
+    (capped) or, ``redraw``, in its place."""
+    one = np.zeros(1, dtype=np.int64)
+    while now_s >= w.next_draw_s:
+        draw_tasks(p, one, rng)
+        drawn = int(one[0])
+        if tp.law == "redraw":
+            w.backlog, w.fresh = drawn, True
+        else:
+            kept = min(drawn, max(tp.backlog_max - w.backlog, 0))
+            w.backlog += kept
+            w.arrived += kept
+            w.lost += drawn - kept
+        w.next_draw_s += tp.interval_s
+
+
+def learn_served(w: Walker, sortie: int | None, served_tasks: int | None) -> None:
+    """The service says ``served_tasks`` of this user were served in ``sortie``: what is new
+    of it comes off the backlog. The first news is the baseline; a later sortie counts
+    from zero; a stale one (an earlier sortie, a smaller count) is ignored."""
+    if sortie is None or served_tasks is None:
+        return
+    if w.sortie is None:
+        w.sortie, w.served_seen = sortie, served_tasks
+        return
+    if sortie < w.sortie or (sortie == w.sortie and served_tasks <= w.served_seen):
+        return
+    if sortie > w.sortie:  # a new sortie: the last one's requests were closed with it
+        w.sortie, w.served_seen, w.view, w.view_request = sortie, 0, None, 0
+    new = served_tasks - w.served_seen
+    w.served_seen = served_tasks
+    w.served += new
+    w.backlog = max(w.backlog - new, 0)
+
+
+def on_ack(w: Walker, ack: TaskAck, sent: int) -> None:
+    """The service took the request of ``sent`` tasks: that is its count now (services it
+    recorded before are not taken off it: if there were new ones, ``learn_served`` takes
+    them off our backlog, the counts differ and the user sends again)."""
+    w.acked += 1
+    w.request_id = ack.request_id
+    learn_served(w, ack.sortie, ack.served_tasks)
+    w.view, w.view_request = sent, ack.request_id
+
+
+def on_place(w: Walker, place: UserPlace) -> None:
+    """The service's ``user_place`` for this user: what it served, and its count of the
+    backlog of the request in force (if it is this user's latest as far as it knows)."""
+    learn_served(w, place.sortie, place.served_tasks)
+    if place.sortie != w.sortie:
+        return
+    if place.request_id is None:
+        w.view, w.view_request = None, 0
+    elif place.request_id >= w.view_request:
+        w.view, w.view_request = place.backlog, place.request_id
+
+
+def on_refused(w: Walker, now_s: float, tp: TaskParams, why: str) -> None:
+    w.refused += 1
+    w.last_refusal = why
+    w.wait_until_s = now_s + tp.retry_s
+
+
+def wants_to_send(w: Walker, now_s: float, tp: TaskParams) -> bool:
+    """Whether the user sends a request now (see the module's docstring)."""
+    if w.done or now_s < w.wait_until_s:
+        return False
+    if tp.law == "redraw":
+        return w.fresh
+    if w.view is None:
+        return w.backlog > 0
+    if w.backlog != w.view:
+        return True
+    if w.backlog == 0:
+        return False
+    moved = w.sent_xy is None or float(math.hypot(*(w.xy - w.sent_xy))) >= tp.resend_m
+    return moved or now_s - w.sent_at_s >= tp.interval_s
+
+
+def sent(w: Walker, now_s: float) -> int:
+    """The user sends its backlog now: note it; the tasks sent."""
+    w.submitted += 1
+    w.sent_xy, w.sent_at_s, w.fresh = w.xy.copy(), now_s, False
+    w.history.append((now_s, w.backlog))
+    return w.backlog
+
+
+def run_users(client: PlannerClient, scenario: Scenario, count: int, tp: TaskParams, speedup: float,
               seed: int, stop: threading.Event, duration_s: float | None = None) -> list[Walker]:
-    """Walk and submit until ``stop`` is set, ``duration_s`` (wall) passes, or the service
-    refuses every user because it flies no more sorties. Between two sorties the service
-    refuses requests too ("sortie over: waiting for ..."): users keep walking and asking."""
+    """Walk, let tasks arrive and submit until ``stop`` is set, ``duration_s`` (wall) passes,
+    or the service refuses every user because it flies no more sorties. Between two sorties
+    the service refuses requests too ("sortie over: waiting for ..."): users keep walking,
+    their tasks keep arriving, and they ask again after ``tp.retry_s``."""
     rng = np.random.default_rng(seed)
     params = WalkParams(scenario.area_side_m)
-    walkers = new_walkers(count, scenario, params, rng)
+    # the first draws within a wall second, so that the first plan sees every user
+    walkers = new_walkers(count, scenario, params, rng, min(tp.interval_s, speedup))
+    by_id = {w.user_id: w for w in walkers}
     p = pack(scenario)
-    tasks = np.zeros(1, dtype=np.int64)
+    places: queue.SimpleQueue[UserPlace] = queue.SimpleQueue()
+    client.follow_places(places.put)  # zenoh's thread: handed over to this one
     start = time.monotonic()
-    # the first requests go out within a second so that the first plan sees every user
-    due = [start + float(rng.uniform(0.0, min(1.0, interval_s / speedup))) for _ in walkers]
     last = start
     while not stop.is_set():
         now = time.monotonic()
         if duration_s is not None and now - start >= duration_s:
             break
+        sim = (now - start) * speedup
+        while not places.empty():
+            place = places.get()
+            if place.user_id in by_id:
+                on_place(by_id[place.user_id], place)
         for w in walkers:
             step(w, (now - last) * speedup, params, rng)
+            arrive(w, sim, p, tp, rng)
         last = now
-        for i, w in enumerate(walkers):
-            if w.done or now < due[i]:
-                continue
-            due[i] = now + interval_s / speedup
-            draw_tasks(p, tasks, rng)
-            x, y = (float(round(v, 1)) for v in np.clip(w.xy, 0.0, params.side_m))
-            w.submitted += 1
-            try:
-                ack = client.submit(w.user_id, x, y, int(tasks[0]), client_ref=f"{w.user_id}#{w.submitted}")
-            except ClientError as err:
-                w.refused += 1
-                w.last_refusal = f"{err.field}: {err.message}"
-                log.info("%s refused: %s: %s", w.user_id, err.field, err.message)
-                if err.field == "service" and ONE_SORTIE in err.message:
-                    w.done = True
-                continue
-            except ProtocolError as err:
-                w.refused += 1
-                w.last_refusal = str(err)
-                continue
-            w.acked += 1
-            log.info("%s at (%.0f, %.0f): %d tasks -> request %d", w.user_id, x, y, tasks[0], ack.request_id)
+        for w in walkers:
+            if wants_to_send(w, sim, tp):
+                submit(client, w, sim, tp, params)
         if all(w.done for w in walkers):
             log.info("the service's sortie is over: every user stops")
             break
-        stop.wait(0.05)
+        stop.wait(TICK_S)
     return walkers
+
+
+def submit(client: PlannerClient, w: Walker, now_s: float, tp: TaskParams, params: WalkParams) -> None:
+    """Send the user's backlog and position; take in the ack or the refusal."""
+    x, y = (float(round(v, 1)) for v in np.clip(w.xy, 0.0, params.side_m))
+    tasks = sent(w, now_s)
+    try:
+        ack = client.submit(w.user_id, x, y, tasks, client_ref=f"{w.user_id}#{w.submitted}")
+    except ClientError as err:
+        on_refused(w, now_s, tp, f"{err.field}: {err.message}")
+        log.info("%s refused: %s", w.user_id, escape_text(w.last_refusal))
+        if err.field == "service" and ONE_SORTIE in err.message:
+            w.done = True
+        return
+    except ProtocolError as err:
+        on_refused(w, now_s, tp, str(err))
+        log.info("%s: %s", w.user_id, escape_text(w.last_refusal))
+        return
+    on_ack(w, ack, tasks)
+    where = "" if ack.place is None else f", place {ack.place} in about {ack.eta_s or 0.0:.0f} s"
+    log.info("%s at (%.0f, %.0f): backlog %d -> request %d (served %d so far%s)", w.user_id, x, y, tasks,
+             ack.request_id, w.served, where)

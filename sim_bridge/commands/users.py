@@ -1,7 +1,9 @@
-"""Simulated ground users: each walks by random waypoint and submits a task request over
-zenoh every interval. Stops on SIGINT/SIGTERM, after --duration, or when the service says
-it flies no more sorties (between two sorties it refuses requests and the users keep
-asking). Logs go to stderr; a one-line summary per user at the end."""
+"""Simulated ground users: each walks by random waypoint, keeps a backlog of tasks (new ones
+arrive every interval; what the service serves is taken off) and submits it over zenoh when
+it changes, when the user has moved, and at least every interval (--tasks redraw: the
+paper's fresh draw every interval instead). Stops on SIGINT/SIGTERM, after --duration, or
+when the service says it flies no more sorties (between two sorties it refuses requests and
+the users keep asking). Logs go to stderr; a one-line summary per user at the end."""
 
 from __future__ import annotations
 
@@ -13,7 +15,7 @@ import threading
 
 from protocol.client_args import DEFAULT_ENDPOINT, add_client_arguments
 
-HELP = "simulated ground users that move by random waypoint and submit requests over zenoh"
+HELP = "simulated ground users that move by random waypoint and submit their task backlogs over zenoh"
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
@@ -21,7 +23,18 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--preset", default="field", help="scenario preset: area, layout and task draws (default field)")
     parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE", help="override a scenario field")
     parser.add_argument("--interval", type=float, default=40.0,
-                        help="simulated seconds between one user's requests (default 40)")
+                        help="simulated seconds between two draws of a user's tasks, and the longest a user with "
+                             "tasks stays silent (default 40)")
+    parser.add_argument("--tasks", choices=("backlog", "redraw"), default="backlog",
+                        help="backlog (default): each interval's draw N(mean, phi^2) of the scenario arrives and is "
+                             "added to the user's backlog (capped at --backlog-max), what is served is taken off, "
+                             "the backlog is sent when it changes; redraw: the paper's experiments, a fresh draw "
+                             "replaces the task count every interval and is sent then")
+    parser.add_argument("--backlog-max", type=int, default=None, metavar="N",
+                        help="most tasks a user holds (default: the scenario's task_max, u_max)")
+    parser.add_argument("--resend-m", type=float, default=50.0, metavar="M",
+                        help="a user with tasks that has moved this far since its last request sends again "
+                             "(default 50)")
     parser.add_argument("--speedup", type=float, default=1.0, help="simulated seconds per wall second (default 1)")
     parser.add_argument("--seed", type=int, default=0, help="seed of the walks and task draws (default 0)")
     parser.add_argument("--duration", type=float, default=None, help="stop after this many wall seconds")
@@ -34,10 +47,14 @@ def run(args: argparse.Namespace) -> int:
     from planner_service.model import ScenarioError, preset
     from protocol import Keys, ProtocolError
     from protocol.client import PlannerClient
-    from sim_bridge.users import run_users
+    from sim_bridge.users import TaskParams, run_users
 
-    if args.count < 1 or not args.interval > 0 or not args.speedup > 0:
-        print("error: --count must be at least 1, --interval and --speedup positive", file=sys.stderr)
+    if args.count < 1 or not args.interval > 0 or not args.speedup > 0 or not args.resend_m > 0:
+        print("error: --count must be at least 1, --interval, --speedup and --resend-m positive", file=sys.stderr)
+        return 2
+    from protocol.messages import MAX_TASKS
+    if args.backlog_max is not None and not 1 <= args.backlog_max <= MAX_TASKS:
+        print(f"error: --backlog-max must be 1 to {MAX_TASKS} (the most tasks a request may carry)", file=sys.stderr)
         return 2
     try:
         scenario = preset(args.preset).with_overrides(args.set)
@@ -58,7 +75,10 @@ def run(args: argparse.Namespace) -> int:
         while not client.wait_for_service(1.0):
             if stop.is_set():
                 return 0
-        walkers = run_users(client, scenario, args.count, args.interval, args.speedup, args.seed, stop, args.duration)
+        tasks = TaskParams(interval_s=args.interval, law=args.tasks, resend_m=args.resend_m, retry_s=args.interval,
+                           backlog_max=scenario.task_max if args.backlog_max is None else args.backlog_max)
+        walkers = run_users(client, scenario, args.count, tasks, args.speedup, args.seed, stop, args.duration)
     for w in walkers:
-        print(f"{w.user_id}: {w.submitted} submitted, {w.acked} acked, {w.refused} refused", file=sys.stderr)
+        print(f"{w.user_id}: {w.submitted} submitted, {w.acked} acked, {w.refused} refused; {w.arrived} tasks arrived, "
+              f"{w.lost} lost to a full backlog, {w.served} served, backlog {w.backlog}", file=sys.stderr)
     return 0

@@ -1,0 +1,202 @@
+"""The simulated users as a pure walk with explicit generators (``sim_bridge/users.py``): the
+task laws (backlog: arrivals added and capped, served taken off; redraw: the paper's draw
+every interval), when a user speaks, what it learns from acks and ``user_place``; then a
+whole walk against the real intake and journal (no zenoh), whose counts must agree."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from planner_service.model import field, pack
+from planner_service.model.mobility import draw_tasks
+from planner_service.service.intake import Accepted, Intake, fairness_rule
+from planner_service.service.journal import Journal
+from protocol import Area, TaskAck, UserPlace
+from sim_bridge.users import (TaskParams, WalkParams, Walker, arrive, learn_served, new_walkers, on_ack, on_place,
+                              on_refused, sent, step, wants_to_send)
+
+SCENARIO = field()
+P = pack(SCENARIO)
+WALK = WalkParams(SCENARIO.area_side_m)
+
+
+def walker() -> Walker:
+    return Walker("u", np.array([10.0, 10.0]), np.array([400.0, 10.0]), 1.0, next_draw_s=0.0)
+
+
+def draws(seed: int, n: int) -> list[int]:
+    """The model's first ``n`` draws from ``seed``, one a call, as ``arrive`` makes them."""
+    rng, one, out = np.random.default_rng(seed), np.zeros(1, dtype=np.int64), []
+    for _ in range(n):
+        draw_tasks(P, one, rng)
+        out.append(int(one[0]))
+    return out
+
+
+def test_backlog_law_adds_each_interval_s_draw_and_caps_it() -> None:
+    tp = TaskParams(interval_s=40.0, backlog_max=25)
+    w, rng = walker(), np.random.default_rng(7)
+    expected, backlog, lost = [], 0, 0
+    for d in draws(7, 6):
+        kept = min(d, 25 - backlog)
+        backlog, lost = backlog + kept, lost + d - kept
+        expected.append(backlog)
+    seen = []
+    for k in range(6):
+        arrive(w, 40.0 * k + 39.0, P, tp, rng)  # one draw per interval, at its start
+        seen.append(w.backlog)
+    assert seen == expected and w.lost == lost and w.arrived == backlog
+    assert w.backlog == 25 and lost > 0  # six draws of mean 10 fill a backlog of 25
+    arrive(w, 239.0, P, tp, rng)  # nothing more is due
+    assert w.backlog == 25
+
+
+def test_redraw_law_replaces_the_count_and_sends_it_once_an_interval() -> None:
+    tp = TaskParams(interval_s=40.0, law="redraw")
+    w, rng = walker(), np.random.default_rng(3)
+    expected = draws(3, 3)
+    for k in range(3):
+        arrive(w, 40.0 * k, P, tp, rng)
+        assert w.backlog == expected[k] and wants_to_send(w, 40.0 * k, tp)
+        sent(w, 40.0 * k)
+        learn_served(w, 1, 5 * (k + 1))  # services do not change a redraw
+        assert not wants_to_send(w, 40.0 * k + 1.0, tp)
+    assert [b for _, b in w.history] == expected
+
+
+def test_when_a_user_speaks() -> None:
+    tp = TaskParams(interval_s=40.0, resend_m=50.0, retry_s=40.0)
+    w = walker()
+    assert not wants_to_send(w, 0.0, tp)  # nothing to offload, nothing in force
+    w.backlog = 12
+    assert wants_to_send(w, 0.0, tp)
+    on_ack(w, TaskAck(request_id=1, user_id="u", sortie=1, served_tasks=0), sent(w, 0.0))
+    assert not wants_to_send(w, 39.0, tp)  # the service counts what it has
+    w.backlog = 15  # new tasks
+    assert wants_to_send(w, 1.0, tp)
+    on_ack(w, TaskAck(request_id=2, user_id="u", sortie=1, served_tasks=0), sent(w, 1.0))
+    step(w, 30.0, WALK, np.random.default_rng(0))  # 30 m at 1 m/s: not far enough
+    assert not wants_to_send(w, 31.0, tp)
+    step(w, 25.0, WALK, np.random.default_rng(0))
+    assert wants_to_send(w, 56.0, tp)  # moved 55 m
+    on_ack(w, TaskAck(request_id=3, user_id="u", sortie=1, served_tasks=0), sent(w, 56.0))
+    assert not wants_to_send(w, 95.0, tp) and wants_to_send(w, 96.0, tp)  # at least once an interval
+    on_refused(w, 96.0, tp, "service: busy: ...")
+    assert not wants_to_send(w, 135.0, tp) and wants_to_send(w, 136.0, tp)
+
+
+def test_what_a_user_learns_of_its_services() -> None:
+    tp = TaskParams()
+    w = walker()
+    w.backlog = 20
+    on_ack(w, TaskAck(request_id=4, user_id="u", sortie=2, served_tasks=8), sent(w, 0.0))
+    assert (w.backlog, w.served, w.sortie) == (20, 0, 2)  # the first news is the baseline
+    # the service served 12 of request 4 and published the place: backlog 8 left, as ours
+    on_place(w, UserPlace(user_id="u", sortie=2, request_id=4, backlog=8, served_tasks=20, services=2))
+    assert (w.backlog, w.view, w.served) == (8, 8, 12) and not wants_to_send(w, 1.0, tp)
+    # a request that crossed a service on the wire: the ack shows the service, the counts
+    # differ (the service does not take it off a newer request), the user sends again
+    w.backlog += 10
+    on_ack(w, TaskAck(request_id=5, user_id="u", sortie=2, served_tasks=26), sent(w, 2.0))
+    assert (w.backlog, w.view) == (12, 18) and wants_to_send(w, 2.1, tp)
+    on_ack(w, TaskAck(request_id=6, user_id="u", sortie=2, served_tasks=26), sent(w, 2.1))
+    assert not wants_to_send(w, 2.2, tp)
+    # stale news changes nothing: an older place, an earlier sortie, a smaller count
+    on_place(w, UserPlace(user_id="u", sortie=2, request_id=5, backlog=1, served_tasks=26))
+    learn_served(w, 1, 99)
+    learn_served(w, 2, 20)
+    assert (w.backlog, w.view, w.served) == (12, 12, 18)
+    # everything served: the service's count is 0 too, nothing to say
+    on_place(w, UserPlace(user_id="u", sortie=2, request_id=6, backlog=0, served_tasks=38))
+    assert (w.backlog, w.view) == (0, 0) and not wants_to_send(w, 100.0, tp)
+    # a new sortie counts from zero; nothing of ours is in force in it
+    on_place(w, UserPlace(user_id="u", sortie=3, request_id=None, served_tasks=0))
+    assert (w.sortie, w.served_seen, w.view) == (3, 0, None)
+
+
+def test_a_user_whose_backlog_is_all_served_during_its_request_says_it_is_done() -> None:
+    w = walker()
+    w.backlog = 6
+    on_ack(w, TaskAck(request_id=1, user_id="u", sortie=1, served_tasks=0), sent(w, 0.0))
+    w.backlog = 0  # it uploaded everything itself (a real user knows)
+    assert wants_to_send(w, 1.0, TaskParams())  # tasks 0: nothing more, the wait ends
+
+
+def test_a_whole_walk_against_the_intake_and_journal_keeps_the_counts_right(tmp_path: Path) -> None:
+    """Ten users for 60 intervals against the real intake: a stand-in for the vehicle serves
+    a pending user now and then (part of its backlog, bound to its request in force) and
+    publishes the places now and then. A user's backlog is its arrivals less what it learnt
+    was served; the service's count of it is the truth (arrivals less everything served)
+    whenever the user has nothing more to say; users learn nearly every service."""
+    journal = Journal(tmp_path / "j.sqlite", now_s=0.0)
+    clock = {"t": 0.0}
+    intake = Intake(journal, Area(SCENARIO.area_side_m, 120.0, 10.0), lambda: clock["t"], monotonic=lambda: clock["t"],
+                    unservable=fairness_rule(SCENARIO))
+    tp = TaskParams(interval_s=40.0, backlog_max=SCENARIO.task_max)
+    rng, serve_rng = np.random.default_rng(11), np.random.default_rng(12)
+    walkers = new_walkers(10, SCENARIO, WALK, rng, 10.0)
+    served_total = dict.fromkeys((w.user_id for w in walkers), 0)
+    for tick in range(1, 60 * 8 + 1):
+        now = tick * 5.0
+        clock["t"] = now
+        for w in walkers:
+            step(w, 5.0, WALK, rng)
+            arrive(w, now, P, tp, rng)
+            if wants_to_send(w, now, tp):
+                x, y = (float(v) for v in np.clip(w.xy, 0.0, WALK.side_m))
+                tasks = sent(w, now)
+                out = intake.handle(json.dumps({"kind": "task_request", "user_id": w.user_id, "x_m": x, "y_m": y,
+                                                "tasks": tasks, "client_ref": f"{w.user_id}#{w.submitted}"}).encode())
+                assert isinstance(out, Accepted), out
+                on_ack(w, out.reply, tasks)
+        # A user's backlog is its arrivals less what it learnt was served; what it has not
+        # learnt yet is all that separates it from the truth. Unless it is about to send
+        # again (it learnt of a service its last request crossed), the service counts the
+        # truth.
+        counts = {b.user_id: b.backlog for b in journal.user_backlogs()}
+        for w in walkers:
+            truth = w.arrived - served_total[w.user_id]
+            assert w.backlog == w.arrived - w.served and w.backlog - truth == served_total[w.user_id] - w.served
+            if w.view is not None and not wants_to_send(w, now, tp):
+                assert counts.get(w.user_id, 0) == truth, (tick, w.user_id, counts.get(w.user_id), truth)
+        if tick % 4 == 0:  # a hold ends: serve part of a pending user's backlog
+            pending = journal.pending()
+            if pending:
+                row = pending[int(serve_rng.integers(len(pending)))]
+                bound = journal.request_in_force(row.user_id, now)
+                assert bound is not None and bound.request_id == row.request_id
+                n = int(serve_rng.integers(1, bound.backlog + 1))
+                journal.record_service(bound.request_id, 0, (x, y, 100.0), n, n * 1e5, 0.1, 9e4, now)
+                served_total[row.user_id] += n
+                if tick % 8 == 0:  # a re-plan publishes the places
+                    for b in journal.user_backlogs():
+                        on_place(next(w for w in walkers if w.user_id == b.user_id), UserPlace(
+                            user_id=b.user_id, sortie=1, request_id=b.request_id, backlog=b.backlog,
+                            served_tasks=b.served_tasks, services=b.services))
+    assert sum(served_total.values()) > 100 and sum(w.arrived for w in walkers) > 1000
+    for w in walkers:  # each learnt what was served, up to the last service after its last ack
+        assert w.served <= served_total[w.user_id]
+        assert w.served_seen == w.served
+    learnt = sum(w.served for w in walkers)
+    print(f"\n{sum(w.submitted for w in walkers)} requests, {learnt} of {sum(served_total.values())} served tasks learnt")
+    assert learnt >= 0.9 * sum(served_total.values())
+
+
+@pytest.mark.parametrize("law", ["backlog", "redraw"])
+def test_the_same_seed_walks_the_same(law: str) -> None:
+    def run(seed: int) -> list[tuple[float, int]]:
+        tp = TaskParams(law=law)  # type: ignore[arg-type]
+        rng = np.random.default_rng(seed)
+        ws = new_walkers(3, SCENARIO, WALK, rng, 5.0)
+        for k in range(200):
+            for w in ws:
+                step(w, 1.0, WALK, rng)
+                arrive(w, float(k), P, tp, rng)
+                if wants_to_send(w, float(k), tp):
+                    on_ack(w, TaskAck(request_id=k + 1, user_id=w.user_id, sortie=1, served_tasks=0), sent(w, float(k)))
+        return [h for w in ws for h in w.history]
+    assert run(5) == run(5) and run(5) != run(6)
