@@ -3,16 +3,20 @@
 #
 #   sh docs/zenoh/make-certs.sh DIR [SERVICE_NAME ...]
 #
-# In DIR: ca.pem/ca.key (the certificate authority; made once, kept if already there),
-# service.pem/service.key (CN uavmec-service, the service's identity), user.pem/user.key
-# (CN uavmec-user, the identity every user presents). SERVICE_NAME: the DNS names or IP
-# addresses users connect to, written into the service certificate, which users check
-# (default: localhost 127.0.0.1). The access control rules match these common names.
+# In DIR: ca.pem/ca.key (the certificate authority; made once, kept if already there) and
+# service.pem/service.key (CN uavmec-service, the service's identity). SERVICE_NAME: the DNS
+# names or IP addresses users connect to, written into the service certificate, which users
+# check (default: localhost 127.0.0.1).
 #
-#   sh docs/zenoh/make-certs.sh DIR --user NAME
+#   sh docs/zenoh/make-certs.sh DIR --user USER_ID
 #
-# adds NAME.pem/NAME.key, another user certificate (CN uavmec-user) signed by DIR's CA, for a
-# user of its own (one per device: a lost device's certificate is just not renewed).
+# adds USER_ID.pem/USER_ID.key, a user's certificate signed by DIR's CA whose common name is
+# its user id (1-64 of A-Z a-z 0-9 _ . : -): the service's access control lets that
+# certificate submit requests as USER_ID only, on its own request key, and follow its own
+# place. It prints the entries to add to the access_control of service-tls-acl.json5 (for
+# prefix uavmec and vehicle uav1: change them with yours), one line each for "rules",
+# "subjects" and "policies". One certificate per user and device: a lost device's
+# certificate is just not renewed, and its entries removed.
 #
 # Keep ca.key off the aircraft and off users' devices: whoever holds it can make identities.
 set -eu
@@ -40,8 +44,20 @@ sign() {
 }
 
 if [ "${1:-}" = "--user" ]; then
-    [ $# -eq 2 ] || { echo "usage: $0 DIR --user NAME" >&2; exit 2; }
-    sign "$2" uavmec-user "extendedKeyUsage=clientAuth"
+    [ $# -eq 2 ] || { echo "usage: $0 DIR --user USER_ID" >&2; exit 2; }
+    user=$2
+    # the common name is the user id the access control binds: nothing else may pass
+    case $user in
+        ''|*[!A-Za-z0-9_.:-]*) echo "$0: '$user' is not a user id (1-64 of A-Z a-z 0-9 _ . : -)" >&2; exit 2 ;;
+        uavmec-service|uavmec-ca|service|ca) echo "$0: $user is reserved (the service's or the CA's name)" >&2; exit 2 ;;
+    esac
+    [ ${#user} -le 64 ] || { echo "$0: '$user' is longer than 64 characters" >&2; exit 2; }
+    sign "$user" "$user" "extendedKeyUsage=clientAuth"
+    k="uavmec/uav1"
+    echo "add to the access_control of service-tls-acl.json5 (prefix uavmec, vehicle uav1: change them with yours):"
+    echo "rules: { id: \"$user-in\", permission: \"allow\", flows: [\"ingress\"], messages: [\"query\", \"declare_subscriber\"], key_exprs: [\"$k/request/$user\", \"$k/users/$user\"] }, { id: \"$user-out\", permission: \"allow\", flows: [\"egress\"], messages: [\"reply\", \"put\"], key_exprs: [\"$k/request/$user\", \"$k/users/$user\"] },"
+    echo "subjects: { id: \"$user\", cert_common_names: [\"$user\"] },"
+    echo "policies: { id: \"$user\", rules: [\"user-asks\", \"user-follows\", \"user-checks-alive\", \"to-users\", \"$user-in\", \"$user-out\"], subjects: [\"$user\"] },"
     exit 0
 fi
 
@@ -57,4 +73,4 @@ done
 # the service both accepts users (server) and may connect to a router (client)
 sign service uavmec-service "extendedKeyUsage=serverAuth,clientAuth
 subjectAltName=$san"
-sign user uavmec-user "extendedKeyUsage=clientAuth"
+echo "users: sh $0 $dir --user USER_ID (one certificate per user id)"
