@@ -38,6 +38,7 @@ from .config import ServiceConfig
 from .errors import JournalError, LinkError, PlanningError
 from .intake import Accepted, Intake, fairness_rule
 from .journal import Journal
+from .places import plan_places, user_places
 from .link import LinkEvent, LinkSettings, open_link
 from .link.base import HOLDING_MODES, MISSION_MODES, RETURNING_MODES
 from .planning import (PlannedPath, Planner, VehicleFix, assemble, check_path, not_served_reason, planning_battery_j,
@@ -727,6 +728,23 @@ class Service:
         self.plan_msg = Plan(plan_id=held.plan_id, time_s=self.clock(), predicted_energy_j=max(predicted_energy_j, 0.0),
                              points=[PlanPoint(p.x_m, p.y_m, p.z_m, p.hold_s, p.user_id) for p in held.points])
         self.zio.publish("plan", encode(self.plan_msg))
+        self._publish_places(held)
+
+    def _publish_places(self, held: HeldMission) -> None:
+        """Every user's place in the plan just published, for the acks and on each user's key
+        (docs/PROTOCOL.md, "Requests"): from where the vehicle is, through the plan's points."""
+        if not self.link.telemetry.valid:
+            return
+        fix = self._fix()
+        try:
+            places = plan_places(held.points, (fix.x_m, fix.y_m, fix.z_m), self.scenario.speed_mps)
+            messages = user_places(self.journal.user_backlogs(), places, sortie=self.journal.sortie,
+                                   plan_id=held.plan_id, time_s=self.clock())
+        except (JournalError, PlanningError) as err:
+            log.error("plan %d: users' places not published: %s", held.plan_id, err)
+            return
+        self.intake.set_places(places)
+        self.zio.publish_places(messages)
 
     async def _maybe_resume(self) -> None:
         """After the vehicle lost its mission in the air (a restart: it holds position), fly

@@ -3,7 +3,8 @@ as real processes, real zenoh and MAVLink on loopback. The users' requests in th
 are backlogs, not fresh draws: between two requests of a user with no service of it near
 them, the count never falls; none exceeds the cap. Each user learnt exactly what the
 journal says it was served, if its last request came after its last service (the ack
-carries the count), and never more."""
+carries the count), and never more. With every plan the service publishes each user's
+place: the users of the plan in its order, the others with none."""
 
 from __future__ import annotations
 
@@ -12,6 +13,8 @@ import time
 
 import pytest
 from stack import Stack
+
+from protocol import Plan, UserPlace
 
 SPEEDUP = "40"
 SUMMARY = re.compile(r"^(user-\d+): (\d+) submitted, (\d+) acked, (\d+) refused; (\d+) tasks arrived, (\d+) lost "
@@ -22,6 +25,11 @@ SUMMARY = re.compile(r"^(user-\d+): (\d+) submitted, (\d+) acked, (\d+) refused;
 def test_users_send_their_backlogs_and_learn_what_was_served(stack: Stack) -> None:
     stack.vehicle("--speedup", SPEEDUP)
     stack.service(mavlink__start_mission="true", planner__min_requests="4")
+    assert stack.client is not None
+    places: list[UserPlace] = []
+    plans: list[Plan] = []
+    stack.client.follow_places(places.append)
+    stack.client.follow_plans(plans.append)
     users = stack.users("--count", "6", "--speedup", SPEEDUP, "--seed", "5", "--backlog-max", "20")
     served = []
     deadline = time.monotonic() + 100.0
@@ -62,3 +70,16 @@ def test_users_send_their_backlogs_and_learn_what_was_served(stack: Stack) -> No
             assert learnt == journal_served, (user, learnt, journal_served)
         assert acked == sum(1 for _, u, _, _, _ in rows if u == user) and submitted >= acked
     assert sum(v[5] for v in summary.values()) > 0  # somebody learnt of a service
+
+    checked = 0
+    for plan in list(plans):
+        of_plan = {p.user_id: p for p in list(places) if p.plan_id == plan.plan_id}
+        order = list(dict.fromkeys(pt.user_id for pt in plan.points if pt.user_id is not None))
+        if not of_plan:
+            continue
+        assert all(of_plan[u].place == i for i, u in enumerate(order, 1) if u in of_plan), (plan, of_plan)
+        assert all(p.place is None and p.eta_s is None for u, p in of_plan.items() if u not in order)
+        etas = [of_plan[u].eta_s for u in order if u in of_plan]
+        assert etas == sorted(etas), etas  # later in the order, later in time
+        checked += 1
+    assert checked >= 1, (len(plans), len(places))
