@@ -8,6 +8,11 @@ from .messages import (
     MAX_PAYLOAD_BYTES, SCHEMA_VERSION, ErrorReply, Event, Plan, PlanPoint, PendingRequest, State,
     Status, TaskAck, TaskRequest, decode, decode_reply, decode_request, encode,
 )
+from .messages import (
+    OPERATOR_SCHEMA_VERSION, STATUS_SCHEMA_VERSION, OperatorCommand, OperatorReply, decode_operator_command,
+    decode_operator_reply,
+)
+from .text import printable
 from .mission import (
     FLAVOURS, Flavour, HoverPoint, MissionItem, MissionPlan, decode_path, encode_path, mission_digest,
     same_items, same_mission, validate_mission,
@@ -21,4 +26,6 @@ __all__ = [
     "TaskAck", "TaskRequest", "decode", "decode_path", "decode_reply", "decode_request", "encode",
     "encode_path", "global_to_local", "local_to_global", "mission_digest", "read_plan", "read_wpl",
     "same_items", "same_mission", "validate_mission", "write_plan", "write_wpl",
+    "OPERATOR_SCHEMA_VERSION", "STATUS_SCHEMA_VERSION", "OperatorCommand", "OperatorReply",
+    "decode_operator_command", "decode_operator_reply", "printable",
 ]
