@@ -28,17 +28,19 @@ def printable(text: object, limit: int = DEFAULT_LIMIT) -> str:
     """``text`` (any object: ``str()`` of it) with every character that is not printable
     (C0 and C1 controls, DEL, line and paragraph separators, format characters such as
     bidi overrides and zero-width ones, lone surrogates, unassigned code points) written as
-    ``\\xNN``, ``\\uNNNN`` or ``\\UNNNNNNNN``, a backslash as ``\\\\`` (so an escape in
-    the output always means one in the input), and cut to at most ``limit`` characters
-    of output, ending in ``...(N chars)`` when cut (N: the input's length). The space is
-    kept; every other whitespace character is escaped."""
+    ``\\xNN``, ``\\uNNNN`` or ``\\UNNNNNNNN``, and cut to at most ``limit`` characters of
+    output, ending in ``...(N chars)`` when cut (N: the input's length). The space is kept;
+    every other whitespace character is escaped. A backslash is kept as it is, so that
+    ``printable`` of its own output changes nothing: text escaped by the service and again
+    by a client reads the same (a literal backslash-x in the input looks like an escape;
+    what matters is that no control character gets through)."""
     if limit < MIN_LIMIT:
         raise ValueError(f"limit must be at least {MIN_LIMIT}, got {limit}")
     source = text if isinstance(text, str) else str(text)
     pieces: list[str] = []
     used = 0
     for ch in source:
-        piece = "\\\\" if ch == "\\" else ch if (ch == " " or ch.isprintable()) else _escape(ch)
+        piece = ch if (ch == " " or ch.isprintable()) else _escape(ch)
         pieces.append(piece)
         used += len(piece)
         if used > limit:  # cut: keep what fits before the marker

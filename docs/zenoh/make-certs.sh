@@ -14,9 +14,15 @@
 # adds NAME.pem/NAME.key, another user certificate (CN uavmec-user) signed by DIR's CA, for a
 # user of its own (one per device: a lost device's certificate is just not renewed).
 #
+#   sh docs/zenoh/make-certs.sh DIR --operator NAME
+#
+# adds NAME.pem/NAME.key, another operator certificate (CN uavmec-operator): the identity that
+# may send the service its operator commands (start, hold, status); the first run makes
+# operator.pem/operator.key. Give it to the operator's ground station only, never to users.
+#
 # Keep ca.key off the aircraft and off users' devices: whoever holds it can make identities.
 set -eu
-[ $# -ge 1 ] || { echo "usage: $0 DIR [SERVICE_NAME ...] | $0 DIR --user NAME" >&2; exit 2; }
+[ $# -ge 1 ] || { echo "usage: $0 DIR [SERVICE_NAME ...] | $0 DIR --user NAME | $0 DIR --operator NAME" >&2; exit 2; }
 dir=$1; shift
 mkdir -p "$dir"
 umask 077
@@ -45,6 +51,12 @@ if [ "${1:-}" = "--user" ]; then
     exit 0
 fi
 
+if [ "${1:-}" = "--operator" ]; then
+    [ $# -eq 2 ] || { echo "usage: $0 DIR --operator NAME" >&2; exit 2; }
+    sign "$2" uavmec-operator "extendedKeyUsage=clientAuth"
+    exit 0
+fi
+
 [ $# -ge 1 ] || set -- localhost 127.0.0.1
 san=""
 for name in "$@"; do
@@ -58,3 +70,4 @@ done
 sign service uavmec-service "extendedKeyUsage=serverAuth,clientAuth
 subjectAltName=$san"
 sign user uavmec-user "extendedKeyUsage=clientAuth"
+sign operator uavmec-operator "extendedKeyUsage=clientAuth"

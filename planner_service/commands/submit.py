@@ -6,6 +6,7 @@ from __future__ import annotations
 import argparse
 import sys
 
+from protocol.arguments import finite_float, non_negative_int, positive_float
 from protocol.client_args import DEFAULT_ENDPOINT, add_client_arguments
 
 HELP = "a zenoh client that submits one task request"
@@ -13,12 +14,13 @@ HELP = "a zenoh client that submits one task request"
 
 def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--user", required=True, help="user id (1-64 of A-Z a-z 0-9 _ . : -)")
-    parser.add_argument("--x", type=float, required=True, help="east position, local metres")
-    parser.add_argument("--y", type=float, required=True, help="north position, local metres")
-    parser.add_argument("--z", type=float, default=0.0, help="height, local metres (default 0)")
-    parser.add_argument("--tasks", type=int, required=True, help="number of tasks to offload")
+    parser.add_argument("--x", type=finite_float, required=True, help="east position, local metres")
+    parser.add_argument("--y", type=finite_float, required=True, help="north position, local metres")
+    parser.add_argument("--z", type=finite_float, default=0.0, help="height, local metres (default 0)")
+    parser.add_argument("--tasks", type=non_negative_int, required=True, help="number of tasks to offload")
     add_client_arguments(parser)
-    parser.add_argument("--timeout", type=float, default=5.0, help="seconds to wait for the service (default 5)")
+    parser.add_argument("--timeout", type=positive_float, default=5.0,
+                        help="seconds to wait for the service (default 5)")
 
 
 def run(args: argparse.Namespace) -> int:

@@ -84,9 +84,9 @@ def handle(command: OperatorCommand, state: AuthorityState,
     new = state
     if command.command == "start":
         if context.degraded:
-            accepted, message = False, f"refused: the service is degraded: {context.degraded}"
+            accepted, message = False, f"the service is degraded: {context.degraded}"
         elif context.start_refusal is not None:
-            accepted, message = False, f"refused: {context.start_refusal}"
+            accepted, message = False, context.start_refusal
         elif state.authority == "operator":
             accepted, message = True, f"the service already has the authority: {state.detail}"
         else:

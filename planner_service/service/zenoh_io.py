@@ -88,6 +88,7 @@ class ZenohIO:
         self.in_flight = InFlight(cfg.max_queries_in_flight)
         self._request_q: Any = None
         self._state_q: Any = None
+        self._operator_q: Any = None
         self._pubs: dict[str, Any] = {}
         self._token: Any = None
 
@@ -96,8 +97,10 @@ class ZenohIO:
         return session_config(c.mode, c.listen, c.connect, c.multicast_scouting, c.config_file or None)
 
     async def open(self, loop: asyncio.AbstractEventLoop, on_request: Callable[[Any], None],
-                   on_state: Callable[[Any], None], stopping: asyncio.Event) -> bool:
-        """Open the session and declare everything; handlers run on ``loop``'s thread.
+                   on_state: Callable[[Any], None], stopping: asyncio.Event,
+                   on_operator: Callable[[Any], None] | None = None) -> bool:
+        """Open the session and declare everything; handlers run on ``loop``'s thread
+        (``on_operator``: the operator queryable, declared only if given).
 
         In client mode the session needs a router: while none answers, it is tried again
         every ``OPEN_RETRY_S`` (off the loop's thread, so shutdown stays possible) until one
@@ -134,6 +137,9 @@ class ZenohIO:
         self._pubs = {name: s.declare_publisher(getattr(self.keys, name)) for name in ("status", "plan", "events")}
         self._state_q = s.declare_queryable(self.keys.state, self._hand_over(loop, on_state, self.keys.state))
         self._request_q = s.declare_queryable(self.keys.request, self._hand_over(loop, on_request, self.keys.request))
+        if on_operator is not None:
+            self._operator_q = s.declare_queryable(self.keys.operator,
+                                                   self._hand_over(loop, on_operator, self.keys.operator))
         self._token = s.liveliness().declare_token(self.keys.alive)
         return True
 
@@ -183,13 +189,13 @@ class ZenohIO:
 
     def close(self) -> None:
         self.stop_intake()
-        for item in (self._token, self._state_q, *self._pubs.values()):
+        for item in (self._token, self._state_q, self._operator_q, *self._pubs.values()):
             if item is not None:
                 try:
                     item.undeclare()
                 except zenoh.ZError:
                     pass
-        self._token, self._state_q, self._pubs = None, None, {}
+        self._token, self._state_q, self._operator_q, self._pubs = None, None, None, {}
         if self.session is not None:
             self.session.close()
             self.session = None

@@ -11,20 +11,22 @@ import signal
 import sys
 import threading
 
+from protocol.arguments import positive_float, positive_int
 from protocol.client_args import DEFAULT_ENDPOINT, add_client_arguments
 
 HELP = "simulated ground users that move by random waypoint and submit requests over zenoh"
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--count", type=int, default=10, help="number of users (default 10)")
+    parser.add_argument("--count", type=positive_int, default=10, help="number of users (default 10)")
     parser.add_argument("--preset", default="field", help="scenario preset: area, layout and task draws (default field)")
     parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE", help="override a scenario field")
-    parser.add_argument("--interval", type=float, default=40.0,
+    parser.add_argument("--interval", type=positive_float, default=40.0,
                         help="simulated seconds between one user's requests (default 40)")
-    parser.add_argument("--speedup", type=float, default=1.0, help="simulated seconds per wall second (default 1)")
+    parser.add_argument("--speedup", type=positive_float, default=1.0,
+                        help="simulated seconds per wall second (default 1)")
     parser.add_argument("--seed", type=int, default=0, help="seed of the walks and task draws (default 0)")
-    parser.add_argument("--duration", type=float, default=None, help="stop after this many wall seconds")
+    parser.add_argument("--duration", type=positive_float, default=None, help="stop after this many wall seconds")
     add_client_arguments(parser)
     parser.add_argument("--log-level", default="INFO", choices=("DEBUG", "INFO", "WARNING", "ERROR"))
 

@@ -56,8 +56,8 @@ def test_start_after_a_revocation_gives_it_back_and_twice_is_harmless() -> None:
 
 @pytest.mark.parametrize("fields, words", [
     ({"degraded": "the journal cannot be written: disk full"},
-     "refused: the service is degraded: the journal cannot be written: disk full"),
-    ({"start_refusal": "the battery reading is unknown"}, "refused: the battery reading is unknown"),
+     "the service is degraded: the journal cannot be written: disk full"),
+    ({"start_refusal": "the battery reading is unknown"}, "the battery reading is unknown"),
 ])
 def test_start_is_refused_when_the_service_cannot_take_it(fields: dict[str, str], words: str) -> None:
     for state in (NONE, REVOKED):
