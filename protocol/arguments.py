@@ -89,6 +89,13 @@ def finite_float(text: str) -> float:
     return _number(text, float)
 
 
+def probability(text: str) -> float:
+    value = _number(text, float)
+    if not 0.0 <= value <= 1.0:
+        raise argparse.ArgumentTypeError(f"{text} is not a probability in [0, 1]")
+    return value
+
+
 def positive_int(text: str) -> int:
     value = int(_number(text, int))
     if value < 1:

@@ -313,7 +313,8 @@ class Journal:
             (app_id,) = db.execute("PRAGMA application_id").fetchone()
             tables = {name for (name,) in db.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
         except sqlite3.Error as err:
-            raise JournalError(f"the journal {self.path} cannot be read: {err}") from None
+            raise JournalError(f"{self.path} is not a journal, or a damaged one: SQLite cannot read it ({err}); "
+                               "refused, not written") from None
         if app_id == APPLICATION_ID:
             if not LEGACY_TABLES <= tables:
                 raise JournalError(f"the journal {self.path} has the journal's application id but not its tables "
