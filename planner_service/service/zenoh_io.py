@@ -33,6 +33,8 @@ log = logging.getLogger("planner_service.zenoh")
 
 OPEN_RETRY_S = 2.0
 """In client mode, how long one attempt to reach a router lasts before the next."""
+OPERATOR_QUERIES_IN_FLIGHT = 8
+"""Operator commands waiting for the event loop (a person types them: a few at most)."""
 
 
 class ZenohError(ServiceError):
@@ -86,6 +88,8 @@ class ZenohIO:
         self.keys = keys
         self.session: Any = None
         self.in_flight = InFlight(cfg.max_queries_in_flight)
+        self.operator_in_flight = InFlight(OPERATOR_QUERIES_IN_FLIGHT)
+        """The operator's own bound: a flood of users' queries never answers a hold busy."""
         self._request_q: Any = None
         self._state_q: Any = None
         self._operator_q: Any = None
@@ -138,16 +142,16 @@ class ZenohIO:
         self._state_q = s.declare_queryable(self.keys.state, self._hand_over(loop, on_state, self.keys.state))
         self._request_q = s.declare_queryable(self.keys.request, self._hand_over(loop, on_request, self.keys.request))
         if on_operator is not None:
-            self._operator_q = s.declare_queryable(self.keys.operator,
-                                                   self._hand_over(loop, on_operator, self.keys.operator))
+            self._operator_q = s.declare_queryable(
+                self.keys.operator, self._hand_over(loop, on_operator, self.keys.operator, self.operator_in_flight))
         self._token = s.liveliness().declare_token(self.keys.alive)
         return True
 
     def _hand_over(self, loop: asyncio.AbstractEventLoop, handler: Callable[[Any], None],
-                   key: str) -> Callable[[Any], None]:
+                   key: str, gate: InFlight | None = None) -> Callable[[Any], None]:
         """A zenoh callback (zenoh's thread) that queues ``handler(query)`` on the loop, or
-        answers busy at once when ``max_queries_in_flight`` are already queued."""
-        gate = self.in_flight
+        answers busy at once when ``gate``'s limit (``max_queries_in_flight``) is queued."""
+        gate = gate or self.in_flight
 
         def run(query: Any) -> None:
             try:
@@ -157,7 +161,7 @@ class ZenohIO:
 
         def callback(query: Any) -> None:
             if not gate.enter():
-                self._busy(query, key)
+                self._busy(query, key, gate)
                 return
             try:
                 loop.call_soon_threadsafe(run, query)
@@ -166,11 +170,12 @@ class ZenohIO:
                 query.drop()
         return callback
 
-    def _busy(self, query: Any, key: str) -> None:
+    def _busy(self, query: Any, key: str, gate: InFlight) -> None:
         payload = query.payload.to_bytes() if query.payload is not None else None
-        reply = ErrorReply(field="service", message=(
-            f"{BUSY}{self.in_flight.limit} queries are already waiting (zenoh.max_queries_in_flight); "
-            f"retry in a moment"), client_ref=client_ref(payload))
+        waiting = ("operator commands are already waiting" if gate is self.operator_in_flight else
+                   "queries are already waiting (zenoh.max_queries_in_flight)")
+        reply = ErrorReply(field="service", message=f"{BUSY}{gate.limit} {waiting}; retry in a moment",
+                           client_ref=client_ref(payload))
         try:
             reply_and_drop(query, key, encode(reply))
         except zenoh.ZError:  # the client went away meanwhile: nothing to answer
