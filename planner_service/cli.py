@@ -2,15 +2,17 @@
 
 from __future__ import annotations
 
-import argparse
 import importlib
 import sys
 
-COMMANDS = ("serve", "demo", "plan", "experiment", "bench", "submit", "keygen")
+from protocol.arguments import OneLineParser
+
+COMMANDS = ("serve", "demo", "plan", "experiment", "bench", "submit", "keygen", "operator")
 
 
-def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+def build_parser() -> OneLineParser:
+    """Every error of the command line is one line naming the option, exit status 2."""
+    parser = OneLineParser(
         prog="python -m planner_service",
         description="Flight-side MCTS path planner for UAV-aided wireless systems.",
     )

@@ -8,18 +8,24 @@ from .messages import (
     MAX_PAYLOAD_BYTES, SCHEMA_VERSION, ErrorReply, Event, Plan, PlanPoint, PendingRequest, State,
     Status, TaskAck, TaskRequest, UserPlace, decode, decode_reply, decode_request, encode,
 )
+from .messages import (
+    OPERATOR_SCHEMA_VERSION, STATUS_SCHEMA_VERSION, OperatorCommand, OperatorReply, decode_operator_command,
+    decode_operator_reply,
+)
 from .mission import (
     FLAVOURS, Flavour, HoverPoint, MissionItem, MissionPlan, decode_path, encode_path, mission_digest,
     same_items, same_mission, validate_mission,
 )
 from .mission_files import read_plan, read_wpl, write_plan, write_wpl
-from .text import escape_text
+from .text import printable
 
 __all__ = [
     "Area", "DEFAULT_PREFIX", "ErrorReply", "Event", "FLAVOURS", "Flavour", "GeoOrigin",
     "HoverPoint", "Keys", "MAX_PAYLOAD_BYTES", "MissionError", "MissionItem", "MissionPlan",
     "PendingRequest", "Plan", "PlanPoint", "ProtocolError", "SCHEMA_VERSION", "SigningError", "State", "Status",
     "TaskAck", "TaskRequest", "UserPlace", "check_user_id", "decode", "decode_path", "decode_reply", "decode_request", "encode",
-    "encode_path", "escape_text", "global_to_local", "local_to_global", "mission_digest", "read_plan", "read_wpl",
+    "encode_path", "global_to_local", "local_to_global", "mission_digest", "read_plan", "read_wpl",
     "same_items", "same_mission", "validate_mission", "write_plan", "write_wpl",
+    "OPERATOR_SCHEMA_VERSION", "STATUS_SCHEMA_VERSION", "OperatorCommand", "OperatorReply",
+    "decode_operator_command", "decode_operator_reply", "printable",
 ]

@@ -25,9 +25,9 @@ import zenoh
 
 from .errors import ProtocolError
 from .keys import Keys
-from .messages import (ErrorReply, Event, Plan, State, Status, TaskAck, TaskRequest, UserPlace, decode, decode_reply,
-                       encode)
-from .text import escape_text
+from .messages import (ErrorReply, Event, OperatorCommand, OperatorReply, Plan, State, Status, TaskAck, TaskRequest,
+                       UserPlace, decode, decode_operator_reply, decode_reply, encode)
+from .text import printable
 from .zenoh_config import error_text, session_config
 
 
@@ -166,6 +166,42 @@ class PlannerClient:
     def follow_events(self, callback: Callable[[Event], None]) -> None:
         self._follow(self.keys.events, Event, callback)
 
+    # --- the operator ----------------------------------------------------------------------------
+    def operator(self, command: str, reason: str = "", timeout_s: float | None = None) -> OperatorReply:
+        """Send an operator's command (``start``, ``hold``, ``status``) and return the
+        service's reply, accepted or refused (``reply.accepted``).
+
+        The command carries a fresh random ``client_ref``; only a reply that echoes it, for
+        this command, counts (every queryable on the key is asked, so a rogue one cannot
+        hide the service's answer, and its own answer is ignored). ``ClientError`` with
+        the error's field if the service answered an error, ``("service", ...)`` if no
+        reply came (under access control a user's certificate gets none: only operator
+        certificates may send commands)."""
+        if command not in ("start", "hold", "status"):
+            raise ClientError("command", f"{command!r} is not start, hold or status")
+        if len(reason) > 256:
+            raise ClientError("reason", f"{len(reason)} characters; at most 256")
+        ref = secrets.token_hex(8)
+        payload = encode(OperatorCommand(command=command, reason=reason, client_ref=ref))  # type: ignore[arg-type]
+        wait_s = timeout_s or self.timeout_s
+        foreign = 0
+        for reply in self.session.get(self.keys.operator, payload=payload, timeout=wait_s,
+                                      target=zenoh.QueryTarget.ALL, consolidation=zenoh.ConsolidationMode.NONE):
+            if reply.ok is None:
+                continue
+            try:
+                answer = decode_operator_reply(reply.ok.payload.to_bytes())
+            except ProtocolError:
+                foreign += 1
+                continue
+            if answer.client_ref != ref or (isinstance(answer, OperatorReply) and answer.command != command):
+                foreign += 1
+                continue
+            if isinstance(answer, ErrorReply):
+                raise ClientError(answer.field, answer.message)
+            return answer
+        ignored = f" ({foreign} replies that did not answer this command ignored)" if foreign else ""
+        raise ClientError("service", f"no reply on {self.keys.operator} within {wait_s:g} s{ignored}")
     def follow_place(self, user_id: str, callback: Callable[[UserPlace], None]) -> None:
         """``user_id``'s place in the plan, each time the service publishes it."""
         self._follow_places(self.keys.user(user_id), callback)
@@ -211,8 +247,8 @@ def answer(replies: list[bytes], user_id: str, client_ref: str) -> TaskAck | Err
         return answers[0]
     wanted = f"user_id '{user_id}', client_ref '{client_ref}'"
     if answers:
-        raise ClientError("reply", escape_text(
+        raise ClientError("reply", printable(
             f"{len(answers)} different replies answer the request of {wanted}: two queryables answer on "
             f"the request key (a rogue one, or two services for one vehicle)"))
-    raise ClientError("reply", escape_text(
+    raise ClientError("reply", printable(
         f"no reply answers the request of {wanted} (a forged or misrouted reply?): got {'; '.join(others)}", 400))

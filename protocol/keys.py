@@ -112,6 +112,12 @@ class Keys:
         return self._key("state")
 
     @property
+    def operator(self) -> str:
+        """Queryable: the operator's commands (start, hold, status) in, an operator_reply
+        out. Under access control only operator certificates may query it."""
+        return self._key("operator")
+
+    @property
     def alive(self) -> str:
         """Liveliness token of the service."""
         return self._key("alive")

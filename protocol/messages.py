@@ -8,6 +8,10 @@ inside the area, finite numbers) is checked after the decode, so every refusal, 
 its cause, is one ``ProtocolError`` naming the field.
 
 Every message carries ``kind`` (its type tag) and ``schema`` (the version of its layout).
+Layouts are versioned one message type at a time (``LAYOUT``): a type whose fields change
+in a way an older decoder refuses (a new field, as every decoder forbids unknown ones) gets
+the next number, the others keep theirs. A decoder takes only its own version, so an old
+client refuses a new ``status`` naming ``schema`` instead of misreading it.
 """
 
 from __future__ import annotations
@@ -15,7 +19,7 @@ from __future__ import annotations
 import json
 import math
 import re
-from typing import Annotated, Any, Literal, Union
+from typing import Annotated, Any, ClassVar, Literal, Union
 
 import msgspec
 
@@ -23,6 +27,13 @@ from .area import Area
 from .errors import ProtocolError
 
 SCHEMA_VERSION = 1
+"""The layout version of every message type that has not changed since the first
+(``task_request``, ``task_ack``, ``error``, ``plan``, ``event``); ``STATUS_SCHEMA_VERSION``
+for ``status`` and ``state``, ``OPERATOR_SCHEMA_VERSION`` for the operator's messages."""
+STATUS_SCHEMA_VERSION = 2
+"""``status`` (and ``state``, which holds one) at version 2: authority, battery source and
+unknown battery, position check, what the service waits for, the degraded state."""
+OPERATOR_SCHEMA_VERSION = 1
 MAX_PAYLOAD_BYTES = 4096
 """A request is a few hundred bytes; anything larger is refused before parsing."""
 MAX_TASKS = 1000
@@ -44,11 +55,23 @@ EventKind = Literal[
 ]
 
 
+Phase = Literal["idle", "planning", "flying", "returning", "landed", "lost", "degraded"]
+"""What the service is doing (``status.phase``); ``degraded``: it failed in a way that stops
+it taking requests (``status.degraded`` says how) and only keeps the vehicle safe."""
+Authority = Literal["none", "operator", "revoked"]
+"""May the service command modes and arming? ``none``: not given (or handed back by the
+operator's ``hold``); ``operator``: given by the operator (``start``); ``revoked``: taken
+away by a change the service did not command (a pilot's mode, a failsafe, a landing)."""
+OperatorCommandName = Literal["start", "hold", "status"]
+
+
 class _Message(
     msgspec.Struct, frozen=True, forbid_unknown_fields=True, kw_only=True, tag_field="kind"
 ):
+    LAYOUT: ClassVar[int] = SCHEMA_VERSION
+    """The layout version this type writes and reads."""
     schema: int = SCHEMA_VERSION
-    """Layout version; a payload without it is read as version 1."""
+    """Layout version; a payload without it is read as the receiver's version of its type."""
 
 
 class TaskRequest(_Message, tag="task_request"):
@@ -115,19 +138,36 @@ class ErrorReply(_Message, tag="error"):
 class Status(_Message, tag="status"):
     """Periodic snapshot of the vehicle as the service sees it."""
 
+    LAYOUT: ClassVar[int] = STATUS_SCHEMA_VERSION
+    schema: int = STATUS_SCHEMA_VERSION
     vehicle: ShortText = ""
     time_s: float = 0.0
-    phase: Literal["idle", "planning", "flying", "returning", "landed", "lost"] = "idle"
+    phase: Phase = "idle"
     armed: bool = False
     mode: ShortText = ""
     x_m: float = 0.0
     y_m: float = 0.0
     z_m: float = 0.0
-    battery_fraction: Fraction = 1.0
+    battery_fraction: Fraction | None = None
+    """Remaining charge, 0-1; null: unknown (no reading, or an impossible one)."""
     mission_seq: Count = 0
     mission_total: Count = 0
     pending_requests: Count = 0
     served_users: Count = 0
+    authority: Authority = "none"
+    authority_detail: ShortText = ""
+    """Why the authority is what it is (who gave or took it, and when), in words."""
+    battery_source: Literal["autopilot", "model", "unknown"] = "unknown"
+    """Where ``battery_fraction`` comes from: the autopilot's reading, the model's estimate
+    (the energy spent since the last good reading), or nowhere (null)."""
+    position_ok: bool = False
+    """The position is a fix inside the served area (or near it): planned on; false: no
+    fix yet, or a fix far outside, which is never planned on."""
+    waiting_for: ShortText = ""
+    """What the service waits for before it can go on ("the operator's start", "a position
+    fix", ...); "" when it waits for nothing."""
+    degraded: ShortText = ""
+    """Why the service is degraded (journal, a task that died, ...); "" when healthy."""
 
 
 class PlanPoint(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
@@ -173,9 +213,40 @@ class PendingRequest(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
 class State(_Message, tag="state"):
     """The reply of the state queryable: status, plan and what is still pending."""
 
+    LAYOUT: ClassVar[int] = STATUS_SCHEMA_VERSION
+    schema: int = STATUS_SCHEMA_VERSION
     status: Status = Status()
     plan: Plan | None = None
     pending: Annotated[list[PendingRequest], msgspec.Meta(max_length=10_000)] = []
+
+
+class OperatorCommand(_Message, tag="operator_command", kw_only=True):
+    """The operator's command on the operator queryable: ``start`` gives the service
+    authority over modes and arming for the sortie, ``hold`` takes it back (the service
+    commands nothing more; the vehicle keeps the mission it holds), ``status`` asks."""
+
+    LAYOUT: ClassVar[int] = OPERATOR_SCHEMA_VERSION
+    schema: int = OPERATOR_SCHEMA_VERSION
+    command: OperatorCommandName
+    reason: ShortText = ""
+    """Why, in the operator's words (kept in the log and the authority's detail)."""
+    client_ref: Annotated[str, msgspec.Meta(max_length=64)] | None = None
+    """The client's own correlation id, echoed in the reply."""
+
+
+class OperatorReply(_Message, tag="operator_reply", kw_only=True):
+    """What the service did with an operator's command: ``accepted`` or refused (``message``
+    says why), the authority and phase that resulted, and for ``status`` the snapshot."""
+
+    LAYOUT: ClassVar[int] = OPERATOR_SCHEMA_VERSION
+    schema: int = OPERATOR_SCHEMA_VERSION
+    command: OperatorCommandName
+    accepted: bool
+    authority: Authority
+    phase: Phase
+    message: ShortText = ""
+    client_ref: Annotated[str, msgspec.Meta(max_length=64)] | None = None
+    status: Status | None = None
 
 
 class _NoMessage(_Message, tag="-"):
@@ -184,9 +255,12 @@ class _NoMessage(_Message, tag="-"):
     would read as a default Status, Plan, Event or State."""
 
 
-Message = Union[TaskRequest, TaskAck, ErrorReply, Status, Plan, Event, State, UserPlace]
+Message = Union[TaskRequest, TaskAck, ErrorReply, Status, Plan, Event, State, UserPlace, OperatorCommand,
+                OperatorReply]
 Reply = Union[TaskAck, ErrorReply]
 """What the request queryable answers."""
+OperatorAnswer = Union[OperatorReply, ErrorReply]
+"""What the operator queryable answers (an ``error`` for a command it cannot read)."""
 
 
 _XY_FIELDS = ("x_m", "y_m")
@@ -236,6 +310,16 @@ def decode_request(payload: bytes | bytearray | memoryview | str, area: Area) ->
 def decode_reply(payload: bytes | bytearray | memoryview | str) -> TaskAck | ErrorReply:
     """Decode what the request queryable answered (an ack or an error)."""
     return decode(payload, Reply)
+
+
+def decode_operator_command(payload: bytes | bytearray | memoryview | str) -> OperatorCommand:
+    """Decode an operator's command (``ProtocolError`` naming the field)."""
+    return decode(payload, OperatorCommand)
+
+
+def decode_operator_reply(payload: bytes | bytearray | memoryview | str) -> OperatorReply | ErrorReply:
+    """Decode what the operator queryable answered (a reply, or an error)."""
+    return decode(payload, OperatorAnswer)
 
 
 _AT = re.compile(r" - at `\$\.?(?P<path>[^`]*)`\Z")
@@ -329,9 +413,9 @@ def _check_values(message: Any, area: Area | None, path: str) -> None:
     if isinstance(message, msgspec.Struct):
         for name in message.__struct_fields__:
             _check_field(getattr(message, name), name, area, f"{path}.{name}" if path else name)
-    if isinstance(message, _Message) and message.schema != SCHEMA_VERSION:
+    if isinstance(message, _Message) and message.schema != message.LAYOUT:
         field = f"{path}.schema" if path else "schema"
-        raise ProtocolError(field, f"schema {message.schema} is not supported (expected {SCHEMA_VERSION})")
+        raise ProtocolError(field, f"schema {message.schema} is not supported (expected {message.LAYOUT})")
 
 
 def _check_field(value: Any, name: str, area: Area | None, path: str) -> None:

@@ -31,6 +31,41 @@ sets ``connect/retry``: at most every second, so a router's restart costs about 
 
 _SOURCE = re.compile(r" at \S+\.rs:\d+\.?$")
 
+IP_PROTOCOLS = ("tcp", "udp", "tls", "quic", "ws")
+"""zenoh link protocols whose address is HOST:PORT."""
+OTHER_PROTOCOLS = ("unixsock-stream", "unixpipe", "vsock", "serial")
+_ENDPOINT = re.compile(r"(?P<protocol>[a-z][a-z0-9-]*)/(?P<address>[^?#]+)(\?[^#]*)?(#.*)?", re.S)
+_HOST_PORT = re.compile(r"(?P<host>\[[0-9A-Fa-f:.%a-zA-Z]+\]|[^\s:\[\]/]+):(?P<port>[0-9]{1,5})")
+
+
+def endpoint_problem(text: str) -> str | None:
+    """Why ``text`` is not a zenoh endpoint, or None. zenoh itself checks only the
+    ``<protocol>/<address>`` shape when configured and says the rest when the session
+    opens (as a multi-line Rust error); this says it at once, in words."""
+    match = _ENDPOINT.fullmatch(text) if isinstance(text, str) else None
+    example = "e.g. tcp/127.0.0.1:7447 or tls/uav1.local:7447"
+    if match is None:
+        return f"{text!r} is not a zenoh endpoint (<protocol>/<address>, {example})"
+    protocol, address = match.group("protocol"), match.group("address")
+    if protocol not in IP_PROTOCOLS + OTHER_PROTOCOLS:
+        return (f"{text!r}: {protocol!r} is not a zenoh link protocol "
+                f"(one of {', '.join(IP_PROTOCOLS + OTHER_PROTOCOLS)})")
+    if protocol in IP_PROTOCOLS:
+        hp = _HOST_PORT.fullmatch(address)
+        if hp is None:
+            return f"{text!r}: the address must be HOST:PORT ({example})"
+        if not 1 <= int(hp.group("port")) <= 65535:
+            return f"{text!r}: port {int(hp.group('port'))} is not in 1..65535"
+    return None
+
+
+def check_endpoints(option: str, endpoints: Sequence[str]) -> None:
+    """``ProtocolError(option, why)`` for the first endpoint that is not one."""
+    for endpoint in endpoints:
+        why = endpoint_problem(endpoint)
+        if why is not None:
+            raise ProtocolError(option, why)
+
 
 def error_text(err: BaseException) -> str:
     """A zenoh error's message without the Rust source location zenoh appends."""
@@ -40,7 +75,10 @@ def error_text(err: BaseException) -> str:
 def session_config(mode: str, listen: Sequence[str] = (), connect: Sequence[str] = (),
                    multicast_scouting: bool = False, config_file: str | Path | None = None) -> zenoh.Config:
     """A zenoh Config: ``config_file`` (or zenoh's defaults) with mode, explicit endpoints and
-    multicast scouting on top. ``ProtocolError("config_file", ...)`` if the file is refused."""
+    multicast scouting on top. ``ProtocolError("config_file", ...)`` if the file is refused,
+    ``ProtocolError("listen" or "connect", ...)`` for an endpoint that is not one."""
+    check_endpoints("listen", listen)
+    check_endpoints("connect", connect)
     if config_file:
         try:
             conf = zenoh.Config.from_file(str(config_file))

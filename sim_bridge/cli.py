@@ -2,9 +2,10 @@
 
 from __future__ import annotations
 
-import argparse
 import importlib
 import sys
+
+from protocol.arguments import OneLineParser
 
 COMMANDS = {
     "vehicle": "sim_bridge.commands.vehicle",
@@ -14,8 +15,9 @@ COMMANDS = {
 }
 
 
-def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+def build_parser() -> OneLineParser:
+    """Every error of the command line is one line naming the option, exit status 2."""
+    parser = OneLineParser(
         prog="python -m sim_bridge",
         description="Simulated counterparts of the planner: a MAVLink vehicle (SITL-stub), "
         "ground users over zenoh, a lossy UDP link, and a zenoh router.",

@@ -36,7 +36,7 @@ import numpy as np
 
 from planner_service.model import Scenario, pack, user_rows
 from planner_service.model.mobility import draw_tasks
-from protocol import ProtocolError, TaskAck, UserPlace, escape_text
+from protocol import ProtocolError, TaskAck, UserPlace, printable
 from protocol.client import ClientError, PlannerClient
 
 log = logging.getLogger("sim_bridge.users")
@@ -283,13 +283,13 @@ def submit(client: PlannerClient, w: Walker, now_s: float, tp: TaskParams, param
         ack = client.submit(w.user_id, x, y, tasks, client_ref=f"{w.user_id}#{w.submitted}")
     except ClientError as err:
         on_refused(w, now_s, tp, f"{err.field}: {err.message}")
-        log.info("%s refused: %s", w.user_id, escape_text(w.last_refusal))
+        log.info("%s refused: %s", w.user_id, printable(w.last_refusal))
         if err.field == "service" and ONE_SORTIE in err.message:
             w.done = True
         return
     except ProtocolError as err:
         on_refused(w, now_s, tp, str(err))
-        log.info("%s: %s", w.user_id, escape_text(w.last_refusal))
+        log.info("%s: %s", w.user_id, printable(w.last_refusal))
         return
     on_ack(w, ack, tasks)
     where = "" if ack.place is None else f", place {ack.place} in about {ack.eta_s or 0.0:.0f} s"

@@ -18,9 +18,15 @@
 # "subjects" and "policies". One certificate per user and device: a lost device's
 # certificate is just not renewed, and its entries removed.
 #
+#   sh docs/zenoh/make-certs.sh DIR --operator NAME
+#
+# adds NAME.pem/NAME.key, another operator certificate (CN uavmec-operator): the identity that
+# may send the service its operator commands (start, hold, status); the first run makes
+# operator.pem/operator.key. Give it to the operator's ground station only, never to users.
+#
 # Keep ca.key off the aircraft and off users' devices: whoever holds it can make identities.
 set -eu
-[ $# -ge 1 ] || { echo "usage: $0 DIR [SERVICE_NAME ...] | $0 DIR --user NAME" >&2; exit 2; }
+[ $# -ge 1 ] || { echo "usage: $0 DIR [SERVICE_NAME ...] | $0 DIR --user NAME | $0 DIR --operator NAME" >&2; exit 2; }
 dir=$1; shift
 mkdir -p "$dir"
 umask 077
@@ -49,7 +55,8 @@ if [ "${1:-}" = "--user" ]; then
     # the common name is the user id the access control binds: nothing else may pass
     case $user in
         ''|*[!A-Za-z0-9_.:-]*) echo "$0: '$user' is not a user id (1-64 of A-Z a-z 0-9 _ . : -)" >&2; exit 2 ;;
-        uavmec-service|uavmec-ca|service|ca) echo "$0: $user is reserved (the service's or the CA's name)" >&2; exit 2 ;;
+        uavmec-service|uavmec-ca|uavmec-operator|service|ca|operator)
+            echo "$0: $user is reserved (the service's, the CA's or the operator's name)" >&2; exit 2 ;;
     esac
     [ ${#user} -le 64 ] || { echo "$0: '$user' is longer than 64 characters" >&2; exit 2; }
     sign "$user" "$user" "extendedKeyUsage=clientAuth"
@@ -58,6 +65,12 @@ if [ "${1:-}" = "--user" ]; then
     echo "rules: { id: \"$user-in\", permission: \"allow\", flows: [\"ingress\"], messages: [\"query\", \"declare_subscriber\"], key_exprs: [\"$k/request/$user\", \"$k/users/$user\"] }, { id: \"$user-out\", permission: \"allow\", flows: [\"egress\"], messages: [\"reply\", \"put\"], key_exprs: [\"$k/request/$user\", \"$k/users/$user\"] },"
     echo "subjects: { id: \"$user\", cert_common_names: [\"$user\"] },"
     echo "policies: { id: \"$user\", rules: [\"user-asks\", \"user-follows\", \"user-checks-alive\", \"to-users\", \"$user-in\", \"$user-out\"], subjects: [\"$user\"] },"
+    exit 0
+fi
+
+if [ "${1:-}" = "--operator" ]; then
+    [ $# -eq 2 ] || { echo "usage: $0 DIR --operator NAME" >&2; exit 2; }
+    sign "$2" uavmec-operator "extendedKeyUsage=clientAuth"
     exit 0
 fi
 
@@ -73,4 +86,5 @@ done
 # the service both accepts users (server) and may connect to a router (client)
 sign service uavmec-service "extendedKeyUsage=serverAuth,clientAuth
 subjectAltName=$san"
+sign operator uavmec-operator "extendedKeyUsage=clientAuth"
 echo "users: sh $0 $dir --user USER_ID (one certificate per user id)"

@@ -12,18 +12,20 @@ import sys
 import threading
 from pathlib import Path
 
+from protocol.arguments import positive_float, positive_int
+
 HELP = "the main job on the embedded default (writes summary.json, trajectory.png, mission.plan)"
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", default="demo-out", help="output folder (default: demo-out)")
-    parser.add_argument("--users", type=int, default=10, help="simulated users (default 10)")
-    parser.add_argument("--speedup", type=float, default=25.0, help="simulated seconds per wall second (default 25)")
-    parser.add_argument("--budget-ms", type=float, default=150.0, help="planner budget per decision (default 150)")
+    parser.add_argument("--users", type=positive_int, default=10, help="simulated users (default 10)")
+    parser.add_argument("--speedup", type=positive_float, default=25.0, help="simulated seconds per wall second (default 25)")
+    parser.add_argument("--budget-ms", type=positive_float, default=150.0, help="planner budget per decision (default 150)")
     parser.add_argument("--backend", default="pymavlink", choices=["pymavlink", "mavsdk"], help="MAVLink library")
     parser.add_argument("--flavour", default="ardupilot", choices=["ardupilot", "px4"], help="autopilot the stub imitates")
     parser.add_argument("--seed", type=int, default=1, help="seed of the users and the planner (default 1)")
-    parser.add_argument("--timeout", type=float, default=180.0, help="give up after this many wall seconds (default 180)")
+    parser.add_argument("--timeout", type=positive_float, default=180.0, help="give up after this many wall seconds (default 180)")
 
 
 def run(args: argparse.Namespace) -> int:

@@ -8,37 +8,50 @@ import argparse
 import logging
 import sys
 
+from protocol.arguments import existing_file, zenoh_endpoint
+
 HELP = "the long-running flight-side service (zenoh intake, MCTS planning, MAVLink missions)"
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--config", default=None, help="TOML configuration file (default: built-in defaults)")
+    parser.add_argument("--config", default=None, type=existing_file,
+                        help="TOML configuration file (default: built-in defaults)")
     parser.add_argument("--set", dest="overrides", action="append", default=[], metavar="SECTION.KEY=VALUE",
                         help="override a configuration key, e.g. --set mavlink.backend=mavsdk (repeatable)")
-    parser.add_argument("--journal", default=None, help="journal file (same as --set journal.path=...)")
+    parser.add_argument("--journal", default=None,
+                        help="journal file (same as --set journal.path=...): created if it does not exist; an "
+                             "existing file must be a journal, used by no other service")
     parser.add_argument("--mavlink", default=None, metavar="URL", help="autopilot connection (mavlink.url)")
     parser.add_argument("--backend", default=None, choices=["pymavlink", "mavsdk"], help="MAVLink library (mavlink.backend)")
-    parser.add_argument("--listen", default=None, metavar="ENDPOINT", help="zenoh listen endpoint (zenoh.listen)")
-    parser.add_argument("--zenoh-config", default=None, metavar="FILE",
+    parser.add_argument("--listen", default=None, metavar="ENDPOINT", type=zenoh_endpoint,
+                        help="zenoh listen endpoint (zenoh.listen)")
+    parser.add_argument("--zenoh-config", default=None, metavar="FILE", type=existing_file,
                         help="zenoh configuration file (JSON5) as the session's base: TLS, access control "
                              "(zenoh.config_file; docs/zenoh/service-tls-acl.json5)")
     parser.add_argument("--log-level", default="INFO", choices=["DEBUG", "INFO", "WARNING", "ERROR"])
 
 
 def run(args: argparse.Namespace) -> int:
+    from protocol.text import printable
+
     from ..service import ConfigError, ServiceError, load_config, parse_overrides
     from ..service.app import run_service
 
     logging.basicConfig(level=args.log_level, stream=sys.stderr, format="%(asctime)s %(name)s %(levelname)s %(message)s")
+    flags = {key: flag for flag, key in (("journal", "journal.path"), ("mavlink", "mavlink.url"),
+                                         ("backend", "mavlink.backend"), ("listen", "zenoh.listen"),
+                                         ("zenoh_config", "zenoh.config_file"))
+             if getattr(args, flag) is not None}
     try:
         overrides = parse_overrides(args.overrides)
-        for flag, key in (("journal", "journal.path"), ("mavlink", "mavlink.url"), ("backend", "mavlink.backend"),
-                          ("listen", "zenoh.listen"), ("zenoh_config", "zenoh.config_file")):
-            if getattr(args, flag) is not None:
-                overrides[key] = getattr(args, flag)
+        for key, flag in flags.items():
+            overrides[key] = getattr(args, flag)
         config = load_config(args.config, overrides)
     except ConfigError as err:
-        print(f"error: {err}", file=sys.stderr)
+        # name the option the value came from: --mavlink (mavlink.url), --set KEY=..., or the file
+        flag = flags.get(err.key)
+        where = f"--{flag.replace('_', '-')} ({err.key})" if flag else err.key
+        print(f"error: {where}: {printable(err.message, 400)}", file=sys.stderr)
         return 2
     try:
         return run_service(config)

@@ -12,9 +12,11 @@ import argparse
 import sys
 
 from typing import TYPE_CHECKING
+from protocol.arguments import finite_float, non_negative_int, positive_float
+from protocol.client_args import DEFAULT_ENDPOINT, add_client_arguments
 
 from protocol.client_args import DEFAULT_ENDPOINT, add_client_arguments
-from protocol.text import escape_text
+from protocol.text import printable
 
 if TYPE_CHECKING:
     from protocol import TaskAck
@@ -24,17 +26,18 @@ HELP = "a zenoh client that submits one task request (a user's backlog and posit
 
 def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--user", required=True, help="user id (1-64 of A-Z a-z 0-9 _ . : -)")
-    parser.add_argument("--x", type=float, required=True, help="east position, local metres")
-    parser.add_argument("--y", type=float, required=True, help="north position, local metres")
-    parser.add_argument("--z", type=float, default=0.0, help="height, local metres (default 0)")
-    parser.add_argument("--tasks", type=int, required=True,
+    parser.add_argument("--x", type=finite_float, required=True, help="east position, local metres")
+    parser.add_argument("--y", type=finite_float, required=True, help="north position, local metres")
+    parser.add_argument("--z", type=finite_float, default=0.0, help="height, local metres (default 0)")
+    parser.add_argument("--tasks", type=non_negative_int, required=True,
                         help="the user's whole backlog: every task it has waiting now (not an increment); "
                              "0: nothing (more) to offload, which ends its wait")
     parser.add_argument("--client-ref", default=None, metavar="REF",
                         help="correlation id echoed in the reply (default: 16 random hex digits); a reply "
                              "that does not carry it is refused")
     add_client_arguments(parser)
-    parser.add_argument("--timeout", type=float, default=5.0, help="seconds to wait for the service (default 5)")
+    parser.add_argument("--timeout", type=positive_float, default=5.0,
+                        help="seconds to wait for the service (default 5)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -59,10 +62,10 @@ def run(args: argparse.Namespace) -> int:
         try:
             ack = client.submit(args.user, args.x, args.y, args.tasks, args.z, client_ref=args.client_ref)
         except ClientError as err:
-            print(f"refused: {escape_text(err.field)}: {escape_text(err.message)}", file=sys.stderr)
+            print(f"refused: {printable(err.field)}: {printable(err.message)}", file=sys.stderr)
             return 1
         except ProtocolError as err:
-            print(f"error: {escape_text(str(err))}", file=sys.stderr)
+            print(f"error: {printable(str(err))}", file=sys.stderr)
             return 1
     print(f"accepted: {describe(ack)}")
     return 0
@@ -79,5 +82,5 @@ def describe(ack: "TaskAck") -> str:
     elif ack.sortie is not None:
         parts.append("not in the current plan")
     if ack.note:
-        parts.append(escape_text(ack.note))
+        parts.append(printable(ack.note))
     return "; ".join(parts)

@@ -41,6 +41,8 @@ from .journal import Journal
 from .places import plan_places, user_places
 from .link import LinkEvent, LinkSettings, open_link
 from .link.base import HOLDING_MODES, MISSION_MODES, RETURNING_MODES
+from .operator import OperatorContext, handle_payload
+from .operator import initial as initial_authority
 from .planning import (PlannedPath, Planner, VehicleFix, assemble, check_path, not_served_reason, planning_battery_j,
                        should_return)
 from .progress import HOLD_RADIUS_M, HeldMission, item_dict, item_from_dict
@@ -145,6 +147,9 @@ class Service:
         self._upload_times_s: list[float] = []
         """Wall time of the last accepted uploads (a lossy link makes them seconds long)."""
         self.plan_msg: Plan | None = None
+        # --- operator (journal branch): the authority the operator gave or took back; the
+        # sortie loop's rules (when it is used, when it is revoked) are the lead's to wire.
+        self.authority = initial_authority(config.mavlink.start_mission, clock())
         sortie = self.journal.current_sortie()
         self.sortie_over: str | None = (sortie.why or "ended") if sortie.over else None
         """Why the current sortie ended; None while it runs (or waits for its first plan)."""
@@ -179,7 +184,8 @@ class Service:
         ]
         z = self.cfg.zenoh
         try:
-            opened = await self.zio.open(loop, self._on_request, self._on_state, self.stopping)
+            opened = await self.zio.open(loop, self._on_request, self._on_state, self.stopping,
+                                         on_operator=self._on_operator)
         except BaseException:
             for task in self._tasks:
                 task.cancel()
@@ -258,6 +264,20 @@ class Service:
         state = State(status=self._status(), plan=self.plan_msg, pending=pending)
         reply_and_drop(query, self.keys.state, encode(state))
 
+    def _on_operator(self, query: Any) -> None:
+        """An operator's command (journal branch: the minimal wiring; the lead's sortie loop
+        supplies the start refusals and acts on the authority)."""
+        payload = query.payload.to_bytes() if query.payload is not None else None
+        t = self.link.telemetry
+        refusal = None if t.connected else "the autopilot is not connected"
+        context = OperatorContext(phase=self._phase(), now_s=self.clock(), start_refusal=refusal, status=self._status())
+        before = self.authority
+        self.authority, reply = handle_payload(payload, before, context)
+        reply_and_drop(query, self.keys.operator, encode(reply))
+        if self.authority != before:
+            log.info("operator: authority %s -> %s (%s)", before.authority, self.authority.authority,
+                     self.authority.detail)
+
     def _event(self, event: str, **fields: Any) -> None:
         self.zio.publish("events", encode(Event(event=event, time_s=self.clock(), **fields)))  # type: ignore[arg-type]
 
@@ -292,6 +312,7 @@ class Service:
             mission_seq=max(t.mission_seq, 0), mission_total=max(t.mission_total, 0),
             pending_requests=len(self.journal.pending()),
             served_users=len({s.user_id for s in self.journal.services()}),
+            authority=self.authority.authority, authority_detail=self.authority.detail,
         )
 
     async def _status_loop(self) -> None:

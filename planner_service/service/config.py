@@ -11,6 +11,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import os
+import re
 import tomllib
 from dataclasses import dataclass, field, fields
 from pathlib import Path
@@ -19,12 +20,19 @@ from typing import Any, Mapping
 from protocol import Area, GeoOrigin, Keys, ProtocolError
 from protocol.errors import SigningError
 from protocol.signing import default_timestamp_path, load_key
+from protocol.zenoh_config import endpoint_problem
 
 from ..model import Scenario, ScenarioError, preset
 from .errors import ConfigError
 
 ZENOH_MODES = ("peer", "client", "router")
 BACKENDS = ("pymavlink", "mavsdk")
+MAVLINK_SCHEMES = ("udpin", "udpout", "udp", "udpbcast", "tcp", "tcpin")
+"""pymavlink's network connection strings, SCHEME:HOST:PORT (``udp`` listens, as udpin)."""
+MAVSDK_SCHEMES = ("udpin", "udpout", "tcpin", "tcpout", "serial")
+"""MAVSDK's own SCHEME://... forms, taken as they are by the mavsdk backend."""
+_HOST_PORT = re.compile(r"(?P<host>[^\s:/,]+):(?P<port>[0-9]{1,5})")
+_SERIAL = re.compile(r"(?P<device>/[^\s,]+|COM[0-9]+)(,(?P<baud>[0-9]{3,7}))?")
 
 
 @dataclass(frozen=True)
@@ -315,6 +323,11 @@ def validate(c: ServiceConfig) -> None:
         raise ConfigError("zenoh.max_queries_in_flight", "must be at least 1")
     if z.config_file and not Path(z.config_file).is_file():
         raise ConfigError("zenoh.config_file", f"{z.config_file} is not a readable file")
+    for key in ("listen", "connect"):
+        for endpoint in getattr(z, key):
+            why = endpoint_problem(endpoint)
+            if why is not None:
+                raise ConfigError(f"zenoh.{key}", why)
     i = c.intake
     if i.max_pending_requests < 1 or i.max_users < 1:
         raise ConfigError("intake", "max_pending_requests and max_users must be at least 1")
@@ -326,6 +339,9 @@ def validate(c: ServiceConfig) -> None:
         raise ConfigError(f"zenoh.{err.field}", err.message) from None
     if m.backend not in BACKENDS:
         raise ConfigError("mavlink.backend", f"{m.backend!r} is not one of {BACKENDS}")
+    why = mavlink_url_problem(m.url, m.backend)
+    if why is not None:
+        raise ConfigError("mavlink.url", why)
     if m.flavour not in ("ardupilot", "px4"):
         raise ConfigError("mavlink.flavour", f"{m.flavour!r} is not ardupilot or px4")
     for key in ("item_timeout_s", "link_timeout_s"):
@@ -365,6 +381,50 @@ def validate(c: ServiceConfig) -> None:
     if not area.min_flight_altitude_m <= scenario.altitude_m <= area.max_altitude_m:
         raise ConfigError("safety.max_altitude_m", f"the scenario's altitude {scenario.altitude_m} m is outside "
                           f"[{area.min_flight_altitude_m}, {area.max_altitude_m}] m")
+
+
+def mavlink_url_problem(url: str, backend: str) -> str | None:
+    """Why ``url`` is not a connection string the backend can open, or None. pymavlink
+    takes anything (``bogus:1`` becomes a UDP listener on a host named bogus, and the
+    service would wait for an autopilot there for ever); this refuses it at start."""
+    forms = ("udpin:HOST:PORT (listen), udpout:HOST:PORT (send), tcp:HOST:PORT, tcpin:HOST:PORT, "
+             "or a serial device /dev/ttyX[,BAUD]")
+    scheme, sep, rest = url.partition(":")
+    if sep and rest.startswith("//"):
+        if backend != "mavsdk":
+            return f"{url!r}: SCHEME://... is MAVSDK's form (mavlink.backend = mavsdk); pymavlink takes {forms}"
+        if scheme not in MAVSDK_SCHEMES:
+            return f"{url!r}: {scheme!r} is not one of MAVSDK's {', '.join(MAVSDK_SCHEMES)}"
+        address = rest[2:]
+        if scheme == "serial":
+            device, _, baud = address.partition(":")
+            return _serial_problem(url, device, baud)
+        return _host_port_problem(url, address, forms)
+    if scheme in MAVLINK_SCHEMES and sep:
+        return _host_port_problem(url, rest, forms)
+    serial = _SERIAL.fullmatch(url)
+    if serial is not None:
+        return _serial_problem(url, serial.group("device"), serial.group("baud") or "")
+    if sep and not url.startswith("/"):
+        return f"{url!r} has no known scheme ({scheme!r}); write {forms}"
+    return f"{url!r} is not a MAVLink connection: write {forms}"
+
+
+def _host_port_problem(url: str, address: str, forms: str) -> str | None:
+    match = _HOST_PORT.fullmatch(address)
+    if match is None:
+        return f"{url!r}: after the scheme comes HOST:PORT ({forms})"
+    if not 1 <= int(match.group("port")) <= 65535:
+        return f"{url!r}: port {int(match.group('port'))} is not in 1..65535"
+    return None
+
+
+def _serial_problem(url: str, device: str, baud: str) -> str | None:
+    if baud and not baud.isdigit():
+        return f"{url!r}: the baud rate {baud!r} is not a number"
+    if device.startswith("/") and not os.path.exists(device):
+        return f"{url!r}: no such serial device {device}"
+    return None
 
 
 def _validate_signing(m: MavlinkConfig) -> None:

@@ -91,7 +91,8 @@ def run_demo(out: Path, *, users: int = 10, speedup: float = 25.0, budget_ms: fl
         raise DemoError(f"children exited badly: {bad}")
     journal = Journal(journal_path)
     try:
-        final_battery = statuses[-1].battery_fraction * scenario.battery_j if statuses else None
+        known = [st.battery_fraction for st in statuses if st.battery_fraction is not None]  # None: unknown
+        final_battery = known[-1] * scenario.battery_j if known else None
         summary = sortie_summary(journal, scenario, final_battery)
         summary.update(preset=scenario.name, algo="mcts", backend=backend, flavour=flavour, users=users,
                        speedup=speedup, budget_ms=budget_ms, seed=seed, wall_s=wall, scenario=scenario.as_dict(),
@@ -114,7 +115,8 @@ def _progress_line(s: Status, events: list[Event], wall_s: float) -> str:
     tasks = sum(int(e.detail.split()[0]) for e in served if e.detail.split() and e.detail.split()[0].isdigit())
     users = len({e.user_id for e in served})
     per = tasks / len(served) if served else 0.0
-    return (f"[{wall_s:5.1f} s] {s.phase:9s} {s.mode:12s} battery {s.battery_fraction:4.0%}  "
+    battery = "  ?" if s.battery_fraction is None else f"{s.battery_fraction:4.0%}"
+    return (f"[{wall_s:5.1f} s] {s.phase:9s} {s.mode:12s} battery {battery}  "
             f"at ({s.x_m:5.0f}, {s.y_m:5.0f}, {s.z_m:4.0f}) m  served {users} users / {len(served)} services, "
             f"{per:.1f} tasks/interval  pending {s.pending_requests}")
 
@@ -150,7 +152,9 @@ def plot_trajectory(path: Path, scenario: Any, statuses: list[Status], requests:
     ax.legend(loc="upper right", fontsize=7)
     if statuses:
         t0 = statuses[0].time_s
-        bx.plot([s.time_s - t0 for s in statuses], [100 * s.battery_fraction for s in statuses], c="tab:green")
+        bx.plot([s.time_s - t0 for s in statuses],
+                [float("nan") if s.battery_fraction is None else 100 * s.battery_fraction for s in statuses],
+                c="tab:green")  # an unknown reading is a gap
     bx.axhline(100 * scenario.battery_threshold, ls="--", c="grey", label="reserve threshold")
     bx.set_xlabel("wall time (s)")
     bx.set_ylabel("battery (%)")

@@ -28,7 +28,7 @@ import time
 from dataclasses import dataclass
 from typing import Callable, Mapping
 
-from protocol import MAX_PAYLOAD_BYTES, Area, ErrorReply, Keys, ProtocolError, TaskAck, decode_request, escape_text
+from protocol import MAX_PAYLOAD_BYTES, Area, ErrorReply, Keys, ProtocolError, TaskAck, decode_request, printable
 
 from ..model import Scenario, pack
 from ..model._jit import py
@@ -96,7 +96,7 @@ class Accepted:
         if self.unservable:
             text += f"; cannot be served in this sortie: {self.unservable}"
         if self.reply.client_ref is not None:
-            text += f"; client_ref {escape_text(self.reply.client_ref)}"
+            text += f"; client_ref {printable(self.reply.client_ref)}"
         return text
 
 
@@ -108,9 +108,9 @@ class Rejected:
 
     def describe(self) -> str:
         """One line for a log or an event, wire text (a field's name, the client's ref) escaped."""
-        text = f"{escape_text(self.reply.field)}: {escape_text(self.reply.message)}"
+        text = f"{printable(self.reply.field)}: {printable(self.reply.message)}"
         if self.reply.client_ref is not None:
-            text += f" (client_ref {escape_text(self.reply.client_ref)})"
+            text += f" (client_ref {printable(self.reply.client_ref)})"
         return text
 
 

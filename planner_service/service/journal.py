@@ -30,13 +30,40 @@ decision stay bounded however many sorties the file holds. Fairness counts are p
 Schema versions (``meta.schema_version``): 1, one sortie per file (no version row);
 2, sorties. A version-1 file is migrated in place on open (its rows become sortie 1,
 ended if its meta said ``sortie_over``); a file from a newer version is refused.
+
+The file (this module's own guarantees, apart from what the rows mean):
+
+- **One service per journal.** ``Journal`` takes an exclusive ``flock`` on ``PATH.lock``
+  (beside the real path of the file, symlinks resolved) before it touches the database and
+  holds it until ``close``; a second one is refused naming the holder's pid. The kernel drops
+  the lock when its process dies, so a SIGKILLed service leaves no stale lock. (SQLite's
+  ``locking_mode = EXCLUSIVE`` would also keep out the readers the WAL is there for: the
+  demo's summary, the tests, an operator's ``sqlite3``; and it names nobody.)
+- **Only a journal is a journal.** A path that does not exist is created fresh, atomically
+  (built as ``PATH.new``, then linked into place: a crash leaves no half-made journal). An
+  existing file must be an SQLite database carrying ``APPLICATION_ID`` (or, from before
+  the id, the tables of layout 1 or 2: it is then stamped): an empty file, a file that is
+  not SQLite, another application's database, or an SQLite file without our tables is
+  refused, never taken as fresh, never written.
+- **Fail loud.** A write that fails (disk or database full, I/O error, read-only file) is
+  rolled back if SQLite has not already done so, and raises ``JournalError`` saying what
+  happened in words; a storage failure also sets ``failed`` (why, one line), after which
+  every write is refused at once (reads still answer from the open file), so the service
+  can degrade instead of carrying on without a record. Before every write, and whenever
+  ``check()`` is called, the path is compared with the file open (device and inode, the
+  database and its WAL): a journal deleted or replaced under the service fails the same
+  way, and what it held is first copied to ``PATH.rescued-TIME`` (SQLite's backup API, from
+  the still open file), since everything in it would otherwise be lost at close.
 """
 
 from __future__ import annotations
 
+import fcntl
 import json
 import math
+import os
 import sqlite3
+import stat
 import time
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -47,6 +74,26 @@ from .errors import JournalError
 
 SCHEMA_VERSION = 2
 """The layout this module writes (``meta.schema_version``)."""
+APPLICATION_ID = int.from_bytes(b"uavj", "big")
+"""SQLite's ``PRAGMA application_id`` of a journal (0x7561766a, "uavj" in the header at
+offset 68): what tells our file from any other SQLite database. ``file PATH`` shows it."""
+SQLITE_MAGIC = b"SQLite format 3\x00"
+LEGACY_TABLES = frozenset({"requests", "services", "missions", "meta"})
+"""The tables every journal has had: a file without the application id (written before
+it existed) is taken as a journal only if it holds them all."""
+TRANSIENT_CODES = frozenset({5, 6, 19})
+"""SQLite's primary result codes BUSY, LOCKED and CONSTRAINT: the file is still sound
+(another connection held a lock; a row broke a constraint), so the write is refused but
+the journal is not marked failed. Any other error of a write is the storage failing."""
+_STORAGE_WORDS = {
+    13: "the disk (or the database's size limit) is full",  # SQLITE_FULL
+    10: "an I/O error",  # SQLITE_IOERR
+    8: "the file is read-only",  # SQLITE_READONLY
+    11: "the file is damaged",  # SQLITE_CORRUPT
+    26: "the file is not a database any more",  # SQLITE_NOTADB
+    14: "the file cannot be opened",  # SQLITE_CANTOPEN
+    3: "permission denied",  # SQLITE_PERM
+}
 
 TABLES = """
 CREATE TABLE IF NOT EXISTS requests (
@@ -202,28 +249,121 @@ class Journal:
     """One SQLite connection, used from one thread (the service's event loop).
 
     ``sortie`` is the current sortie's number: the last one in the file, running or over.
-    A new file starts sortie 1 at ``now_s`` (default: the wall clock)."""
+    A new file starts sortie 1 at ``now_s`` (default: the wall clock).
+
+    ``failed`` is None while the journal can be written; after a storage failure (see the
+    module's docstring) it says why, in one line, and every write raises ``JournalError``."""
 
     def __init__(self, path: str | Path, synchronous: str = "FULL", now_s: float | None = None) -> None:
         self.path = str(path)
+        self.failed: str | None = None
+        self.rescued: str | None = None
+        """Where the journal's rows were copied when its file was deleted or replaced."""
+        self._synchronous = synchronous.upper()
+        self._lock_fd: int | None = None
+        self._identity: dict[str, tuple[int, int]] = {}
+        """(device, inode) of the database file and its WAL, as opened: the path must keep them."""
+        self._closed = False
+        now = time.time() if now_s is None else now_s
+        memory = self.path == ":memory:"
         try:
-            if self.path != ":memory:":
-                Path(self.path).parent.mkdir(parents=True, exist_ok=True)
-            self._db = sqlite3.connect(self.path, isolation_level=None)
-            self._db.execute("PRAGMA journal_mode=WAL")
-            self._db.execute(f"PRAGMA synchronous={synchronous.upper()}")
-            self._db.execute("PRAGMA foreign_keys=ON")
-        except sqlite3.Error as err:
-            raise JournalError(f"cannot open the journal {self.path}: {err}") from None
+            if not memory:
+                try:
+                    Path(self.path).parent.mkdir(parents=True, exist_ok=True)
+                except OSError as err:
+                    raise JournalError(f"cannot open the journal {self.path}: cannot create its folder: "
+                                       f"{err.strerror or err}") from None
+                self._lock_fd = _lock(self.path)
+                if _must_create(self.path):
+                    self._create(now)
+            self._db = self._connect(self.path, check=not memory)
+        except BaseException:
+            self._unlock()
+            raise
         try:
-            self._open_schema(time.time() if now_s is None else now_s)
+            self._open_schema(now)
             (number,) = self._db.execute("SELECT MAX(number) FROM sorties").fetchone()
+            if not memory:
+                self._identity = _identities(self.path)
         except (sqlite3.Error, JournalError) as err:
             self._db.close()
+            self._unlock()
             if isinstance(err, JournalError):
                 raise
             raise JournalError(f"cannot open the journal {self.path}: {err}") from None
         self.sortie = int(number)
+
+    def _connect(self, path: str, check: bool = False) -> sqlite3.Connection:
+        """A connection in WAL mode; with ``check``, only after the file was found to be a
+        journal (switching to WAL writes the header of a file that is not)."""
+        try:
+            db = sqlite3.connect(path, isolation_level=None)
+        except sqlite3.Error as err:
+            raise JournalError(f"cannot open the journal {path}: {err}") from None
+        try:
+            if check:
+                self._check_ours(db)
+            db.execute("PRAGMA journal_mode=WAL")
+            db.execute(f"PRAGMA synchronous={self._synchronous}")
+            db.execute("PRAGMA foreign_keys=ON")
+        except sqlite3.Error as err:
+            db.close()
+            raise JournalError(f"cannot open the journal {path}: {err}") from None
+        except JournalError:
+            db.close()
+            raise
+        return db
+
+    def _create(self, now_s: float) -> None:
+        """A fresh journal at ``path``, built beside it and linked into place complete, so
+        that no crash leaves an empty or half-made file there (which would be refused)."""
+        building = f"{self.path}.new"  # ours alone: we hold the lock
+        for leftover in (building, f"{building}-wal", f"{building}-shm"):
+            try:
+                os.unlink(leftover)
+            except FileNotFoundError:
+                pass
+            except OSError as err:
+                raise JournalError(f"cannot create the journal {self.path}: cannot remove {leftover}: "
+                                   f"{err.strerror or err}") from None
+        self._db = self._connect(building)
+        try:
+            self._open_schema(now_s)
+            self._db.execute("PRAGMA wal_checkpoint(TRUNCATE)")
+        except sqlite3.Error as err:
+            raise JournalError(f"cannot create the journal {self.path}: {err}") from None
+        finally:
+            self._db.close()  # the last connection: the WAL is folded in and removed
+        try:
+            os.link(building, self.path)  # fails if anything appeared there meanwhile
+            os.unlink(building)
+            _sync_folder(self.path)
+        except OSError as err:
+            raise JournalError(f"cannot create the journal {self.path}: {err.strerror or err}") from None
+
+    def _check_ours(self, db: sqlite3.Connection) -> None:
+        """Refuse an SQLite database that is not a journal (another application's, or one
+        without our tables); a journal from before the application id is stamped by
+        ``_open_schema``. Reads only."""
+        try:
+            (app_id,) = db.execute("PRAGMA application_id").fetchone()
+            tables = {name for (name,) in db.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
+        except sqlite3.Error as err:
+            raise JournalError(f"{self.path} is not a journal, or a damaged one: SQLite cannot read it ({err}); "
+                               "refused, not written") from None
+        if app_id == APPLICATION_ID:
+            if not LEGACY_TABLES <= tables:
+                raise JournalError(f"the journal {self.path} has the journal's application id but not its tables "
+                                   f"(missing {sorted(LEGACY_TABLES - tables)}): damaged; refused")
+            return
+        if app_id != 0:
+            raise JournalError(f"{self.path} is not a journal: it is another application's SQLite database "
+                               f"(application_id {app_id:#x}; a journal's is {APPLICATION_ID:#x}); refused, "
+                               "not written")
+        if not LEGACY_TABLES <= tables:
+            shown = ", ".join(sorted(tables)[:6]) or "none"
+            raise JournalError(f"{self.path} is not a journal: an SQLite database without the journal's "
+                               f"application id or tables (its tables: {shown}); refused, not written")
 
     def _schema_version(self) -> int:
         """0 for a new file, 1 for the one-sortie layout (it had no version row)."""
@@ -267,17 +407,28 @@ class Journal:
             for statement in INDEXES.split(";"):
                 if statement.strip():
                     self._db.execute(statement)
+            self._db.execute(f"PRAGMA application_id = {APPLICATION_ID}")  # this file is a journal
 
     # --- writing --------------------------------------------------------------------------
     @contextmanager
     def _transaction(self) -> Iterator[None]:
-        """One write transaction: committed at the end of the block, rolled back on any error."""
+        """One write transaction: committed at the end of the block, rolled back on any error.
+
+        Refused at once (``JournalError``) if the journal failed or its file is no longer
+        the one open. On a full disk or an I/O error SQLite rolls the transaction back
+        itself; a ROLLBACK then would fail ("no transaction is active") and hide the
+        cause, so it is sent only while a transaction is still open."""
+        self._writable()
         self._db.execute("BEGIN IMMEDIATE")
         try:
             yield
             self._db.execute("COMMIT")
         except BaseException:
-            self._db.execute("ROLLBACK")
+            if self._db.in_transaction:
+                try:
+                    self._db.execute("ROLLBACK")
+                except sqlite3.Error:
+                    pass  # the error that brought us here is the one to report
             raise
 
     def _write(self, what: str, statements: Iterable[tuple[str, tuple[Any, ...]]]) -> list[int]:
@@ -288,8 +439,62 @@ class Journal:
                 for sql, args in statements:
                     ids.append(int(self._db.execute(sql, args).lastrowid or 0))
         except sqlite3.Error as err:
-            raise JournalError(f"{what}: {err}") from None
+            raise self._failure(what, err) from None
         return ids
+
+    # --- the file's health ---------------------------------------------------------------------
+    def _failure(self, what: str, err: sqlite3.Error) -> JournalError:
+        """The ``JournalError`` for an SQLite error of ``what``; a storage failure (anything
+        but a lock held elsewhere or a broken constraint) also marks the journal failed."""
+        code = getattr(err, "sqlite_errorcode", None)
+        primary = code & 0xFF if isinstance(code, int) else None
+        name = getattr(err, "sqlite_errorname", None) or type(err).__name__
+        if primary in TRANSIENT_CODES:
+            return JournalError(f"{what}: {err} ({name}); nothing was written")
+        words = _STORAGE_WORDS.get(primary, "SQLite failed")  # type: ignore[arg-type]
+        reason = (f"the journal {self.path} cannot be written: {words} ({name}: {err}); the write ({what}) "
+                  f"was rolled back and the journal takes no more writes")
+        if self.failed is None:
+            self.failed = reason
+        return JournalError(f"{what}: {reason}")
+
+    def _writable(self) -> None:
+        if self._closed:
+            raise JournalError(f"the journal {self.path} is closed")
+        if self.check() is not None:
+            raise JournalError(f"the journal failed and takes no more writes: {self.failed}")
+
+    def check(self) -> str | None:
+        """None while the journal can be written; otherwise why not (``failed``).
+
+        Compares the path with the file open (the database and its WAL: device and
+        inode). A file deleted or replaced under the service marks the journal failed,
+        once, after copying its rows from the still open file to ``PATH.rescued-TIME``.
+        Cheap (two ``stat`` calls): call it at every status tick; every write calls it."""
+        if self.failed is not None or not self._identity:
+            return self.failed
+        why = _moved(self.path, self._identity)
+        if why is not None:
+            self.rescued, kept = self._rescue()
+            self.failed = (f"the journal {self.path} {why} while the service ran: nothing more is written to it; "
+                           f"{kept}")
+        return self.failed
+
+    def _rescue(self) -> tuple[str | None, str]:
+        """Copy the open database (as this connection sees it, WAL included) to a new file
+        beside the path: (its path or None, what happened in words)."""
+        target = f"{self.path}.rescued-{time.strftime('%Y%m%dT%H%M%S')}-{os.getpid()}"
+        if os.path.exists(target):
+            return None, f"its rows could not be copied: {target} exists"
+        try:
+            copy = sqlite3.connect(target)
+            try:
+                self._db.backup(copy)
+            finally:
+                copy.close()
+        except (sqlite3.Error, OSError) as err:
+            return None, f"its rows could not be copied to {target}: {err}"
+        return target, f"its rows were copied to {target}"
 
     def accept(self, user_id: str, x_m: float, y_m: float, z_m: float, tasks: int,
                client_ref: str | None, now_s: float) -> tuple[int, list[int]]:
@@ -317,7 +522,7 @@ class Journal:
                         "UPDATE requests SET status = 'replaced', reason = ?, closed_at_s = ? "
                         "WHERE request_id = ? AND status = 'pending'", (f"replaced by request {request_id}", now_s, rid))
         except sqlite3.Error as err:
-            raise JournalError(f"accept: {err}") from None
+            raise self._failure("accept", err) from None
         return request_id, older
 
     def record_service(self, request_id: int, hover_index: int, xyz: tuple[float, float, float], tasks: int,
@@ -380,10 +585,12 @@ class Journal:
 
     # --- reading (``sortie``: None is the current one) ---------------------------------------
     def _rows(self, sql: str, args: tuple[Any, ...] = ()) -> list[tuple[Any, ...]]:
+        if self._closed:
+            raise JournalError(f"the journal {self.path} is closed")
         try:
             return self._db.execute(sql, args).fetchall()
         except sqlite3.Error as err:
-            raise JournalError(f"read: {err}") from None
+            raise self._failure("read", err) from None
 
     def current_sortie(self) -> SortieRow:
         row = self.sortie_row(self.sortie)
@@ -501,12 +708,118 @@ class Journal:
         return self.sortie if sortie is None else sortie
 
     def close(self) -> None:
-        """Checkpoint the WAL into the main file and close."""
+        """Checkpoint the WAL into the main file, close and release the lock. A journal
+        that failed is only closed (no checkpoint into a full, replaced or deleted file):
+        ``failed`` still says why. ``JournalError`` if the checkpoint fails (the rows stay
+        in the WAL, which the next open reads). Closing twice does nothing."""
+        if self._closed:
+            return
+        self._closed = True
         try:
-            self._db.execute("PRAGMA wal_checkpoint(TRUNCATE)")
-            self._db.close()
-        except sqlite3.Error as err:
-            raise JournalError(f"close: {err}") from None
+            if self.check() is None:
+                try:
+                    self._db.execute("PRAGMA wal_checkpoint(TRUNCATE)")
+                except sqlite3.Error as err:
+                    raise self._failure("close", err) from None
+        finally:
+            try:
+                self._db.close()
+            except sqlite3.Error:
+                pass
+            self._unlock()
+
+    def _unlock(self) -> None:
+        if self._lock_fd is not None:
+            os.close(self._lock_fd)  # closing releases the flock
+            self._lock_fd = None
+
+
+def _lock_path(path: str) -> str:
+    """The lock file of the journal at ``path``: beside the file symlinks lead to, so that
+    two paths to one file share one lock."""
+    return os.path.realpath(path) + ".lock"
+
+
+def _lock(path: str) -> int:
+    """Take the journal's lock (``JournalError`` naming the holder if another has it)."""
+    lock_path = _lock_path(path)
+    try:
+        fd = os.open(lock_path, os.O_RDWR | os.O_CREAT, 0o644)
+    except OSError as err:
+        raise JournalError(f"cannot open the journal {path}: cannot create its lock file {lock_path}: "
+                           f"{err.strerror or err}") from None
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError:
+        holder = os.pread(fd, 32, 0).decode("ascii", "replace").strip()
+        os.close(fd)
+        who = f"pid {holder}" if holder.isdigit() else "another process"
+        raise JournalError(f"the journal {path} is in use by another service ({who}, holding {lock_path}): "
+                           "one service per journal; stop it or give this one another journal.path") from None
+    os.ftruncate(fd, 0)
+    os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
+    return fd
+
+
+def _must_create(path: str) -> bool:
+    """True if nothing is at ``path`` (a fresh journal is made); ``JournalError`` for a
+    file that cannot be a journal: not a regular file, empty, or not SQLite."""
+    try:
+        info = os.stat(path)
+    except FileNotFoundError:
+        return True
+    except OSError as err:
+        raise JournalError(f"cannot open the journal {path}: {err.strerror or err}") from None
+    if not stat.S_ISREG(info.st_mode):
+        raise JournalError(f"{path} is not a journal: not a regular file")
+    if info.st_size == 0:
+        raise JournalError(f"{path} is not a journal: the file is empty (a journal never is: a new one is made "
+                           "only where no file exists); remove it, or give the journal's right path")
+    try:
+        with open(path, "rb") as handle:
+            head = handle.read(len(SQLITE_MAGIC))
+    except OSError as err:
+        raise JournalError(f"cannot open the journal {path}: {err.strerror or err}") from None
+    if head != SQLITE_MAGIC:
+        raise JournalError(f"{path} is not a journal: not an SQLite database (it begins {head[:16]!r}); "
+                           "refused, not written")
+    return False
+
+
+def _identities(path: str) -> dict[str, tuple[int, int]]:
+    """(device, inode) of the database file and of its WAL (if there is one)."""
+    out: dict[str, tuple[int, int]] = {}
+    for name in (path, f"{path}-wal"):
+        try:
+            info = os.stat(name)
+        except FileNotFoundError:
+            continue
+        out[name] = (info.st_dev, info.st_ino)
+    return out
+
+
+def _moved(path: str, identity: dict[str, tuple[int, int]]) -> str | None:
+    """How the files at ``identity``'s paths differ from those opened, or None."""
+    for name, (dev, ino) in identity.items():
+        what = "" if name == path else " (its write-ahead log, " + os.path.basename(name) + ")"
+        try:
+            info = os.stat(name)
+        except FileNotFoundError:
+            return f"was deleted{what}"
+        except OSError as err:
+            return f"cannot be checked{what}: {err.strerror or err}"
+        if (info.st_dev, info.st_ino) != (dev, ino):
+            return f"was replaced by another file{what}"
+    return None
+
+
+def _sync_folder(path: str) -> None:
+    """fsync the folder holding ``path``, so that a new name in it survives a power cut."""
+    fd = os.open(os.path.dirname(os.path.abspath(path)), os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
 
 
 _REQ_COLUMNS = "request_id, user_id, x_m, y_m, z_m, tasks, client_ref, accepted_at_s, status, reason"

@@ -33,6 +33,8 @@ log = logging.getLogger("planner_service.zenoh")
 
 OPEN_RETRY_S = 2.0
 """In client mode, how long one attempt to reach a router lasts before the next."""
+OPERATOR_QUERIES_IN_FLIGHT = 8
+"""Operator commands waiting for the event loop (a person types them: a few at most)."""
 
 
 class ZenohError(ServiceError):
@@ -86,9 +88,12 @@ class ZenohIO:
         self.keys = keys
         self.session: Any = None
         self.in_flight = InFlight(cfg.max_queries_in_flight)
+        self.operator_in_flight = InFlight(OPERATOR_QUERIES_IN_FLIGHT)
+        """The operator's own bound: a flood of users' queries never answers a hold busy."""
         self._request_q: Any = None
         self._user_request_q: Any = None
         self._state_q: Any = None
+        self._operator_q: Any = None
         self._pubs: dict[str, Any] = {}
         self._token: Any = None
 
@@ -97,8 +102,10 @@ class ZenohIO:
         return session_config(c.mode, c.listen, c.connect, c.multicast_scouting, c.config_file or None)
 
     async def open(self, loop: asyncio.AbstractEventLoop, on_request: Callable[[Any], None],
-                   on_state: Callable[[Any], None], stopping: asyncio.Event) -> bool:
-        """Open the session and declare everything; handlers run on ``loop``'s thread.
+                   on_state: Callable[[Any], None], stopping: asyncio.Event,
+                   on_operator: Callable[[Any], None] | None = None) -> bool:
+        """Open the session and declare everything; handlers run on ``loop``'s thread
+        (``on_operator``: the operator queryable, declared only if given).
 
         In client mode the session needs a router: while none answers, it is tried again
         every ``OPEN_RETRY_S`` (off the loop's thread, so shutdown stays possible) until one
@@ -139,14 +146,17 @@ class ZenohIO:
         # that user's certificate; the same handler (it reads the user id from the key)
         self._user_request_q = s.declare_queryable(self.keys.user_requests,
                                                    self._hand_over(loop, on_request, self.keys.user_requests))
+        if on_operator is not None:
+            self._operator_q = s.declare_queryable(
+                self.keys.operator, self._hand_over(loop, on_operator, self.keys.operator, self.operator_in_flight))
         self._token = s.liveliness().declare_token(self.keys.alive)
         return True
 
     def _hand_over(self, loop: asyncio.AbstractEventLoop, handler: Callable[[Any], None],
-                   key: str) -> Callable[[Any], None]:
+                   key: str, gate: InFlight | None = None) -> Callable[[Any], None]:
         """A zenoh callback (zenoh's thread) that queues ``handler(query)`` on the loop, or
-        answers busy at once when ``max_queries_in_flight`` are already queued."""
-        gate = self.in_flight
+        answers busy at once when ``gate``'s limit (``max_queries_in_flight``) is queued."""
+        gate = gate or self.in_flight
 
         def run(query: Any) -> None:
             try:
@@ -156,7 +166,7 @@ class ZenohIO:
 
         def callback(query: Any) -> None:
             if not gate.enter():
-                self._busy(query)
+                self._busy(query, gate)
                 return
             try:
                 loop.call_soon_threadsafe(run, query)
@@ -165,11 +175,12 @@ class ZenohIO:
                 query.drop()
         return callback
 
-    def _busy(self, query: Any) -> None:
+    def _busy(self, query: Any, gate: InFlight) -> None:
         payload = query.payload.to_bytes() if query.payload is not None else None
-        reply = ErrorReply(field="service", message=(
-            f"{BUSY}{self.in_flight.limit} queries are already waiting (zenoh.max_queries_in_flight); "
-            f"retry in a moment"), client_ref=client_ref(payload))
+        waiting = ("operator commands are already waiting" if gate is self.operator_in_flight else
+                   "queries are already waiting (zenoh.max_queries_in_flight)")
+        reply = ErrorReply(field="service", message=f"{BUSY}{gate.limit} {waiting}; retry in a moment",
+                           client_ref=client_ref(payload))
         try:
             reply_and_drop(query, str(query.key_expr), encode(reply))  # the query's key: a user's own
         except zenoh.ZError:  # the client went away meanwhile: nothing to answer
@@ -197,13 +208,13 @@ class ZenohIO:
 
     def close(self) -> None:
         self.stop_intake()
-        for item in (self._token, self._state_q, *self._pubs.values()):
+        for item in (self._token, self._state_q, self._operator_q, *self._pubs.values()):
             if item is not None:
                 try:
                     item.undeclare()
                 except zenoh.ZError:
                     pass
-        self._token, self._state_q, self._pubs = None, None, {}
+        self._token, self._state_q, self._operator_q, self._pubs = None, None, None, {}
         if self.session is not None:
             self.session.close()
             self.session = None

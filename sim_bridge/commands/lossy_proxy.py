@@ -10,16 +10,19 @@ import random
 import signal
 import sys
 
+from protocol.arguments import non_negative_float, probability
+
 HELP = "run a lossy UDP proxy between a ground station and a vehicle"
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--listen", required=True, metavar="HOST:PORT", help="where ground stations send")
     parser.add_argument("--forward", required=True, metavar="HOST:PORT", help="the vehicle's address")
-    parser.add_argument("--drop", type=float, default=0.0, help="probability of dropping a datagram (each way)")
-    parser.add_argument("--dup", type=float, default=0.0, help="probability of duplicating a datagram")
-    parser.add_argument("--delay-ms", type=float, default=0.0, help="mean one-way delay in milliseconds")
-    parser.add_argument("--jitter-ms", type=float, default=None,
+    parser.add_argument("--drop", type=probability, default=0.0,
+                        help="probability of dropping a datagram (each way)")
+    parser.add_argument("--dup", type=probability, default=0.0, help="probability of duplicating a datagram")
+    parser.add_argument("--delay-ms", type=non_negative_float, default=0.0, help="mean one-way delay in milliseconds")
+    parser.add_argument("--jitter-ms", type=non_negative_float, default=None,
                         help="delay spread (uniform +-, default half the delay): reorders datagrams")
     parser.add_argument("--seed", type=int, default=0, help="seed of every random draw (default 0)")
     parser.add_argument("--log-level", default="INFO", choices=("DEBUG", "INFO", "WARNING", "ERROR"))

@@ -10,15 +10,17 @@ import signal
 import sys
 import threading
 
+from protocol.arguments import existing_file, zenoh_endpoint
+
 HELP = "a zenoh router (a session in router mode) for client-mode services and users"
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--listen", action="append", required=True, metavar="ENDPOINT",
+    parser.add_argument("--listen", action="append", required=True, metavar="ENDPOINT", type=zenoh_endpoint,
                         help="endpoint to listen on, e.g. tcp/127.0.0.1:7447 (repeatable)")
-    parser.add_argument("--connect", action="append", default=[], metavar="ENDPOINT",
+    parser.add_argument("--connect", action="append", default=[], metavar="ENDPOINT", type=zenoh_endpoint,
                         help="endpoint of another router to connect to (repeatable)")
-    parser.add_argument("--zenoh-config", default=None, metavar="FILE",
+    parser.add_argument("--zenoh-config", default=None, metavar="FILE", type=existing_file,
                         help="zenoh configuration file (JSON5) as the base: TLS, access control; "
                              "--listen and --connect are applied on top")
 

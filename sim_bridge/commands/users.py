@@ -13,16 +13,17 @@ import signal
 import sys
 import threading
 
+from protocol.arguments import positive_float, positive_int
 from protocol.client_args import DEFAULT_ENDPOINT, add_client_arguments
 
 HELP = "simulated ground users that move by random waypoint and submit their task backlogs over zenoh"
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--count", type=int, default=10, help="number of users (default 10)")
+    parser.add_argument("--count", type=positive_int, default=10, help="number of users (default 10)")
     parser.add_argument("--preset", default="field", help="scenario preset: area, layout and task draws (default field)")
     parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE", help="override a scenario field")
-    parser.add_argument("--interval", type=float, default=40.0,
+    parser.add_argument("--interval", type=positive_float, default=40.0,
                         help="simulated seconds between two draws of a user's tasks, and the longest a user with "
                              "tasks stays silent (default 40)")
     parser.add_argument("--tasks", choices=("backlog", "redraw"), default="backlog",
@@ -30,14 +31,15 @@ def configure(parser: argparse.ArgumentParser) -> None:
                              "added to the user's backlog (capped at --backlog-max), what is served is taken off, "
                              "the backlog is sent when it changes; redraw: the paper's experiments, a fresh draw "
                              "replaces the task count every interval and is sent then")
-    parser.add_argument("--backlog-max", type=int, default=None, metavar="N",
+    parser.add_argument("--backlog-max", type=positive_int, default=None, metavar="N",
                         help="most tasks a user holds (default: the scenario's task_max, u_max)")
-    parser.add_argument("--resend-m", type=float, default=50.0, metavar="M",
+    parser.add_argument("--resend-m", type=positive_float, default=50.0, metavar="M",
                         help="a user with tasks that has moved this far since its last request sends again "
                              "(default 50)")
-    parser.add_argument("--speedup", type=float, default=1.0, help="simulated seconds per wall second (default 1)")
+    parser.add_argument("--speedup", type=positive_float, default=1.0,
+                        help="simulated seconds per wall second (default 1)")
     parser.add_argument("--seed", type=int, default=0, help="seed of the walks and task draws (default 0)")
-    parser.add_argument("--duration", type=float, default=None, help="stop after this many wall seconds")
+    parser.add_argument("--duration", type=positive_float, default=None, help="stop after this many wall seconds")
     add_client_arguments(parser)
     parser.add_argument("--log-level", default="INFO", choices=("DEBUG", "INFO", "WARNING", "ERROR"))
 

@@ -13,11 +13,32 @@ import signal
 import sys
 import threading
 
+from protocol.arguments import non_negative_float, positive_float, positive_int
+
 HELP = "run the simulated MAVLink vehicle (SITL-stub)"
 
 
+def _url(text: str) -> str:
+    """udpin:HOST:PORT, udpout:HOST:PORT or tcpin:HOST:PORT, checked as parsed."""
+    from sim_bridge.vehicle import VehicleError
+    from sim_bridge.vehicle.link import parse_url
+
+    try:
+        parse_url(text)
+    except VehicleError as err:
+        raise argparse.ArgumentTypeError(err.message) from None
+    return text
+
+
+def _system_id(text: str) -> int:
+    value = positive_int(text)
+    if value > 255:
+        raise argparse.ArgumentTypeError(f"{text} is not a MAVLink system id (1-255)")
+    return value
+
+
 def configure(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--mavlink", default="udpin:127.0.0.1:14550", metavar="URL",
+    parser.add_argument("--mavlink", default="udpin:127.0.0.1:14550", metavar="URL", type=_url,
                         help="udpin:HOST:PORT, udpout:HOST:PORT or tcpin:HOST:PORT (default %(default)s)")
     parser.add_argument("--flavour", choices=("ardupilot", "px4"), default="ardupilot",
                         help="autopilot to imitate: item-0 convention and mode numbers (default %(default)s)")
@@ -26,14 +47,15 @@ def configure(parser: argparse.ArgumentParser) -> None:
                         help="override a scenario field, e.g. --set speed_mps=10 (repeatable)")
     parser.add_argument("--origin", default=None, metavar="LAT,LON,ALT",
                         help="geodetic origin of the local frame (default 47.397742,8.545594,488)")
-    parser.add_argument("--speedup", type=float, default=1.0, help="simulated seconds per wall second (default 1)")
-    parser.add_argument("--sysid", type=int, default=1, help="MAVLink system id (default 1)")
-    parser.add_argument("--item-timeout", type=float, default=1.0,
+    parser.add_argument("--speedup", type=positive_float, default=1.0,
+                        help="simulated seconds per wall second (default 1)")
+    parser.add_argument("--sysid", type=_system_id, default=1, help="MAVLink system id (default 1)")
+    parser.add_argument("--item-timeout", type=positive_float, default=1.0,
                         help="seconds before re-requesting a mission item during an upload (default 1)")
-    parser.add_argument("--retries", type=int, default=5, help="re-requests before an upload is abandoned (default 5)")
-    parser.add_argument("--fence-margin", type=float, default=100.0,
+    parser.add_argument("--retries", type=positive_int, default=5, help="re-requests before an upload is abandoned (default 5)")
+    parser.add_argument("--fence-margin", type=non_negative_float, default=100.0,
                         help="geofence: the scenario area grown by this many metres (default 100)")
-    parser.add_argument("--max-mission-items", type=int, default=512,
+    parser.add_argument("--max-mission-items", type=positive_int, default=512,
                         help="mission capacity: a larger upload is answered NO_SPACE (default 512)")
     parser.add_argument("--signing-key", default=None, metavar="FILE",
                         help="enforce MAVLink 2 signing with the key in FILE (64 hex characters, mode 0600; make one "
@@ -46,7 +68,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
                         help="save the flight (position, battery, armed, mode, time, home) here a few times a "
                              "second and, if the file exists at start, resume from it as after a reboot: in the "
                              "air it holds position, its mission lost; time_boot_ms restarts from 0")
-    parser.add_argument("--recharge-s", type=float, default=None, metavar="SECONDS",
+    parser.add_argument("--recharge-s", type=non_negative_float, default=None, metavar="SECONDS",
                         help="battery swap: SECONDS of simulated time after landing and disarming, the battery "
                              "is full again (default: never)")
     parser.add_argument("--log-level", default="INFO", choices=("DEBUG", "INFO", "WARNING", "ERROR"))

@@ -25,8 +25,14 @@ from hypothesis import strategies as st
 
 MAX_PAYLOAD_BYTES = 4096
 ID_CHARS = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789_.:-"
-KINDS = ("task_request", "task_ack", "error", "status", "plan", "event", "state", "user_place")
-PHASES = ("idle", "planning", "flying", "returning", "landed", "lost")
+KINDS = ("task_request", "task_ack", "error", "status", "plan", "event", "state", "user_place", "operator_command",
+         "operator_reply")
+PHASES = ("idle", "planning", "flying", "returning", "landed", "lost", "degraded")
+AUTHORITIES = ("none", "operator", "revoked")
+BATTERY_SOURCES = ("autopilot", "model", "unknown")
+OPERATOR_COMMANDS = ("start", "hold", "status")
+LAYOUTS = {"status": 2, "state": 2, "operator_command": 1, "operator_reply": 1}
+"""Each message type's layout version (docs/PROTOCOL.md); 1 for the others."""
 EVENTS = ("request_accepted", "request_rejected", "plan_updated", "mission_uploaded", "upload_failed",
           "user_served", "waypoint_reached", "returning", "landed", "link_lost", "link_restored")
 
@@ -135,8 +141,8 @@ def _optional(rng: random.Random, fields: dict[str, str], optional: dict[str, Ca
     for name, make in optional.items():
         if rng.random() < 0.6:
             fields[name] = make()
-    if message and rng.random() < 0.5:
-        fields["schema"] = "1"  # messages carry it (optional); nested points do not
+    if message and rng.random() < 0.5:  # messages carry it (optional); nested points do not
+        fields["schema"] = str(LAYOUTS.get(json.loads(fields["kind"]), 1))
     return fields
 
 
@@ -178,9 +184,24 @@ def valid_message(kind: str, rng: random.Random, side_m: float = 500.0, max_alt_
         return _optional(rng, f, {
             "vehicle": lambda: _text(rng), "time_s": lambda: _float(rng), "phase": lambda: dump(rng.choice(PHASES)),
             "armed": lambda: rng.choice(["true", "false"]), "mode": lambda: _text(rng), "x_m": lambda: _float(rng),
-            "y_m": lambda: _float(rng), "z_m": lambda: _float(rng), "battery_fraction": lambda: _float(rng, 0.0, 1.0),
+            "y_m": lambda: _float(rng), "z_m": lambda: _float(rng),
+            "battery_fraction": lambda: rng.choice(["null", _float(rng, 0.0, 1.0)]),
             "mission_seq": lambda: _count(rng), "mission_total": lambda: _count(rng),
-            "pending_requests": lambda: _count(rng), "served_users": lambda: _count(rng)})
+            "pending_requests": lambda: _count(rng), "served_users": lambda: _count(rng),
+            "authority": lambda: dump(rng.choice(AUTHORITIES)), "authority_detail": lambda: _text(rng),
+            "battery_source": lambda: dump(rng.choice(BATTERY_SOURCES)),
+            "position_ok": lambda: rng.choice(["true", "false"]), "waiting_for": lambda: _text(rng),
+            "degraded": lambda: _text(rng)})
+    if kind == "operator_command":
+        f.update(command=dump(rng.choice(OPERATOR_COMMANDS)))
+        return _optional(rng, f, {"reason": lambda: _text(rng),
+                                  "client_ref": lambda: rng.choice(["null", _text(rng, 64), _id(rng)])})
+    if kind == "operator_reply":
+        f.update(command=dump(rng.choice(OPERATOR_COMMANDS)), accepted=rng.choice(["true", "false"]),
+                 authority=dump(rng.choice(AUTHORITIES)), phase=dump(rng.choice(PHASES)))
+        return _optional(rng, f, {"message": lambda: _text(rng),
+                                  "client_ref": lambda: rng.choice(["null", _text(rng, 64)]),
+                                  "status": lambda: rng.choice(["null", _struct(valid_message("status", rng))])})
     if kind == "plan":
         return _optional(rng, f, {"plan_id": lambda: _count(rng), "time_s": lambda: _float(rng),
                                   "predicted_energy_j": lambda: _float(rng, 0.0, 1e9),

@@ -1,5 +1,6 @@
 """Hostile payloads into the client-side decoders (what ``protocol.client`` decodes: the
-request queryable's reply, status, plan, events, the state snapshot and a user's place): at least 10 000
+request queryable's reply, status, plan, events, the state snapshot and a user's place) and the operator's
+messages (the command the service decodes, the reply the operator's client does): at least 10 000
 generated payloads per type. Each decoder returns a message of its type or raises
 ``ProtocolError`` naming a field; nothing else escapes. A decoded message holds only
 finite numbers and survives a re-encode; a valid message decodes; a message with one
@@ -18,8 +19,8 @@ import pytest
 from hostile_payloads import Case, batches, field_root
 from hypothesis import HealthCheck, given, settings
 
-from protocol import (ErrorReply, Event, Plan, ProtocolError, State, Status, TaskAck, UserPlace, decode, decode_reply,
-                      encode)
+from protocol import (ErrorReply, Event, OperatorCommand, OperatorReply, Plan, ProtocolError, State, Status, TaskAck,
+                      UserPlace, decode, decode_operator_command, decode_operator_reply, decode_reply, encode)
 
 PAYLOADS = 10_000
 BATCH = 10
@@ -34,6 +35,8 @@ DECODERS: dict[str, tuple[Callable[[bytes], Any], tuple[type, ...]]] = {
     "event": (lambda p: decode(p, Event), (Event,)),
     "state": (lambda p: decode(p, State), (State,)),
     "user_place": (lambda p: decode(p, UserPlace), (UserPlace,)),
+    "operator_command": (decode_operator_command, (OperatorCommand,)),
+    "operator_reply": (decode_operator_reply, (OperatorReply, ErrorReply)),
 }
 
 
@@ -71,7 +74,7 @@ def check(decoder: Callable[[bytes], Any], types: tuple[type, ...], case: Case, 
 @pytest.mark.parametrize("name", list(DECODERS))
 def test_client_decoders_raise_only_protocol_errors(name: str) -> None:
     decoder, types = DECODERS[name]
-    kinds = ["task_ack", "error"] if name == "reply" else [name]
+    kinds = {"reply": ["task_ack", "error"], "operator_reply": ["operator_reply", "error"]}.get(name, [name])
     seen = {"payloads": 0, "decoded": 0}
 
     @FUZZ

@@ -141,5 +141,5 @@ def test_a_newer_or_foreign_journal_is_refused(tmp_path: Path) -> None:
         Journal(path)
     junk = tmp_path / "junk.sqlite"
     junk.write_bytes(b"not a database at all" * 100)
-    with pytest.raises(JournalError, match="cannot open the journal"):
+    with pytest.raises(JournalError, match="is not a journal: not an SQLite database"):
         Journal(junk)

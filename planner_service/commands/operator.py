@@ -1,0 +1,171 @@
+"""The operator's command line. ``watch``: a live view of the service (phase, mode, battery
+and its source, position, authority, the plan, pending users, the last events), redrawn
+from its status, plan and event publications and its state query, until Ctrl-C; plain text
+(on a terminal that cannot clear, or into a file or pipe, each changed view is printed
+after the last). ``start``: give the service authority to arm, switch modes and start the
+mission; ``hold``: take it back (the service commands nothing more, the vehicle keeps its
+mission); ``status``: ask. Each prints what the service did. Exit status: 0 accepted,
+1 refused or no answer, 2 a usage error. Under access control only an operator's
+certificate may send commands (docs/zenoh/operator-tls.json5)."""
+
+from __future__ import annotations
+
+import argparse
+import os
+import signal
+import sys
+import threading
+import time
+from typing import Any
+
+from protocol.arguments import USAGE_ERROR, positive_float, positive_int
+from protocol.client_args import DEFAULT_ENDPOINT, add_client_arguments
+
+HELP = "the operator's command line: watch the service live, or start / hold / status"
+ACTIONS = ("watch", "start", "hold", "status")
+CLEAR = "\x1b[H\x1b[2J"
+"""Cursor home and clear screen (ANSI): used only on a terminal that is not ``dumb``."""
+
+
+def configure(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("action", choices=ACTIONS,
+                        help="watch: live view until Ctrl-C; start: give the service authority over modes and arming; "
+                             "hold: take it back; status: ask")
+    parser.add_argument("--reason", default="", metavar="TEXT",
+                        help="start or hold: why, in words (at most 256 characters; kept in the service's log and in "
+                             "status.authority_detail)")
+    add_client_arguments(parser)
+    parser.add_argument("--timeout", type=positive_float, default=5.0,
+                        help="seconds to wait for the service's answer (default 5)")
+    parser.add_argument("--refresh", type=positive_float, default=1.0,
+                        help="watch: seconds between redraws (default 1)")
+    parser.add_argument("--events", type=positive_int, default=8, help="watch: how many last events (default 8)")
+    parser.add_argument("--once", action="store_true",
+                        help="watch: print one view (after waiting up to --timeout for a status) and exit: 0 if a "
+                             "status came, 1 if not")
+    parser.add_argument("--plain", action="store_true",
+                        help="watch: never clear the screen, print each changed view after the last (the default "
+                             "when TERM is dumb or the output is not a terminal)")
+
+
+def run(args: argparse.Namespace) -> int:
+    from protocol import Keys, ProtocolError
+    from protocol.client import PlannerClient
+
+    if args.reason and args.action not in ("start", "hold"):
+        print(f"error: --reason: only start and hold take a reason, not {args.action}", file=sys.stderr)
+        return USAGE_ERROR
+    if len(args.reason) > 256:
+        print(f"error: --reason: {len(args.reason)} characters; at most 256", file=sys.stderr)
+        return USAGE_ERROR
+    if args.action != "watch" and (args.once or args.plain):
+        print("error: --once and --plain are for watch", file=sys.stderr)
+        return USAGE_ERROR
+    keys = Keys(args.prefix, args.vehicle)
+    stop = threading.Event()
+    if args.action == "watch":  # Ctrl-C (or SIGTERM) ends the watch between two redraws
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(sig, lambda *_: stop.set())
+    try:
+        try:
+            client = PlannerClient(args.connect or [DEFAULT_ENDPOINT], keys, timeout_s=args.timeout,
+                                   config_file=args.zenoh_config)
+        except ProtocolError as err:  # no session: nothing listening, a TLS handshake refused
+            print(f"error: {err}", file=sys.stderr)
+            return 1
+        with client:
+            if args.action == "watch":
+                return _watch(client, args, stop)
+            return _command(client, args)
+    except KeyboardInterrupt:  # Ctrl-C while a command waits for its answer
+        print("interrupted: no answer awaited", file=sys.stderr)
+        return 130
+
+
+def _command(client: Any, args: argparse.Namespace) -> int:
+    from protocol.client import ClientError
+    from protocol.text import printable
+
+    try:
+        reply = client.operator(args.action, args.reason, args.timeout)
+    except ClientError as err:
+        hint = ("; is the service running, and is this an operator's certificate? (under access control only "
+                "operators may send commands)") if err.field == "service" else ""
+        print(f"error: {printable(err.field, 64)}: {printable(err.message, 300)}{hint}", file=sys.stderr)
+        return 1
+    verdict = "accepted" if reply.accepted else "refused"
+    print(f"{verdict}: {args.action}: {printable(reply.message, 300)}")
+    print(f"authority {reply.authority}, phase {reply.phase}")
+    if reply.status is not None:
+        from ..operator_view import status_lines
+
+        for line in status_lines(reply.status):
+            print(f"  {line}")
+    return 0 if reply.accepted else 1
+
+
+def _watch(client: Any, args: argparse.Namespace, stop: threading.Event) -> int:
+    import zenoh
+
+    from protocol import ProtocolError
+    from protocol.client import ClientError
+
+    from ..operator_view import WatchView, render
+
+    view = WatchView(vehicle=f"{client.keys.prefix}/{client.keys.vehicle}")
+    view.events = type(view.events)(maxlen=args.events)
+    lock = threading.Lock()
+
+    def update(**fields: Any) -> None:
+        with lock:
+            for name, value in fields.items():
+                setattr(view, name, value)
+
+    def on_event(ev: Any) -> None:
+        with lock:
+            view.events.append(ev)
+
+    def on_alive(sample: Any) -> None:
+        update(alive=sample.kind == zenoh.SampleKind.PUT)
+
+    client.follow_status(lambda s: update(status=s, status_at=time.monotonic()))
+    client.follow_plans(lambda p: update(plan=p))
+    client.follow_events(on_event)
+    alive_sub = client.session.liveliness().declare_subscriber(client.keys.alive, on_alive, history=True)
+    term = os.environ.get("TERM", "")
+    plain = args.plain or not sys.stdout.isatty() or term in ("", "dumb", "unknown")
+    last: list[str] | None = None
+    deadline = time.monotonic() + args.timeout
+    try:
+        while not stop.is_set():  # also when the service is absent: the view says so
+            try:
+                state = client.state(timeout_s=min(args.timeout, 1.0))
+                update(pending=list(state.pending), pending_note="")
+                if view.status is None:  # no publication yet: the state's snapshot will do
+                    update(status=state.status, status_at=time.monotonic())
+                if state.plan is not None and (view.plan is None or state.plan.plan_id > view.plan.plan_id):
+                    update(plan=state.plan)  # published before the watch began
+            except ClientError as err:
+                update(pending_note=f"no answer from the state query ({err.message})")
+            except ProtocolError as err:
+                update(pending_note=f"the state query's answer was refused ({err.field}: {err.message})")
+            if args.once and view.status is None and time.monotonic() < deadline:
+                stop.wait(0.1)
+                continue
+            with lock:
+                lines = render(view, time.monotonic())
+            if plain:
+                if last is None or lines[1:] != last[1:]:  # the header's age changes every time
+                    print("\n".join(lines) + "\n" + "-" * 40, flush=True)
+            else:
+                sys.stdout.write(CLEAR + "\n".join(lines) + "\n\n(Ctrl-C to quit)\n")
+                sys.stdout.flush()
+            last = lines
+            if args.once:
+                return 0 if view.status is not None else 1
+            stop.wait(args.refresh)
+    finally:
+        alive_sub.undeclare()
+    if not plain:
+        print()
+    return 0

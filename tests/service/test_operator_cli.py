@@ -1,0 +1,143 @@
+"""``python -m planner_service operator`` against a running service on loopback, as an
+operator runs it: status, start and hold answered with what the service did (exit 0
+accepted, 1 refused); a rogue queryable on the operator key cannot answer for the service;
+``watch`` shows the live state, survives hostile text on the wire and ends cleanly on
+Ctrl-C."""
+
+from __future__ import annotations
+
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import pytest
+import zenoh
+from stack import Stack
+
+from planner_service.service.processes import REPO, free_port
+from protocol import Keys, OperatorReply, PendingRequest, State, Status, encode
+from protocol.client import PlannerClient, client_config
+from protocol.zenoh_config import session_config
+
+
+def operator(endpoint: str, *args: str, timeout: float = 60) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([sys.executable, "-m", "planner_service", "operator", *args, "--connect", endpoint],
+                          cwd=REPO, capture_output=True, text=True, timeout=timeout)
+
+
+@pytest.mark.timeout(180)
+def test_status_start_hold_against_the_service(stack: Stack) -> None:
+    stack.service()  # no vehicle yet: a start is refused
+    status = operator(stack.endpoint, "status")
+    assert status.returncode == 0, status.stderr
+    assert status.stdout.startswith("accepted: status: authority none: not given yet"), status.stdout
+    assert "  phase      lost" in status.stdout and "  battery    " in status.stdout
+    refused = operator(stack.endpoint, "start")
+    assert refused.returncode == 1 and refused.stdout.startswith("refused: start: the autopilot is not connected")
+    assert "Traceback" not in refused.stderr
+
+    stack.vehicle()
+    assert stack.client is not None
+    deadline = time.monotonic() + 30
+    while stack.client.state().status.phase == "lost" and time.monotonic() < deadline:
+        time.sleep(0.2)
+    started = operator(stack.endpoint, "start", "--reason", "range clear\x1b[2J")
+    assert started.returncode == 0, (started.stdout, started.stderr)
+    assert started.stdout.startswith("accepted: start: authority given: the service may arm"), started.stdout
+    assert "(range clear\\x1b[2J)" in started.stdout and "\x1b" not in started.stdout
+    assert "authority operator, phase" in started.stdout
+    again = operator(stack.endpoint, "status")
+    assert "  authority  operator: given by the operator (range clear\\x1b[2J)" in again.stdout, again.stdout
+    held = operator(stack.endpoint, "hold")
+    assert held.returncode == 0 and held.stdout.startswith("accepted: hold: authority withdrawn"), held.stdout
+    assert stack.client.state().status.authority == "none"
+    service = stack.children[0]
+    assert "operator: authority none -> operator (given by the operator (range clear\\x1b[2J))" in service.log()
+    assert "\x1b" not in service.log()
+
+
+@pytest.mark.timeout(120)
+def test_a_rogue_queryable_cannot_answer_for_the_service(stack: Stack) -> None:
+    stack.service(zenoh__mode="router")  # it routes the operator's query to every queryable on the key
+    keys = Keys()
+    rogue = zenoh.open(client_config([stack.endpoint], "client"))
+    forged = {"n": 0}
+
+    def answer(query: Any) -> None:  # says yes to everything, with no client_ref or the wrong one
+        forged["n"] += 1
+        for ref in (None, "not-yours"):
+            query.reply(keys.operator, encode(OperatorReply(command="start", accepted=True, authority="operator",
+                                                            phase="flying", message="forged", client_ref=ref)))
+        query.drop()
+
+    queryable = rogue.declare_queryable(keys.operator, answer)
+    try:
+        time.sleep(0.5)
+        with PlannerClient([stack.endpoint]) as client:
+            reply = client.operator("start", timeout_s=5.0)
+        assert forged["n"] == 1
+        assert not reply.accepted and reply.message == "the autopilot is not connected"  # the service's own
+        quiet = operator(stack.endpoint, "start")
+        assert quiet.returncode == 1 and "forged" not in quiet.stdout
+    finally:
+        queryable.undeclare()
+        rogue.close()
+
+
+class FakeService:
+    """A zenoh session that publishes what a hostile or broken peer might on the service's
+    keys (no access control here), and answers the state query."""
+
+    def __init__(self, endpoint: str, status: Status, pending: list[PendingRequest]) -> None:
+        keys = Keys()
+        self.session = zenoh.open(session_config("peer", [endpoint]))
+        self.status = status
+        state = encode(State(status=status, pending=pending))
+        self.queryable = self.session.declare_queryable(keys.state, lambda q: (q.reply(keys.state, state), q.drop()))
+        self.token = self.session.liveliness().declare_token(keys.alive)
+        self.key = keys.status
+
+    def publish(self) -> None:
+        self.session.put(self.key, encode(self.status))
+
+    def close(self) -> None:
+        self.token.undeclare()
+        self.queryable.undeclare()
+        self.session.close()
+
+
+@pytest.mark.timeout(60)
+def test_watch_escapes_hostile_text_and_stops_cleanly_on_ctrl_c(tmp_path: Path) -> None:
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    hostile = Status(vehicle="uav1", phase="flying", mode="AUTO\x1b[2J\x1b]0;owned\x07", battery_fraction=None,
+                     battery_source="unknown", degraded="journal: disk full\nINFO all is well",
+                     authority="revoked", authority_detail="revoked: the pilot switched to LOITER")
+    fake = FakeService(endpoint, hostile, [PendingRequest(request_id=3, user_id="u-7", x_m=1.0, y_m=2.0,
+                                                          z_m=0.0, tasks=4)])
+    out = tmp_path / "watch.out"
+    try:
+        with open(out, "w") as handle:
+            watch = subprocess.Popen([sys.executable, "-m", "planner_service", "operator", "watch", "--connect", endpoint,
+                                      "--refresh", "0.2"], cwd=REPO, stdout=handle, stderr=subprocess.PIPE, text=True,
+                                     env={"PATH": "/usr/bin:/bin", "TERM": "dumb", "PYTHONPATH": str(REPO)})
+            deadline = time.monotonic() + 30
+            while "DEGRADED" not in out.read_text() and time.monotonic() < deadline and watch.poll() is None:
+                fake.publish()
+                time.sleep(0.1)
+            watch.send_signal(signal.SIGINT)
+            _, err = watch.communicate(timeout=10)
+    finally:
+        fake.close()
+    text = out.read_text()
+    print(f"\n{text[:1200]}")
+    assert watch.returncode == 0 and "Traceback" not in err, err
+    assert "\x1b" not in text and "\x07" not in text and "\u202e" not in text  # a dumb terminal: plain text only
+    assert "mode AUTO\\x1b[2J\\x1b]0;owned\\x07" in text
+    assert "DEGRADED   journal: disk full\\x0aINFO all is well" in text
+    assert "authority  revoked: revoked: the pilot switched to LOITER" in text
+    assert "battery    unknown (unknown)" in text
+    assert "pending    1: u-7 (4 tasks at 1, 2)" in text
+    assert "service alive" in text

@@ -1,0 +1,74 @@
+"""The operator role under mutual TLS and access control, from the shipped files (as
+test_zenoh_tls_acl.py runs them): an operator certificate (make-certs.sh's operator.pem, and
+one more made with --operator) sends start, hold and status and is answered, and watches;
+a user certificate's operator command gets no reply at all (the service's session drops the
+query) and changes nothing, while the same user is still served on the request key."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+from stack import Stack
+from test_zenoh_tls_acl import make_certs, shipped
+
+from planner_service.service.processes import REPO, free_port
+from protocol.client import ClientError, PlannerClient
+
+
+def operator(endpoint: str, conf: Path, *args: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([sys.executable, "-m", "planner_service", "operator", *args, "--connect", endpoint,
+                           "--zenoh-config", str(conf), "--timeout", "3"],
+                          cwd=REPO, capture_output=True, text=True, timeout=60)
+
+
+@pytest.mark.timeout(180)
+def test_only_operator_certificates_may_command(stack: Stack, tmp_path: Path) -> None:
+    certs = tmp_path / "tls"
+    make_certs(certs)
+    make_certs(certs, "--operator", "console2")
+    assert (certs / "operator.pem").is_file() and (certs / "console2.pem").is_file()
+    service_conf = shipped("service-tls-acl.json5", certs, tmp_path / "service.json5")
+    user_conf = shipped("user-tls.json5", certs, tmp_path / "user.json5")
+    operator_conf = shipped("operator-tls.json5", certs, tmp_path / "operator.json5")
+    console2_conf = shipped("operator-tls.json5", certs, tmp_path / "console2.json5", **{"/operator.": "/console2."})
+
+    endpoint = f"tls/127.0.0.1:{free_port()}"
+    stack.endpoint = endpoint
+    stack.vehicle()
+    stack.client = PlannerClient([endpoint], config_file=operator_conf)  # the stack's follower is the operator
+    stack.service(zenoh__mode="router", zenoh__config_file=str(service_conf))
+
+    # a user: served on the request key, unanswered on the operator key
+    with PlannerClient([endpoint], mode="client", config_file=user_conf) as user:
+        assert user.submit("u-1", 100.0, 120.0, 9).request_id == 1
+        t0 = time.monotonic()
+        with pytest.raises(ClientError, match="no reply on uavmec/uav1/operator within 3 s") as silent:
+            user.operator("start", timeout_s=3.0)
+        print(f"\nuser's start: {silent.value.message} after {time.monotonic() - t0:.1f} s")
+    by_user = operator(endpoint, user_conf, "start")
+    assert by_user.returncode == 1 and by_user.stdout == "", by_user
+    assert "error: service: no reply on uavmec/uav1/operator" in by_user.stderr
+    assert "only operators may send commands" in by_user.stderr and "Traceback" not in by_user.stderr
+    assert stack.client.state().status.authority == "none"  # nothing changed
+
+    # the operators: answered
+    deadline = time.monotonic() + 30
+    while stack.client.state().status.phase == "lost" and time.monotonic() < deadline:
+        time.sleep(0.2)
+    started = operator(endpoint, operator_conf, "start", "--reason", "range clear")
+    assert started.returncode == 0, (started.stdout, started.stderr)
+    assert started.stdout.startswith("accepted: start: authority given")
+    status = operator(endpoint, console2_conf, "status")
+    assert status.returncode == 0 and "authority operator: given by the operator (range clear)" in status.stdout
+    watched = operator(endpoint, operator_conf, "watch", "--once")
+    assert watched.returncode == 0, watched.stderr
+    assert "service alive" in watched.stdout and "authority  operator: given by the operator" in watched.stdout
+    assert "pending    1: u-1 (9 tasks at 100, 120)" in watched.stdout, watched.stdout
+    held = operator(endpoint, console2_conf, "hold")
+    assert held.returncode == 0 and "authority none, phase" in held.stdout
+    service = stack.children[-1]
+    assert service.proc.poll() is None and "Traceback" not in service.log()

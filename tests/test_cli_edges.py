@@ -1,0 +1,100 @@
+"""The command lines' edges, as a user hits them: every error of ``python -m planner_service``
+and ``python -m sim_bridge`` is one line on stderr naming the option, exit status 2, no
+traceback, and nothing starts (a bad zenoh endpoint, a bad MAVLink URL such as
+``--mavlink bogus:1``, which the service used to accept and then wait on for ever, a bad
+number, a missing file). A file that is not a journal is refused at start the same way,
+with exit status 1 (the command line was right; the file is not)."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+import pytest
+
+PS, SB = "planner_service", "sim_bridge"
+SUBMIT = ("submit", "--user", "u", "--x", "1", "--y", "2", "--tasks", "3")
+
+CASES: list[tuple[str, tuple[str, ...], str]] = [
+    # (module, arguments, what the one line must say)
+    (PS, ("serve", "--mavlink", "bogus:1"), "--mavlink (mavlink.url): 'bogus:1' has no known scheme ('bogus')"),
+    (PS, ("serve", "--mavlink", "udpin:127.0.0.1:99999"), "--mavlink (mavlink.url): 'udpin:127.0.0.1:99999': port 99999"),
+    (PS, ("serve", "--mavlink", "/dev/no-such-tty,57600"), "--mavlink (mavlink.url): '/dev/no-such-tty,57600': no such "
+                                                            "serial device"),
+    (PS, ("serve", "--set", "mavlink.url=udpout:localhost"), "mavlink.url: 'udpout:localhost': after the scheme comes "
+                                                              "HOST:PORT"),
+    (PS, ("serve", "--listen", "bogus"), "argument --listen: 'bogus' is not a zenoh endpoint"),
+    (PS, ("serve", "--set", "zenoh.connect=tcp/127.0.0.1"), "zenoh.connect: 'tcp/127.0.0.1': the address must be "
+                                                             "HOST:PORT"),
+    (PS, ("serve", "--listen", "foo/127.0.0.1:7447"), "argument --listen: 'foo/127.0.0.1:7447': 'foo' is not a zenoh "
+                                                      "link protocol"),
+    (PS, ("serve", "--config", "missing.toml"), "argument --config: missing.toml: no such file"),
+    (PS, ("serve", "--zenoh-config", "missing.json5"), "argument --zenoh-config: missing.json5: no such file"),
+    (PS, ("serve", "--set", "planner.budget_ms=fast"), "planner.budget_ms: cannot read 'fast' as float"),
+    (PS, ("serve", "--backend", "ros"), "argument --backend: invalid choice: 'ros'"),
+    (PS, ("serve", "--log-level", "LOUD"), "argument --log-level: invalid choice: 'LOUD'"),
+    (PS, (*SUBMIT, "--connect", "bogus"), "argument --connect: 'bogus' is not a zenoh endpoint"),
+    (PS, (*SUBMIT, "--connect", "tcp/127.0.0.1:70000"), "argument --connect: 'tcp/127.0.0.1:70000': port 70000"),
+    (PS, ("submit", "--user", "u", "--x", "abc", "--y", "2", "--tasks", "3"), "argument --x: 'abc' is not a number"),
+    (PS, ("submit", "--user", "u", "--x", "nan", "--y", "2", "--tasks", "3"), "argument --x: 'nan' is not a finite"),
+    (PS, ("submit", "--user", "u", "--x", "1", "--y", "2", "--tasks", "-3"), "argument --tasks: -3 is negative"),
+    (PS, (*SUBMIT, "--zenoh-config", "missing.json5"), "argument --zenoh-config: missing.json5: no such file"),
+    (PS, (*SUBMIT, "--prefix", "a/*"), "argument --prefix: 'a/*' is not a key chunk"),
+    (PS, (*SUBMIT, "--timeout", "0"), "argument --timeout: 0 is not positive"),
+    (PS, ("submit", "--user", "u"), "the following arguments are required: --x, --y, --tasks"),
+    (PS, ("operator", "fly"), "argument action: invalid choice: 'fly'"),
+    (PS, ("operator", "start", "--connect", "tls/uav1.local"), "argument --connect: 'tls/uav1.local': the address "
+                                                               "must be HOST:PORT"),
+    (PS, ("operator", "status", "--reason", "x"), "--reason: only start and hold take a reason, not status"),
+    (PS, ("operator", "start", "--reason", "x" * 300), "--reason: 300 characters; at most 256"),
+    (PS, ("operator", "watch", "--refresh", "-1"), "argument --refresh: -1 is not positive"),
+    (PS, ("plan", "--iterations", "many"), "argument --iterations: invalid int value: 'many'"),
+    (PS, ("demo", "--users", "0"), "argument --users: 0 is not at least 1"),
+    (PS, ("fly",), "argument COMMAND: invalid choice: 'fly'"),
+    (SB, ("vehicle", "--mavlink", "bogus:1"), "argument --mavlink: 'bogus:1' is not udpin:HOST:PORT"),
+    (SB, ("vehicle", "--mavlink", "udpin:127.0.0.1:99999"), "argument --mavlink: port 99999 is out of range"),
+    (SB, ("vehicle", "--speedup", "-2"), "argument --speedup: -2 is not positive"),
+    (SB, ("vehicle", "--sysid", "300"), "argument --sysid: 300 is not a MAVLink system id"),
+    (SB, ("users", "--connect", "bogus"), "argument --connect: 'bogus' is not a zenoh endpoint"),
+    (SB, ("users", "--count", "0"), "argument --count: 0 is not at least 1"),
+    (SB, ("router", "--listen", "bogus"), "argument --listen: 'bogus' is not a zenoh endpoint"),
+    (SB, ("router", "--listen", "tcp/127.0.0.1:7447", "--zenoh-config", "missing.json5"),
+     "argument --zenoh-config: missing.json5: no such file"),
+    (SB, ("lossy-proxy", "--listen", "127.0.0.1:1", "--forward", "127.0.0.1:2", "--drop", "2"),
+     "argument --drop: 2 is not a probability in [0, 1]"),
+    (SB, ("lossy-proxy", "--listen", "bogus", "--forward", "127.0.0.1:2"), "--listen: 'bogus' is not HOST:PORT"),
+]
+
+
+def run(module: str, args: tuple[str, ...], cwd: Path, env: dict[str, str]) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([sys.executable, "-m", module, *args], cwd=cwd, env=env, capture_output=True, text=True,
+                          timeout=120)
+
+
+def test_every_command_line_error_is_one_line_naming_the_option(tmp_path: Path, python_env: dict[str, str]) -> None:
+    with ThreadPoolExecutor(4) as pool:
+        done = list(pool.map(lambda case: run(case[0], case[1], tmp_path, python_env), CASES))
+    bad = []
+    for (module, args, words), out in zip(CASES, done):
+        lines = out.stderr.strip().splitlines()
+        ok = (out.returncode == 2 and len(lines) == 1 and words in lines[0] and "Traceback" not in out.stderr
+              and out.stdout == "")
+        if not ok:
+            bad.append(f"{module} {' '.join(args)[:80]}: exit {out.returncode}, stderr {out.stderr[-600:]!r}")
+    assert not bad, "\n".join(bad)
+    assert sorted(p.name for p in tmp_path.iterdir()) == []  # nothing started, no journal made
+
+
+@pytest.mark.parametrize("content", [b"", b"name,value\n", b"SQLite format 3\x00" + b"\x00" * 200])
+def test_a_file_that_is_not_a_journal_stops_the_service_at_start(tmp_path: Path, python_env: dict[str, str],
+                                                                  content: bytes) -> None:
+    journal = tmp_path / "journal.sqlite"
+    journal.write_bytes(content)
+    out = run(PS, ("serve", "--journal", str(journal), "--mavlink", "udpout:127.0.0.1:9", "--listen",
+                   "tcp/127.0.0.1:9"), tmp_path, python_env)
+    lines = out.stderr.strip().splitlines()
+    assert out.returncode == 1 and len(lines) == 1 and "Traceback" not in out.stderr, out.stderr
+    assert lines[0].startswith(f"error: {journal} is not a journal"), lines
+    assert journal.read_bytes() == content  # left as it was
