@@ -115,6 +115,10 @@ class MavsdkLink(VehicleLink):
         self._current: tuple[int, int] | None = None
         self._current_moved = asyncio.Event()
         self._connected = asyncio.Event()
+        self._inflight: set[asyncio.Future[Any]] = set()
+        """MAVSDK calls running in executor threads: a cancelled task leaves them running, and
+        destroying MAVSDK under them hangs, so ``close`` waits for them (MAVSDK times a
+        command out after about 2 s)."""
         self.state.request_streams = self._request_streams
         self.state.on_restart = self._on_restart
 
@@ -140,6 +144,8 @@ class MavsdkLink(VehicleLink):
             task.cancel()
         await asyncio.gather(*tasks, return_exceptions=True)
         self._tasks = []
+        if self._inflight:
+            await asyncio.wait(set(self._inflight), timeout=5.0)
         if self._sdk is not None:
             result = self._sdk.destroy()
             if asyncio.iscoroutine(result):
@@ -259,10 +265,13 @@ class MavsdkLink(VehicleLink):
         p = [float(x) for x in params] + [0.0] * (7 - len(params))
         body = {"target_system": target[0], "target_component": target[1], "command": command, "confirmation": 0,
                 **{f"param{i + 1}": v for i, v in enumerate(p)}}
+        message = MavlinkMessage(message_name="COMMAND_LONG", target_system_id=target[0],
+                                 target_component_id=target[1], fields_json=json.dumps(body))
+        call = asyncio.get_running_loop().run_in_executor(None, self._direct._plugin.send_command, message)
+        self._inflight.add(call)
+        call.add_done_callback(self._inflight.discard)
         try:
-            ack = await self._direct.send_command(MavlinkMessage(
-                message_name="COMMAND_LONG", target_system_id=target[0], target_component_id=target[1],
-                fields_json=json.dumps(body)))
+            ack = await asyncio.shield(call)
         except MavlinkDirectError as err:
             return "NO_ANSWER" if err.result.name == "TIMEOUT" else f"NO_ANSWER ({_name(err.result)})"
         if (int(ack.system_id), int(ack.component_id)) != target and ack.system_id:
