@@ -5,7 +5,7 @@ from __future__ import annotations
 import os
 import sys
 from pathlib import Path
-from typing import Iterator
+from typing import Any, Callable, Iterator
 
 import pytest
 
@@ -28,20 +28,34 @@ def python() -> str:
 
 
 @pytest.fixture
-def sitl(tmp_path: Path) -> Iterator[Sitl]:
-    """A fresh ArduCopter SITL (support/sitl.py), running but not yet with a position;
+def make_sitl(tmp_path: Path) -> Iterator[Callable[..., Sitl]]:
+    """A factory of ArduCopter SITLs (support/sitl.py; keyword arguments go to ``Sitl``, e.g.
+    ``serials``), each started in its own folder and instance and stopped at the end;
     skipped where the binary is missing."""
     binary = sitl_binary()
     if binary is None:
         pytest.skip(skip_reason())
-    folder = tmp_path / "sitl"
-    folder.mkdir()
-    s = Sitl(binary, folder, free_instance())
-    try:
+    started: list[Sitl] = []
+
+    def make(**options: Any) -> Sitl:
+        folder = tmp_path / f"sitl-{len(started)}"
+        folder.mkdir()
+        s = Sitl(binary, folder, options.pop("instance", None) or free_instance(), **options)
+        started.append(s)
         s.start()
-        yield s
+        return s
+
+    try:
+        yield make
     finally:
-        s.stop()
+        for s in started:
+            s.stop()
+
+
+@pytest.fixture
+def sitl(make_sitl: Callable[..., Sitl]) -> Sitl:
+    """A fresh ArduCopter SITL, running but not yet with a position."""
+    return make_sitl()
 
 
 @pytest.fixture

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import asyncio
 import math
+import socket
 import threading
 import time
 from typing import Any, Callable
@@ -19,7 +20,8 @@ from planner_service.service.link import (Connected, Current, LinkEvent, LinkSet
                                           Restored, VehicleLink, open_link)
 from protocol import GeoOrigin, HoverPoint, encode_path, global_to_local, replacement_items, same_mission
 
-from support.sitl import Sitl, set_param
+from planner_service.service.processes import free_port
+from support.sitl import PtyBridge, Sitl, ports, set_param
 
 pytestmark = [pytest.mark.sitl, pytest.mark.timeout(150)]
 BACKENDS = ["pymavlink", "mavsdk"]
@@ -172,13 +174,30 @@ def test_replacement_in_flight_flies_the_new_plan_and_an_rtl_replacement_returns
           f"MISSION_CURRENT {figures['currents']}")
 
 
-@pytest.mark.parametrize("backend", BACKENDS)
-def test_the_link_survives_the_autopilot_killed_and_restarted_over_tcp(sitl_ready: Sitl, backend: str) -> None:
-    sitl = sitl_ready
+@pytest.mark.parametrize("backend, transport", [("pymavlink", "tcp"), ("pymavlink", "udp"), ("pymavlink", "serial"),
+                                                ("mavsdk", "tcp"), ("mavsdk", "udp"), ("mavsdk", "serial")])
+def test_the_link_survives_the_autopilot_killed_and_restarted(make_sitl: Callable[..., Sitl], backend: str,
+                                                              transport: str) -> None:
+    """TCP: SITL's SERIAL1 port, closed under the link; UDP: SITL sends to the link's port
+    (``--serial1 udpclient:``) and falls silent; serial: a pseudo-terminal joined to SITL's
+    SERIAL2, which stays open while the autopilot behind it restarts."""
+    bridge: PtyBridge | None = None
+    if transport == "udp":
+        port = free_port(socket.SOCK_DGRAM)
+        sitl = make_sitl(serials={1: f"udpclient:127.0.0.1:{port}"})
+        url = f"udpin:127.0.0.1:{port}"
+    else:
+        sitl = make_sitl()
+        url = sitl.url(1)
+        if transport == "serial":
+            bridge = PtyBridge(ports(sitl.instance)[2])
+            url = f"{bridge.device},115200"
+    sitl.wait_ready()
 
     async def run() -> dict[str, float]:
         events = Recorder()
-        link = await connected(sitl, backend, events)
+        link = open_link(backend, LinkSettings(url, "ardupilot", link_timeout_s=2.0), events)
+        await link.connect(15.0)
         try:
             await until("a position", lambda: link.telemetry.position_ok, 30.0, link)
             before = link.telemetry.position_boot_s
@@ -187,6 +206,9 @@ def test_the_link_survives_the_autopilot_killed_and_restarted_over_tcp(sitl_read
             await asyncio.to_thread(sitl.kill)
             await until("lost", lambda: bool(events.of(Lost)), 10.0, link)
             lost_s = time.monotonic() - killed_at
+            assert not link.telemetry.connected
+            with pytest.raises(LinkError, match="NO_LINK"):
+                await link.upload(encode_path([HoverPoint(10.0, 10.0, ALT_M)], ORIGIN, "ardupilot"))
             await asyncio.sleep(1.0)
             started_at = time.monotonic()
             await asyncio.to_thread(sitl.start)
@@ -209,6 +231,10 @@ def test_the_link_survives_the_autopilot_killed_and_restarted_over_tcp(sitl_read
         finally:
             await link.close()
 
-    figures = asyncio.run(run())
-    print(f"\n{backend}: lost {figures['lost_s']:.2f} s after the kill; restored and restart seen "
-          f"{figures['restored_s']:.2f} s after SITL started again")
+    try:
+        figures = asyncio.run(run())
+    finally:
+        if bridge is not None:
+            bridge.close()
+    print(f"\n{backend} over {transport}: lost {figures['lost_s']:.2f} s after the kill; restored and restart "
+          f"seen {figures['restored_s']:.2f} s after SITL started again")

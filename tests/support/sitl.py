@@ -91,6 +91,8 @@ class Sitl:
     folder: Path
     instance: int
     speedup: int = SPEEDUP
+    serials: dict[int, str] = field(default_factory=dict)
+    """SITL's ``--serialN`` devices, e.g. {1: "udpclient:127.0.0.1:14550"} (default: TCP)."""
     proc: subprocess.Popen[bytes] | None = None
     texts: list[tuple[float, str]] = field(default_factory=list)
     _stop: threading.Event = field(default_factory=threading.Event)
@@ -114,6 +116,8 @@ class Sitl:
                 "-I", str(self.instance)]
         if defaults.is_file():
             args += ["--defaults", str(defaults)]
+        for number, device in sorted(self.serials.items()):
+            args += [f"--serial{number}", device]
         self._boots += 1
         out = open(self.folder / f"sitl-{self._boots}.out", "wb")
         self.proc = subprocess.Popen(args, cwd=self.folder, stdout=out, stderr=subprocess.STDOUT,
@@ -218,6 +222,64 @@ class Sitl:
         """The records of ``kinds`` from every dataflash log SITL wrote, oldest first (each a
         dict with ``mavpackettype``; ``TimeUS`` is the autopilot's clock)."""
         return list(read_dataflash(self.logs(), kinds))
+
+
+class PtyBridge:
+    """A serial line for the tests: a pseudo-terminal whose other end is joined to a TCP
+    port of SITL (reconnecting when SITL restarts), so a link opens ``device`` as it would
+    a flight controller's UART."""
+
+    def __init__(self, port: int) -> None:
+        import pty
+        import tty
+
+        self.port = port
+        self.master, slave = pty.openpty()
+        tty.setraw(slave)
+        self.device = os.ttyname(slave)
+        self._slave = slave  # kept open: a pty whose last slave closes reports EIO to the master
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="pty-bridge", daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        import select
+
+        sock: socket.socket | None = None
+        while not self._stop.is_set():
+            if sock is None:
+                try:
+                    sock = socket.create_connection(("127.0.0.1", self.port), timeout=0.2)
+                    sock.setblocking(False)
+                except OSError:
+                    sock = None
+            watched = [self.master] + ([sock] if sock is not None else [])
+            ready, _, _ = select.select(watched, [], [], 0.1)
+            try:
+                if self.master in ready:
+                    data = os.read(self.master, 65536)
+                    if sock is not None:  # else lost, as on a UART with nobody listening
+                        sock.sendall(data)
+                if sock is not None and sock in ready:
+                    data = sock.recv(65536)
+                    if not data:
+                        raise ConnectionResetError("SITL went away")
+                    os.write(self.master, data)
+            except OSError:
+                if sock is not None:
+                    sock.close()
+                sock = None
+        if sock is not None:
+            sock.close()
+
+    def close(self) -> None:
+        self._stop.set()
+        self._thread.join(3.0)
+        for fd in (self.master, self._slave):
+            try:
+                os.close(fd)
+            except OSError:
+                pass
 
 
 def _closed() -> None:
