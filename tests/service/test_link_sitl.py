@@ -112,14 +112,32 @@ def test_telemetry_requested_position_awaited_and_a_refused_arm_leaves_it_disarm
 @pytest.mark.parametrize("backend", BACKENDS)
 def test_replacement_in_flight_flies_the_new_plan_and_an_rtl_replacement_returns_home(sitl_ready: Sitl,
                                                                                         backend: str) -> None:
+    """[home, takeoff, a, b, c, RTL]; while the vehicle holds at a (item 2), b and c are
+    replaced by d and e with items 0..2 kept and ``current_seq`` 3: ArduPilot restarts the
+    hold at a (the change is within its three-command window), and the link moves it on to
+    3 with MAV_CMD_DO_SET_MISSION_CURRENT. At d, ``set_current(4)`` ends the hold early;
+    towards e, a replacement of return to launch alone brings it home."""
     sitl = sitl_ready
-    a, b, c = HoverPoint(40.0, 40.0, ALT_M, 1.0), HoverPoint(120.0, 40.0, ALT_M, 0.0), HoverPoint(120.0, 120.0, ALT_M)
-    d, e = HoverPoint(0.0, 110.0, ALT_M, 1.0), HoverPoint(90.0, 150.0, ALT_M)
+    a, b, c = HoverPoint(40.0, 40.0, ALT_M, 30.0), HoverPoint(120.0, 40.0, ALT_M, 0.0), HoverPoint(120.0, 120.0, ALT_M)
+    d, e = HoverPoint(0.0, 110.0, ALT_M, 30.0), HoverPoint(90.0, 150.0, ALT_M)
 
     async def run() -> dict[str, Any]:
         events = Recorder()
         link = await connected(sitl, backend, events)
         closest: dict[str, float] = {"d": math.inf, "e": math.inf, "b": math.inf}
+        at_d: list[float] = []
+
+        def track() -> bool:
+            here = where(link)
+            for name, point in (("d", d), ("e", e), ("b", b)):
+                closest[name] = min(closest[name], distance(here, point))
+            if distance(here, d) < NEAR_M and link.telemetry.position_boot_s is not None:
+                at_d.append(link.telemetry.position_boot_s)
+            return False
+
+        async def watch(what: str, done: Callable[[], bool], timeout_s: float) -> None:
+            await until(what, lambda: track() or done(), timeout_s, link)
+
         try:
             await until("a position", lambda: link.telemetry.position_ok, 30.0, link)
             first = encode_path([a, b, c], ORIGIN, "ardupilot")  # [home, takeoff, a, b, c, RTL]
@@ -127,51 +145,42 @@ def test_replacement_in_flight_flies_the_new_plan_and_an_rtl_replacement_returns
             held = await link.download()
             assert same_mission(held, first, "ardupilot"), (held, first)  # read back as ArduPilot stores it
             await link.start()
-            await until("towards b (item 3)", lambda: link.telemetry.mission_seq == 3, 60.0, link)
-            # Replace b and c with d: items 0..2 kept, so ArduPilot's kept index 3 is d.
+            await watch("holding at a (item 2)", lambda: link.telemetry.mission_seq == 2
+                        and distance(where(link), a) < NEAR_M, 60.0)
             second, next_seq = replacement_items(held, 2, [d, e], ORIGIN, "ardupilot")
             await link.upload(second, current_seq=next_seq)
-            assert link.telemetry.mission_seq == next_seq
-            generation = link.generation
-
-            def track() -> bool:
-                here = where(link)
-                for name, point in (("d", d), ("e", e), ("b", b)):
-                    closest[name] = min(closest[name], distance(here, point))
-                return False
-
-            async def watch(done: Callable[[], bool], timeout_s: float, what: str) -> None:
-                await until(what, lambda: track() or done(), timeout_s, link)
-
-            await watch(lambda: any(isinstance(ev, Reached) and ev.seq == 3 and ev.mission == generation
-                                    for _, ev in events.events), 60.0, "d reached")
-            assert closest["d"] < NEAR_M, closest
-            await until("towards e (item 4)", lambda: link.telemetry.mission_seq == 4, 30.0, link)
+            assert link.telemetry.mission_seq == next_seq == 3
+            await watch("holding at d", lambda: len(at_d) > 4, 60.0)
+            await link.set_current(4)  # the user's upload is done: end the hold early
+            assert link.telemetry.mission_seq == 4
+            await watch("away from d", lambda: distance(where(link), d) > 2 * NEAR_M, 20.0)
+            held_at_d = at_d[-1] - at_d[0]
             # Return to launch alone, replacing e while the vehicle flies towards it.
             third, rtl_seq = replacement_items(second, 3, [], ORIGIN, "ardupilot")
             assert third[rtl_seq].command == 20 and len(third) == rtl_seq + 1
             await link.upload(third, current_seq=rtl_seq)
-            await watch(lambda: not link.telemetry.armed and not link.telemetry.airborne, 90.0, "landed at home")
+            await watch("landed at home", lambda: not link.telemetry.armed and not link.telemetry.airborne, 90.0)
             home_m = math.hypot(*where(link)[:2])
             assert home_m < NEAR_M, home_m
+            assert closest["d"] < NEAR_M and held_at_d < d.hold_s / 2, (closest, held_at_d)
             assert closest["e"] > 20.0 and closest["b"] > 20.0, closest  # never flew the replaced points
-            return {"closest": closest, "home_m": home_m,
+            return {"closest": closest, "home_m": home_m, "held_at_d": held_at_d,
                     "currents": [ev.seq for ev in events.of(Current)]}
         finally:
             await link.close()
 
     figures = asyncio.run(run())
     sitl.stop()  # flushes the dataflash log
-    # The autopilot's own log: it flew to d, never to b or e, and the restarts were its own doing.
-    positions = [r for r in sitl.read_log(("POS",))]
-    assert positions, "no POS records in the dataflash log"
-    own = [global_to_local(ORIGIN, r["Lat"], r["Lng"], ORIGIN.alt_m + r["RelHomeAlt"]) for r in positions]
+    # The autopilot's own log: it flew to d, never to b or e, and restarted the command on
+    # the upload as ArduPilot does.
+    own = [global_to_local(ORIGIN, r["Lat"], r["Lng"], ORIGIN.alt_m + r["RelHomeAlt"]) for r in sitl.read_log(("POS",))]
+    assert own, "no POS records in the dataflash log"
     assert min(distance(p, d) for p in own) < NEAR_M
     assert min(distance(p, b) for p in own) > 20.0 and min(distance(p, e) for p in own) > 20.0
     texts = [r["Message"] for r in sitl.read_log(("MSG",))]
     assert any("Auto mission changed, restarted command" in t for t in texts), texts[-20:]
-    print(f"\n{backend}: closest approach {figures['closest']}, landed {figures['home_m']:.2f} m from home, "
-          f"MISSION_CURRENT {figures['currents']}")
+    print(f"\n{backend}: closest approach {figures['closest']}, held {figures['held_at_d']:.1f} s of {d.hold_s:g} "
+          f"at d, landed {figures['home_m']:.2f} m from home, MISSION_CURRENT {figures['currents']}")
 
 
 @pytest.mark.parametrize("backend, transport", [("pymavlink", "tcp"), ("pymavlink", "udp"), ("pymavlink", "serial"),
