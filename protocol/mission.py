@@ -241,7 +241,12 @@ def encode_path(
     takeoff: bool = True,
     acceptance_radius_m: float = 0.0,
 ) -> list[MissionItem]:
-    """Hovering points -> mission items, ending in return to launch.
+    """Hovering points -> mission items, ending in return to launch: the first mission of
+    a sortie, flown from the ground. ArduPilot: [home placeholder, takeoff, points...,
+    return to launch] (``VehicleLink.start`` arms and MISSION_START flies it from item 1);
+    PX4: the same without the placeholder. Holds are rounded up to whole seconds for
+    ArduPilot (``encoded_hold_s``). In flight, replace a mission with
+    ``replacement_items``, which keeps the vehicle's index.
 
     The takeoff item climbs over home to the first point's altitude; a vehicle already in
     the air completes it at once, so a re-planned mission may keep it.

@@ -103,9 +103,14 @@ def test_every_message_is_asked_for_and_a_refusal_falls_back() -> None:
             "GPS_RAW_INT", "HOME_POSITION", "EKF_STATUS_REPORT"} == set(names)
     assert "ESTIMATOR_STATUS" in [s.name for s in stream_plan("px4")]
     assert streams.on_interval_result("GLOBAL_POSITION_INT", "MAV_RESULT_ACCEPTED") == []
-    [fallback] = streams.on_interval_result("EKF_STATUS_REPORT", "MAV_RESULT_UNSUPPORTED")
+    [fallback] = streams.on_interval_result("EKF_STATUS_REPORT", "NO_ANSWER")
     assert (fallback.kind, fallback.spec.group) == ("stream", M.MAV_DATA_STREAM_EXTRA3)
-    assert streams.available("EKF_STATUS_REPORT")  # refused, but the fallback may still bring it
+    assert streams.available("EKF_STATUS_REPORT")  # not answered: the fallback may still bring it
+    [fallback] = streams.on_interval_result("HOME_POSITION", "MAV_RESULT_UNSUPPORTED")
+    assert fallback.kind == "message"
+    assert not streams.available("HOME_POSITION")  # the autopilot accepted others: it has not this one
+    streams.heard(M.MAVLINK_MSG_ID_HOME_POSITION)
+    assert streams.available("HOME_POSITION")  # ...until it comes all the same
     [fallback] = streams.on_interval_result("EXTENDED_SYS_STATE", "NO_ANSWER")
     assert fallback.kind == "message"  # in no stream group: asked for once, and again while missing
     assert streams.missing() == ()  # not yet: the autopilot is given MISSING_AFTER_S

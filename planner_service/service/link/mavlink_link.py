@@ -660,7 +660,7 @@ class PymavlinkLink(VehicleLink):
         self._check_link("start()")
         if not t.position_ok:
             raise LinkError("start()", f"no position: waiting for {t.waiting_for}")
-        armed_here = False
+        armed_here, was_armed = False, t.armed  # a vehicle someone else armed is left to them
         try:
             if self.settings.flavour == "ardupilot" and t.mode != "GUIDED":
                 # ArduCopter refuses to arm in AUTO (unless AUTO_OPTIONS allows it); GUIDED
@@ -670,7 +670,7 @@ class PymavlinkLink(VehicleLink):
             armed_here = True
             await self._resume()
         except LinkError as err:
-            if armed_here or self.telemetry.armed:
+            if (armed_here or self.telemetry.armed) and not was_armed:
                 await self._disarm_on_ground(err)
             raise
 

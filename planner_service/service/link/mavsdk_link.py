@@ -386,7 +386,7 @@ class MavsdkLink(VehicleLink):
         self._check_link("start()")
         if not t.position_ok:
             raise LinkError("start()", f"no position: waiting for {t.waiting_for}")
-        armed_here = False
+        armed_here, was_armed = False, t.armed  # a vehicle someone else armed is left to them
         try:
             if self.settings.flavour == "ardupilot" and t.mode != "GUIDED":
                 await self._set_mode("GUIDED")  # ArduCopter refuses to arm in AUTO (see the pymavlink backend)
@@ -394,7 +394,7 @@ class MavsdkLink(VehicleLink):
             armed_here = True
             await self._resume()
         except LinkError as err:
-            if (armed_here or self.telemetry.armed) and not self.telemetry.airborne:
+            if (armed_here or self.telemetry.armed) and not was_armed and not self.telemetry.airborne:
                 try:
                     await self.command(M.MAV_CMD_COMPONENT_ARM_DISARM, 0, what="disarm()")
                     log.warning("start failed (%s): disarmed again", err)

@@ -9,7 +9,10 @@ refusal (or no answer) falls back to REQUEST_DATA_STREAM for the ArduPilot strea
 that carries the message, or to MAV_CMD_REQUEST_MESSAGE for a message in no group. What
 does not arrive is "missing"; a refused message that does not arrive by the fallback
 either is "unavailable" (the autopilot will not send it, and the judgement that needs it
-does without: ``telemetry.assess_position``, the derived landed state).
+does without: ``telemetry.assess_position``, the derived landed state). A message refused
+by an autopilot that accepted others is unavailable at once (it knows the command and does
+not have that message); one refused by an autopilot that accepted nothing (it may not know
+the command) is given ``UNAVAILABLE_AFTER_S`` to come by the fallback.
 
 ``Streams`` is the bookkeeping only (no I/O): it returns the requests to send and is told
 of acknowledgements and arrivals.
@@ -28,6 +31,7 @@ MISSING_AFTER_S = 2.0
 """Wall seconds after a request (or the last arrival, with 3 intervals) before a message is missing."""
 UNAVAILABLE_AFTER_S = 2.0
 """Wall seconds after a refusal and its fallback before the message is taken as unavailable."""
+REFUSALS = frozenset({"MAV_RESULT_DENIED", "MAV_RESULT_UNSUPPORTED", "MAV_RESULT_FAILED"})
 REREQUEST_S = 5.0
 """Missing messages are asked for again this often (a lost request or a reset autopilot)."""
 
@@ -76,6 +80,7 @@ class _State:
     heard_at: float | None = None
     refused: str = ""
     """Why the interval request failed ('' while not refused)."""
+    accepted: bool = False
     fallback_at: float | None = None
 
 
@@ -101,9 +106,14 @@ class Streams:
         state, spec = self._state.get(name), self.by_name.get(name)
         if state is None or spec is None or result == "MAV_RESULT_ACCEPTED":
             if state is not None:
-                state.refused = ""
+                state.refused, state.accepted = "", True
             return []
         state.refused, state.fallback_at = result, self.clock()
+        if result in REFUSALS and any(s.accepted for s in self._state.values()):
+            # The autopilot knows the command and said no to this message alone (ArduPilot:
+            # "No ap_message for mavlink id"): it does not have it. Unavailable at once, so
+            # nothing waits for it; the fallback is still asked, and an arrival counts.
+            state.fallback_at -= UNAVAILABLE_AFTER_S
         return [Request("stream" if spec.group is not None else "message", spec)]
 
     def heard(self, msg_id: int) -> bool:
