@@ -7,6 +7,7 @@ replacement, and the autopilot killed and restarted under the link."""
 from __future__ import annotations
 
 import asyncio
+import logging
 import math
 import socket
 import threading
@@ -186,7 +187,7 @@ def test_replacement_in_flight_flies_the_new_plan_and_an_rtl_replacement_returns
 @pytest.mark.parametrize("backend, transport", [("pymavlink", "tcp"), ("pymavlink", "udp"), ("pymavlink", "serial"),
                                                 ("mavsdk", "tcp"), ("mavsdk", "udp"), ("mavsdk", "serial")])
 def test_the_link_survives_the_autopilot_killed_and_restarted(make_sitl: Callable[..., Sitl], backend: str,
-                                                              transport: str) -> None:
+                                                              transport: str, caplog: pytest.LogCaptureFixture) -> None:
     """TCP: SITL's SERIAL1 port, closed under the link; UDP: SITL sends to the link's port
     (``--serial1 udpclient:``) and falls silent; serial: a pseudo-terminal joined to SITL's
     SERIAL2, which stays open while the autopilot behind it restarts."""
@@ -231,6 +232,7 @@ def test_the_link_survives_the_autopilot_killed_and_restarted(make_sitl: Callabl
             await until("a position again", lambda: link.telemetry.position_ok, 90.0, link)
             assert link.telemetry.connected
             assert {t.name for t in threading.enumerate()} >= threads - {"sitl-monitor"}
+            assert all(not task.done() for task in link._tasks)  # type: ignore[attr-defined]
             # The link works: a mission goes up and comes back.
             items = encode_path([HoverPoint(10.0, 10.0, ALT_M, 1.0)], ORIGIN, "ardupilot")
             await link.upload(items)
@@ -240,10 +242,13 @@ def test_the_link_survives_the_autopilot_killed_and_restarted(make_sitl: Callabl
         finally:
             await link.close()
 
+    caplog.set_level(logging.INFO, logger="planner_service")
     try:
         figures = asyncio.run(run())
     finally:
         if bridge is not None:
             bridge.close()
+    said = [r.getMessage() for r in caplog.records]
+    assert any("autopilot link lost" in m for m in said) and any("the autopilot restarted" in m for m in said), said
     print(f"\n{backend} over {transport}: lost {figures['lost_s']:.2f} s after the kill; restored and restart "
           f"seen {figures['restored_s']:.2f} s after SITL started again")
