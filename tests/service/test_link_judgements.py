@@ -249,10 +249,10 @@ def test_an_unknown_battery_reading_is_never_full() -> None:
 # --- wire text ------------------------------------------------------------------------------------------------
 def test_wire_text_is_escaped_of_control_characters() -> None:
     assert printable("PreArm: \x1b[31mred\x1b[0m\nfake log line\r\x00") == (
-        "PreArm: \\x1b[31mred\\x1b[0m\\nfake log line\\r\\x00")
+        "PreArm: \\x1b[31mred\\x1b[0m\\x0afake log line\\x0d\\x00")
     assert printable("ok \u2028 \x85") == "ok \\u2028 \\x85"
     assert printable("é ü Zürich") == "é ü Zürich"
-    assert len(printable("x" * 1000)) == 256
+    assert len(printable("x" * 1000, 256)) == 256
 
 
 def test_statustext_is_escaped_before_it_is_told() -> None:
