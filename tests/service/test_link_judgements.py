@@ -259,4 +259,4 @@ def test_statustext_is_escaped_before_it_is_told() -> None:
     clock = Clock()
     state, events = vehicle(clock)
     feed(state, M.MAVLink_statustext_message(M.MAV_SEVERITY_WARNING, b"Arm: \x1b[2Jcleared\nscreen"))
-    assert StatusText("Arm: \\x1b[2Jcleared\\nscreen", M.MAV_SEVERITY_WARNING) in events
+    assert StatusText("Arm: \\x1b[2Jcleared\\x0ascreen", M.MAV_SEVERITY_WARNING) in events
