@@ -118,6 +118,10 @@ class PlannerConfig:
     """Seed of the planner's random generator."""
     min_requests: int = 1
     """Pending requests needed before the first plan of a sortie."""
+    max_failures: int = 8
+    """Failed plans or uploads in a row after which the service stops trying (and says so)
+    until the link, a request or the operator changes something; each retry waits twice as
+    long as the last, from 1 s up to 30 s."""
     replan_min_interval_s: float = 1.0
     """Least wall time between two re-plans caused by new requests (re-plans at a
     hovering point are never delayed); 0 re-plans on every request."""
@@ -147,6 +151,12 @@ class SafetyConfig:
     min_flight_altitude_m: float = 10.0
     rtl_battery_fraction: float = 0.1
     """Command return to launch when the battery fraction reaches this (airborne)."""
+    hold_radius_m: float = 5.0
+    """A service counts only while the vehicle's own position is within this distance of
+    its hovering point (ArduPilot's WPNAV_RADIUS is 2 m; GPS wanders about a metre)."""
+    hold_margin_s: float = 1.0
+    """Each planned hold is this much (or one position-report gap, if longer) longer than
+    the upload needs, so that the reports show the whole hold."""
     energy_margin_j: float = 1000.0
     """Kept back from every plan on top of the model's reserve and the landing descent,
     for what the model does not see (wind, an estimate's error)."""
@@ -363,6 +373,12 @@ def validate(c: ServiceConfig) -> None:
         raise ConfigError("journal.synchronous", "must be OFF, NORMAL, FULL or EXTRA")
     if not s.energy_margin_j >= 0:
         raise ConfigError("safety.energy_margin_j", "must not be negative")
+    if not 0.5 <= s.hold_radius_m <= 50.0:
+        raise ConfigError("safety.hold_radius_m", f"must lie in [0.5, 50] m, got {s.hold_radius_m}")
+    if not 0.0 <= s.hold_margin_s <= 30.0:
+        raise ConfigError("safety.hold_margin_s", f"must lie in [0, 30] s, got {s.hold_margin_s}")
+    if p.max_failures < 1:
+        raise ConfigError("planner.max_failures", "must be at least 1")
     if not 0.0 <= s.rtl_battery_fraction < 1.0:
         raise ConfigError("safety.rtl_battery_fraction", "must lie in [0, 1)")
     if not s.rtl_battery_fraction < c.sortie.next_battery_fraction <= 1.0:

@@ -17,7 +17,7 @@ from .config import build_config, to_toml
 from .errors import ServiceError
 from .journal import Journal
 from .processes import Child, free_port, start_vehicle_and_service
-from .progress import item_from_dict
+from .sortie import item_from_dict
 from .report import sortie_summary
 
 

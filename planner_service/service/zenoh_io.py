@@ -199,6 +199,16 @@ class ZenohIO:
         for place in places:
             self.session.put(self.keys.user(place.user_id), encode(place))
 
+    def withdraw_liveliness(self) -> None:
+        """Undeclare the liveliness token: clients that wait for the service see it gone
+        (a degraded service still answers, with the reason it takes nothing)."""
+        if self._token is not None:
+            try:
+                self._token.undeclare()
+            except zenoh.ZError:
+                pass
+            self._token = None
+
     def stop_intake(self) -> None:
         """Undeclare the request queryables: no new request reaches the service."""
         for q in (self._request_q, self._user_request_q):

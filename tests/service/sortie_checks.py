@@ -15,7 +15,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from planner_service.model import Scenario
-from planner_service.service.progress import item_from_dict
+from planner_service.service.sortie import item_from_dict
 from planner_service.service.report import fairness_violations
 from protocol import Area, Event, GeoOrigin, mission_digest, validate_mission
 from protocol.mission import NAV_RTL

@@ -1,28 +1,43 @@
-"""The operator's commands as a pure function: what start, hold and status do to the
-service's authority, what they answer, and that a command that cannot be read or carries
-hostile text changes nothing and comes back escaped and bounded."""
+"""The operator's commands: what start, hold and status do to the service's authority (the
+sortie logic decides), what they answer, and that a command that cannot be read or carries
+hostile text changes nothing and comes back escaped and bounded (the edge)."""
 
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 
 import pytest
 
-from planner_service.service.operator import (AuthorityState, OperatorContext, handle, handle_payload, initial,
-                                              revoke)
-from protocol import ErrorReply, OperatorCommand, OperatorReply, Status, decode_operator_reply, encode
-
-NOW = 1000.0
-STATUS = Status(vehicle="uav1", phase="idle", mode="GUIDED", battery_fraction=0.9, battery_source="autopilot",
-                position_ok=True, waiting_for="the operator's start")
-
-
-def context(**fields: object) -> OperatorContext:
-    return OperatorContext(**{"phase": "idle", "now_s": NOW, "status": STATUS, **fields})  # type: ignore[arg-type]
+from planner_service.model import preset
+from planner_service.service.operator import read_command, reply_for
+from planner_service.service.sortie import Authority, Rules, SortieLogic, Vehicle, new_sortie
+from planner_service.service.sortie import effects as fx
+from planner_service.service.sortie import inputs as ins
+from protocol import Area, ErrorReply, GeoOrigin, OperatorCommand, OperatorReply, Status, decode_operator_reply, encode
 
 
-def command(name: str, reason: str = "", ref: str | None = "ref-1") -> OperatorCommand:
-    return OperatorCommand(command=name, reason=reason, client_ref=ref)  # type: ignore[arg-type]
+class NoRequests:
+    def request_for(self, user_id: str) -> None:
+        return None
+
+    def services_of(self, user_id: str) -> int:
+        return 0
+
+    def pending_count(self) -> int:
+        return 0
+
+
+LOGIC = SortieLogic(Rules(preset("field"), GeoOrigin(), Area(500.0, 120.0, 10.0)), NoRequests())
+READY = Vehicle(connected=True, position_ok=True, boot_s=1.0, landed_known=True, mode="STABILIZE",
+                battery_fraction=0.9, battery_source="autopilot")
+NONE = new_sortie(1, LOGIC.rules)
+GIVEN = replace(NONE, authority=Authority.by_operator())
+REVOKED = replace(NONE, authority=GIVEN.authority.revoke("mode changed to LOITER"))
+
+
+def operator(state, command: str, reason: str = "", v: Vehicle = READY):  # type: ignore[no-untyped-def]
+    return LOGIC.operator(state, ins.OperatorCommand(command, reason), v, 0.0)  # type: ignore[arg-type]
 
 
 def sent(reply: OperatorReply | ErrorReply) -> OperatorReply | ErrorReply:
@@ -30,68 +45,51 @@ def sent(reply: OperatorReply | ErrorReply) -> OperatorReply | ErrorReply:
     return decode_operator_reply(encode(reply))
 
 
-NONE = initial(False, 0.0)
-GIVEN = AuthorityState("operator", "given by the operator", 500.0)
-REVOKED = revoke(GIVEN, "the pilot switched to LOITER", 900.0)
-
-
 def test_start_gives_the_authority_and_says_so() -> None:
-    new, reply = handle(command("start", "range clear, pilot ready"), NONE, context())
-    assert new == AuthorityState("operator", "given by the operator (range clear, pilot ready)", NOW)
-    assert sent(reply) == reply
-    assert (reply.command, reply.accepted, reply.authority, reply.phase, reply.client_ref) == (
-        "start", True, "operator", "idle", "ref-1")
-    assert reply.message.startswith("authority given: the service may arm, switch to the mission mode")
-    assert reply.status is not None and reply.status.authority == "operator"
-    assert reply.status.authority_detail == new.detail and reply.status.mode == "GUIDED"
+    new, out, accepted, said = operator(NONE, "start", "range clear, pilot ready")
+    assert accepted and new.authority.granted
+    assert new.authority.detail == "given by the operator (range clear, pilot ready)"
+    assert said.startswith("authority given: the service may arm")
+    assert [e.event for e in out if isinstance(e, fx.Emit)] == ["authority_granted"]
 
 
 def test_start_after_a_revocation_gives_it_back_and_twice_is_harmless() -> None:
-    assert REVOKED.authority == "revoked" and "the pilot switched to LOITER" in REVOKED.detail
-    new, reply = handle(command("start"), REVOKED, context())
-    assert new.authority == "operator" and reply.accepted and new.detail == "given by the operator"
-    again, reply2 = handle(command("start"), new, context(now_s=NOW + 5))
-    assert again == new and reply2.accepted and reply2.message.startswith("the service already has the authority")
+    assert REVOKED.authority.state == "revoked" and "mode changed to LOITER" in REVOKED.authority.detail
+    new, _, accepted, _ = operator(REVOKED, "start")
+    assert accepted and new.authority.granted
+    again, out, accepted, said = operator(new, "start")
+    assert accepted and again.authority == new.authority and not out
+    assert said.startswith("the service already has the authority")
 
 
-@pytest.mark.parametrize("fields, words", [
-    ({"degraded": "the journal cannot be written: disk full"},
-     "the service is degraded: the journal cannot be written: disk full"),
-    ({"start_refusal": "the battery reading is unknown"}, "the battery reading is unknown"),
+@pytest.mark.parametrize("state, vehicle, words", [
+    (replace(NONE, degraded="the status task failed"), READY, "degraded: the status task failed"),
+    (NONE, Vehicle(), "not connected"),
+    (NONE, replace(READY, position_ok=False), "no position"),
+    (NONE, replace(READY, battery_fraction=None, battery_source="unknown"), "battery's charge is unknown"),
+    (NONE, replace(READY, battery_fraction=0.5, battery_source="model"), "battery's charge is model"),
 ])
-def test_start_is_refused_when_the_service_cannot_take_it(fields: dict[str, str], words: str) -> None:
-    for state in (NONE, REVOKED):
-        new, reply = handle(command("start"), state, context(**fields))
-        assert new == state and not reply.accepted and reply.message == words
-        assert reply.authority == state.authority
+def test_start_is_refused_when_the_service_cannot_take_it(state, vehicle, words: str) -> None:  # type: ignore[no-untyped-def]
+    new, out, accepted, said = operator(state, "start", v=vehicle)
+    assert not accepted and words in said and new == state and not out
 
 
 def test_hold_always_takes_the_authority_back() -> None:
-    new, reply = handle(command("hold", "pilot takes over"), GIVEN, context(degraded="a task died", phase="degraded"))
-    assert new == AuthorityState("none", "handed back by the operator's hold (pilot takes over)", NOW)
-    assert reply.accepted and reply.authority == "none" and reply.phase == "degraded"
-    assert reply.message.startswith("authority withdrawn: the service commands no mode and no arming")
-    for state in (NONE, REVOKED):  # nothing to take back: accepted, unchanged, said
-        same, r = handle(command("hold"), state, context())
-        assert same == state and r.accepted and "nothing changed" in r.message
+    flying = replace(READY, armed=True, airborne=True, mode="AUTO")
+    new, out, accepted, said = operator(replace(GIVEN, degraded="a task died"), "hold", "pilot takes over", flying)
+    assert accepted and new.authority.state == "none" and "pilot takes over" in new.authority.detail
+    assert [e.kind for e in out if isinstance(e, fx.Command)] == ["hold"]
+    assert said.startswith("authority withdrawn")
+    for state in (NONE, REVOKED):
+        same, out, accepted, said = operator(state, "hold")
+        assert accepted and same == state and not out and "nothing changed" in said
 
 
 def test_status_changes_nothing_and_summarises() -> None:
     for state in (NONE, GIVEN, REVOKED):
-        same, reply = handle(command("status"), state, context(degraded="the status task died"))
-        assert same == state and reply.accepted and reply.authority == state.authority
-        assert reply.message == (f"authority {state.authority}: {state.detail}; phase idle; degraded: the status "
-                                 "task died; waiting for the operator's start")
-        assert reply.status is not None and reply.status.battery_fraction == 0.9
-
-
-def test_revoke_and_the_initial_authority() -> None:
-    assert revoke(NONE, "whatever", 1.0) == NONE  # nothing to revoke
-    assert initial(True, 7.0) == AuthorityState(
-        "operator", "given by the configuration (mavlink.start_mission = true)", 7.0)
-    assert initial(False, 7.0).authority == "none"
-    long = revoke(GIVEN, "x" * 1000, 1.0)
-    assert long.authority == "revoked" and len(long.detail) <= 256
+        same, out, accepted, said = operator(state, "status")
+        assert accepted and same is state and not out
+        assert said.startswith(f"authority {state.authority.state}: {state.authority.detail}")
 
 
 def test_a_payload_that_is_not_a_command_changes_nothing() -> None:
@@ -99,19 +97,21 @@ def test_a_payload_that_is_not_a_command_changes_nothing() -> None:
                            (b'{"kind": "operator_command", "command": "arm", "client_ref": "r-9"}', "command"),
                            (b'{"kind": "operator_command", "command": "start", "schema": 2}', "schema"),
                            (b'{"kind": "operator_command", "command": "start", "force": true}', "force")):
-        state, reply = handle_payload(payload, GIVEN, context())
-        assert state is GIVEN and isinstance(reply, ErrorReply) and reply.field == field, (payload, reply)
+        reply = read_command(payload)
+        assert isinstance(reply, ErrorReply) and reply.field == field, (payload, reply)
         assert sent(reply) == reply
-    _, reply = handle_payload(b'{"kind": "operator_command", "command": "arm", "client_ref": "r-9"}', GIVEN, context())
-    assert reply.client_ref == "r-9"
+    reply = read_command(b'{"kind": "operator_command", "command": "arm", "client_ref": "r-9"}')
+    assert isinstance(reply, ErrorReply) and reply.client_ref == "r-9"
 
 
 def test_hostile_text_in_a_reason_is_escaped_and_bounded() -> None:
     reason = "ok\x1b[2J\x1b]0;pwned\x07\nINFO forged log line\u202e" + "\x00" * 300
-    payload = json.dumps({"kind": "operator_command", "command": "start", "reason": reason[:256]}).encode()
-    new, reply = handle_payload(payload, NONE, context())
+    cmd = read_command(json.dumps({"kind": "operator_command", "command": "start", "reason": reason[:256]}).encode())
+    assert isinstance(cmd, OperatorCommand)
+    new, _, accepted, said = operator(NONE, "start", cmd.reason)
+    reply = reply_for(cmd, accepted, said, Status(authority=new.authority.state))
     assert isinstance(reply, OperatorReply) and reply.accepted
-    for text in (new.detail, reply.message):
+    for text in (new.authority.detail, reply.message):
         assert not any(ord(c) < 32 or c == "\u202e" for c in text), text
         assert "\\x1b[2J" in text and "\\x0aINFO forged" in text and len(text) <= 256
     assert sent(reply) == reply

@@ -111,5 +111,9 @@ class VehicleLink(abc.ABC):
         """Command return to launch now."""
 
     @abc.abstractmethod
+    async def hold(self) -> None:
+        """Hold position where the vehicle is (LOITER, PX4's AUTO.LOITER): the operator's hold."""
+
+    @abc.abstractmethod
     async def close(self) -> None:
         """Stop every thread and socket of the link."""

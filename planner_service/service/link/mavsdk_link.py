@@ -410,6 +410,10 @@ class MavsdkLink(VehicleLink):
         await self._set_mode("AUTO.MISSION" if self.settings.flavour == "px4" else "AUTO")
         await self.command(M.MAV_CMD_MISSION_START, 0, 0, what="start_mission()")
 
+    async def hold(self) -> None:
+        self._check_link("hold()")
+        await self._set_mode("AUTO.LOITER" if self.settings.flavour == "px4" else "LOITER")
+
     async def return_to_launch(self) -> None:
         self.state.expect_mode("AUTO.RTL" if self.settings.flavour == "px4" else "RTL")
         await self.command(M.MAV_CMD_NAV_RETURN_TO_LAUNCH, what="return_to_launch()")

@@ -1,0 +1,126 @@
+"""What the sortie logic asks the service to do: one frozen record per effect. The logic
+returns them; ``app.py`` carries them out (journal, link, planner, zenoh) and feeds the
+outcome back as an input. Nothing here does I/O."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal
+
+from protocol import MissionItem
+
+from ..planning import PlannedPath, PlannedPoint
+from .mission import HeldMission
+
+
+@dataclass(frozen=True)
+class PlanBasis:
+    """Where the next decision starts from."""
+
+    reason: str
+    version: int
+    """The sortie logic's version when it asked: a result of an older one is stale."""
+    keep_through: int | None
+    """A replacement keeps the held mission's items up to this seq; None: a fresh mission."""
+    at_point: PlannedPoint | None = None
+    """Plan from this point, the vehicle holding there (its hold counted as done)."""
+    serving: str | None = None
+    """The user served at ``at_point``: counted as served, its tasks consumed."""
+    serving_tasks: int = 0
+
+
+@dataclass(frozen=True)
+class Plan:
+    basis: PlanBasis
+
+
+@dataclass(frozen=True)
+class Upload:
+    plan_id: int
+    items: tuple[MissionItem, ...]
+    mission: HeldMission
+    """What the vehicle holds once the upload is accepted."""
+    path: PlannedPath
+    current_seq: int | None
+    """The item the vehicle must fly after the upload (set when it differs); None: the
+    autopilot's own (an index it keeps)."""
+    keep_through: int | None
+
+
+@dataclass(frozen=True)
+class ReadBack:
+    why: str
+
+
+CommandKind = Literal["start", "resume", "return", "hold", "set_current"]
+
+
+@dataclass(frozen=True)
+class Command:
+    kind: CommandKind
+    seq: int = -1
+    """For set_current: the item to fly now."""
+    why: str = ""
+
+
+@dataclass(frozen=True)
+class RecordService:
+    request_id: int
+    user_id: str
+    hover_index: int
+    xyz: tuple[float, float, float]
+    tasks: int
+    bits: float
+    reward: float
+    held_s: float
+    planned_request: bool
+    """The request served is the one the plan was made for."""
+
+
+@dataclass(frozen=True)
+class RecordMission:
+    plan_id: int
+    mission: HeldMission
+    result: str
+
+
+@dataclass(frozen=True)
+class Emit:
+    """An event for the events publication (and the log)."""
+
+    event: str
+    detail: str = ""
+    user_id: str | None = None
+    request_id: int | None = None
+
+
+@dataclass(frozen=True)
+class PublishPlan:
+    mission: HeldMission
+    predicted_energy_j: float = 0.0
+
+
+@dataclass(frozen=True)
+class Log:
+    level: Literal["info", "warning", "error"]
+    text: str
+
+
+@dataclass(frozen=True)
+class EndSortie:
+    why: str
+
+
+@dataclass(frozen=True)
+class BeginSortie:
+    battery_fraction: float
+
+
+@dataclass(frozen=True)
+class MarkFlown:
+    """Note in the journal that this sortie has flown (a landing while the service is down
+    still ends it)."""
+
+
+Effect = (Plan | Upload | ReadBack | Command | RecordService | RecordMission | Emit | PublishPlan | Log | EndSortie
+          | BeginSortie | MarkFlown)

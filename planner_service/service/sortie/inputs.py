@@ -1,0 +1,167 @@
+"""What the sortie logic is told: one frozen record per input, and the view of the vehicle
+and of the journal it decides on. Nothing here does I/O."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Literal, Protocol, Sequence
+
+from protocol import MissionItem
+
+from ..journal import RequestRow
+from ..planning import PlannedPath
+from .effects import Command, PlanBasis, Upload
+
+
+@dataclass(frozen=True)
+class Vehicle:
+    """The vehicle as its telemetry shows it, in local metres (from the link's snapshot)."""
+
+    connected: bool = False
+    position_ok: bool = False
+    """The autopilot has a position estimate (fix, EKF, home): never lat/lon 0/0."""
+    xyz: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    boot_s: float = math.nan
+    """The vehicle's own clock when it reported the position."""
+    armed: bool = False
+    airborne: bool = False
+    landed_known: bool = False
+    mode: str = ""
+    seq: int = -1
+    """The mission item it flies (MISSION_CURRENT)."""
+    battery_fraction: float | None = None
+    """The best estimate: the autopilot's reading, else the model's fallback; None: unknown."""
+    battery_source: Literal["autopilot", "model", "unknown"] = "unknown"
+    reach_m: float = 0.0
+    """How far it may fly before a plan made now is on board (reading age, search, upload)."""
+    report_gap_s: float = 0.0
+    """Vehicle seconds between two position reports (the tolerance of a hold's length)."""
+
+
+class World(Protocol):
+    """What the sortie logic reads of the journal (the current sortie)."""
+
+    def request_for(self, user_id: str) -> RequestRow | None:
+        """The user's request in force (pending), or None."""
+
+    def services_of(self, user_id: str) -> int:
+        """Services the user has had this sortie."""
+
+    def pending_count(self) -> int:
+        """Requests waiting."""
+
+
+@dataclass(frozen=True)
+class Tick:
+    now: float
+
+
+@dataclass(frozen=True)
+class LinkConnected:
+    mode: str
+
+
+@dataclass(frozen=True)
+class LinkLost:
+    why: str
+
+
+@dataclass(frozen=True)
+class LinkRestored:
+    mode: str
+
+
+@dataclass(frozen=True)
+class VehicleRestarted:
+    why: str
+
+
+@dataclass(frozen=True)
+class ModeChanged:
+    mode: str
+    commanded: bool = False
+    """The link asked for this mode (a step of a start, a resume, a return or a hold)."""
+
+
+@dataclass(frozen=True)
+class Landed:
+    pass
+
+
+@dataclass(frozen=True)
+class Planned:
+    basis: PlanBasis
+    path: PlannedPath
+
+
+@dataclass(frozen=True)
+class PlanFailed:
+    basis: PlanBasis
+    error: str
+
+
+@dataclass(frozen=True)
+class Uploaded:
+    upload: Upload
+    generation: int
+
+
+@dataclass(frozen=True)
+class UploadFailed:
+    upload: Upload
+    error: str
+    outcome_unknown: bool = False
+
+
+@dataclass(frozen=True)
+class ReadBackDone:
+    items: tuple[MissionItem, ...]
+    generation: int
+
+
+@dataclass(frozen=True)
+class ReadBackFailed:
+    error: str
+
+
+@dataclass(frozen=True)
+class CommandDone:
+    command: Command
+
+
+@dataclass(frozen=True)
+class CommandFailed:
+    command: Command
+    error: str
+
+
+@dataclass(frozen=True)
+class RequestIn:
+    """A request was accepted (a user's backlog changed)."""
+
+    user_id: str
+    tasks: int
+
+
+@dataclass(frozen=True)
+class OperatorCommand:
+    command: Literal["start", "hold", "status"]
+    reason: str = ""
+
+
+@dataclass(frozen=True)
+class SortieBegun:
+    number: int
+
+
+@dataclass(frozen=True)
+class Degraded:
+    why: str
+
+
+Input = (Tick | LinkConnected | LinkLost | LinkRestored | VehicleRestarted | ModeChanged | Landed | Planned
+         | PlanFailed | Uploaded | UploadFailed | ReadBackDone | ReadBackFailed | CommandDone | CommandFailed
+         | RequestIn | OperatorCommand | SortieBegun | Degraded)
+
+__all__ = ["Input", "Vehicle", "World", "Sequence"]

@@ -1,0 +1,705 @@
+"""The sortie logic: one frozen state value and ``step(state, input) -> (state, effects)``.
+Pure: no event loop, no sockets, no journal writes; ``app.py`` feeds it the vehicle's
+telemetry and reports, the planner's results and the operator's commands, and carries out
+the effects it returns.
+
+What it decides, in the order a sortie goes:
+- **Plan** on the ground once enough requests wait; upload the whole line, complete and
+  ending in return to launch, and start it when the service has authority.
+- **Truth from the vehicle**: every position report feeds a ``HoldWatch`` over the point
+  the vehicle flies to. A service is recorded when the vehicle leaves a point it was seen
+  holding at, for the tasks the observed hold carried; never from a mission index alone.
+- **One decision per interval**: when the vehicle arrives at a point, the request in force
+  for that point's user is bound, and the next point is decided from there (that service
+  counted as done) and uploaded as a replacement that keeps every item up to the one held
+  (``mission.replacement``): the hold goes on, the point after it is the new decision.
+  A hold longer than the bound request needs is ended early (``set_current``).
+- **Doubt**: after a link gap, a vehicle restart or our own restart, the vehicle may hold
+  another mission: read it back before anything else; a lost mission in the air is
+  re-planned from where the vehicle is and resumed (with authority) or left to the operator.
+- **Authority** (``authority.py``): modes and arming only when granted; any change the
+  service did not command ends it.
+- **Bounded retries**: a failed plan or upload is retried with a growing wait, and given up
+  after ``max_failures`` in a row until something changes.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+from typing import Literal
+
+import numpy as np
+
+from protocol import Area, GeoOrigin, HoverPoint, MissionItem, encode_path, replacement_items, same_mission, validate_mission
+from protocol.errors import MissionError
+
+from ...model import Scenario, pack
+from ...model.fairness import is_eligible
+from ...model.reward import interval_reward
+from ..errors import PlanningError
+from ..link.base import HOLDING_MODES, MISSION_MODES, RETURNING_MODES
+from ..planning import PlannedPath, PlannedPoint, check_path, hold_time_s
+from . import effects as fx
+from . import inputs as ins
+from .authority import Authority, next_sortie
+from .hold import HoldWatch, Sample
+from .mission import HeldMission
+
+Busy = Literal["", "plan", "upload", "readback"]
+
+MAX_HOLD_MARGIN_S = 5.0
+"""The most a hold is lengthened for the reporting gap (a slower stream is a link problem)."""
+
+
+@dataclass(frozen=True)
+class Rules:
+    """What the sortie logic needs of the configuration."""
+
+    scenario: Scenario
+    origin: GeoOrigin
+    area: Area
+    flavour: str = "ardupilot"
+    start_mission: bool = False
+    min_requests: int = 1
+    replan_min_interval_s: float = 1.0
+    hold_radius_m: float = 5.0
+    rtl_battery_fraction: float = 0.1
+    repeat: bool = True
+    next_battery_fraction: float = 0.95
+    max_mission_items: int = 512
+    hold_margin_s: float = 1.0
+    max_failures: int = 8
+    retry_s: float = 1.0
+    max_retry_s: float = 30.0
+
+    @property
+    def mode_names(self) -> dict[str, str]:
+        if self.flavour == "px4":
+            return {"start": "AUTO.MISSION", "resume": "AUTO.MISSION", "return": "AUTO.RTL", "hold": "AUTO.LOITER"}
+        return {"start": "AUTO", "resume": "AUTO", "return": "RTL", "hold": "LOITER"}
+
+
+@dataclass(frozen=True)
+class Binding:
+    """The request a hold serves, bound when the vehicle arrives at the point."""
+
+    seq: int
+    user_id: str
+    request_id: int | None
+    """None: nothing to serve there (``why_not``)."""
+    tasks: int = 0
+    needed_s: float = 0.0
+    """The hold the bound tasks need from this point (upload time)."""
+    planned: bool = False
+    """The request bound is the one the plan was made for."""
+    why_not: str = ""
+    done: bool = False
+    """The user said its upload is done (a newer request with no tasks)."""
+
+
+@dataclass(frozen=True)
+class Sortie:
+    """Everything the sortie logic knows; a new sortie is a new value."""
+
+    number: int = 1
+    over: str | None = None
+    """Why the sortie ended; None while it runs."""
+    flown: bool = False
+    """The vehicle has been airborne in this sortie (so a landing ends it)."""
+    started: bool = False
+    """The mission was started (by the service or, seen airborne, by someone)."""
+    authority: Authority = field(default_factory=Authority)
+    commanded_landing: bool = True
+    """The landing that ended the sortie was the service's (its mission's return, its own
+    return to launch) under its authority."""
+    held: HeldMission | None = None
+    held_gen: int | None = None
+    """The link generation ``held`` is known to match; None while in doubt."""
+    unconfirmed: HeldMission | None = None
+    """An upload whose outcome is unknown: the vehicle may hold it."""
+    doubt: str | None = None
+    """Why the vehicle may hold another mission than ``held``: read it back first."""
+    must_upload: bool = False
+    """The vehicle lost its mission in the air: upload whatever the plan."""
+    resume_pending: bool = False
+    restarted: bool = False
+    watch: HoldWatch | None = None
+    binding: Binding | None = None
+    judged: frozenset[int] = frozenset()
+    """Seqs of ``held``'s points already judged (served or not)."""
+    decided_at: int | None = None
+    """The seq from whose hold the last decision was made (one decision per interval)."""
+    early_end: int | None = None
+    """The seq whose hold the service ended early."""
+    plan_id: int = 0
+    version: int = 0
+    """Bumped when a plan being searched is stale (doubt, restart, sortie over)."""
+    last_hover_index: int = -1
+    busy: Busy = ""
+    commanding: str = ""
+    failures: int = 0
+    retry_at: float = 0.0
+    dirty: bool = True
+    """Requests came in since the last plan."""
+    last_plan_at: float = -math.inf
+    degraded: str | None = None
+    beginning: bool = False
+    """The next sortie was asked of the journal (``BeginSortie``)."""
+    next_authority: Authority | None = None
+    """The authority the next sortie begins with, when the operator gave it."""
+    services: int = 0
+    """Services recorded in this sortie (the interval count)."""
+
+
+Step = tuple[Sortie, list[fx.Effect]]
+
+
+class SortieLogic:
+    """``step`` with the rules and the journal view it needs (both fixed for its life)."""
+
+    def __init__(self, rules: Rules, world: ins.World) -> None:
+        self.rules = rules
+        self.world = world
+        self.p = pack(rules.scenario)
+
+    # --- entry ------------------------------------------------------------------------------
+    def step(self, s: Sortie, event: ins.Input, v: ins.Vehicle, now: float) -> Step:
+        out: list[fx.Effect] = []
+        match event:
+            case ins.Tick():
+                s = self._tick(s, v, now, out)
+            case ins.LinkConnected(mode=mode):
+                s = self._connected(s, v, mode, out)
+            case ins.LinkLost(why=why):
+                out += [fx.Emit("link_lost", why), fx.Log("warning", f"link lost: {why}")]
+            case ins.LinkRestored(mode=mode):
+                out += [fx.Emit("link_restored", mode), fx.Log("info", f"link restored ({mode})")]
+                if s.held is not None or s.flown:
+                    s = self._doubt(s, "the link was lost", out)
+                s = replace(s, retry_at=min(s.retry_at, now), failures=0)
+            case ins.VehicleRestarted(why=why):
+                s = replace(s, restarted=True, authority=replace(s.authority, expected_mode=None))
+                out.append(fx.Emit("vehicle_restarted", why[:256]))
+                s = self._doubt(s, f"the vehicle restarted: {why}", out, hold_interrupted=True)
+            case ins.ModeChanged(mode=mode, commanded=commanded):
+                s = self._mode(s, v, mode, commanded, out)
+            case ins.Landed():
+                if s.flown:
+                    s = self._end(s, "the vehicle landed", v, out)
+            case ins.Planned(basis=basis, path=path):
+                s = self._planned(replace(s, busy="", last_plan_at=now), basis, path, v, now, out)
+            case ins.PlanFailed(error=error):
+                s = self._failed(replace(s, busy="", last_plan_at=now), f"plan {s.plan_id + 1} not flown: {error}",
+                                 now, out)
+            case ins.Uploaded(upload=up, generation=gen):
+                s = self._uploaded(replace(s, busy=""), up, gen, v, out)
+            case ins.UploadFailed(upload=up, error=error, outcome_unknown=unknown):
+                s = self._upload_failed(replace(s, busy=""), up, error, unknown, now, out)
+            case ins.ReadBackDone(items=items, generation=gen):
+                s = self._read_back(replace(s, busy=""), items, gen, v, out)
+            case ins.ReadBackFailed(error=error):
+                out.append(fx.Log("warning", f"could not read back the vehicle's mission ({s.doubt}): {error}; "
+                                             f"trying again"))
+                s = replace(s, busy="", retry_at=now + self.rules.retry_s)
+            case ins.CommandDone(command=cmd):
+                s = self._command_done(replace(s, commanding=""), cmd, out)
+            case ins.CommandFailed(command=cmd, error=error):
+                s = self._command_failed(replace(s, commanding=""), cmd, error, now, out)
+            case ins.RequestIn(user_id=user, tasks=tasks):
+                s = self._request(s, user, tasks, out)
+            case ins.OperatorCommand():
+                raise TypeError("operator commands go through SortieLogic.operator")
+            case ins.SortieBegun(number=number):
+                s = self._begun(s, number, out)
+            case ins.Degraded(why=why):
+                if s.degraded is None:
+                    s = replace(s, degraded=why, version=s.version + 1)
+                    out += [fx.Emit("degraded", why[:256]), fx.Log("error", f"degraded: {why}")]
+        if not isinstance(event, ins.Tick):
+            s = self._next(s, v, now, out)
+        return s, out
+
+    # --- the periodic look at the vehicle --------------------------------------------------------
+    def _tick(self, s: Sortie, v: ins.Vehicle, now: float, out: list[fx.Effect]) -> Sortie:
+        if v.airborne and not s.flown and s.over is None:
+            s = replace(s, flown=True)
+            out.append(fx.MarkFlown())
+        if (s.flown and s.over is None and v.connected and v.landed_known and not v.airborne and not v.armed):
+            s = self._end(s, "the vehicle was found landed", v, out)
+        s = self._maybe_begin(s, v, out)
+        s = self._watch(s, v, out)
+        s = self._safety(s, v, out)
+        return self._next(s, v, now, out)
+
+    def _next(self, s: Sortie, v: ins.Vehicle, now: float, out: list[fx.Effect]) -> Sortie:
+        """Start whatever is due and not running: a read-back, a plan, a command."""
+        if s.over is not None or s.degraded is not None:
+            return s
+        if s.busy == "" and s.doubt is not None and v.connected and now >= s.retry_at:
+            out.append(fx.ReadBack(s.doubt))
+            return replace(s, busy="readback")
+        if s.busy == "" and s.doubt is None and now >= s.retry_at:
+            basis = self._plan_wanted(s, v, now)
+            if basis is not None:
+                out.append(fx.Plan(basis))
+                s = replace(s, busy="plan", dirty=False)
+        if s.commanding == "" and now >= s.retry_at:
+            s = self._command_due(s, v, out)
+        return s
+
+    # --- holds: truth from the vehicle's position ---------------------------------------------
+    def _watch(self, s: Sortie, v: ins.Vehicle, out: list[fx.Effect]) -> Sortie:
+        held = s.held
+        if held is None or s.held_gen is None or not (v.connected and v.position_ok) or math.isnan(v.boot_s):
+            return s
+        sample = Sample(v.boot_s, v.xyz, v.seq)
+        if s.watch is not None:
+            s = self._feed(s, s.watch, sample, v, out)
+        if s.watch is None:
+            # Points before the one flown that no watch ever saw (reports lost, or the
+            # service was away): flown unseen, so no service is recorded for them.
+            for seq, point in held.points:
+                if seq < v.seq and seq not in s.judged:
+                    out.append(fx.Emit("waypoint_skipped", f"point {point.hover_index}: not seen held (the vehicle "
+                                                           f"flies item {v.seq})", user_id=point.user_id))
+                    s = replace(s, judged=s.judged | {seq})
+            point = held.point_at(v.seq)
+            if point is not None and v.seq not in s.judged:
+                watch = HoldWatch(v.seq, (point.x_m, point.y_m, point.z_m), self.rules.hold_radius_m)
+                s = self._feed(s, watch, sample, v, out)
+        return self._maybe_end_hold(s, out)
+
+    def _feed(self, s: Sortie, watch: HoldWatch, sample: Sample, v: ins.Vehicle, out: list[fx.Effect]) -> Sortie:
+        before = watch
+        watch = watch.feed(sample)
+        s = replace(s, watch=watch)
+        if watch.arrived and not before.arrived:
+            s = self._arrived(s, v, out)
+        return self._judge(s, out) if watch.over else s
+
+    def _arrived(self, s: Sortie, v: ins.Vehicle, out: list[fx.Effect]) -> Sortie:
+        """The vehicle is at the point: bind the request in force for its user."""
+        assert s.watch is not None and s.held is not None
+        seq = s.watch.seq
+        point = s.held.point_at(seq)
+        assert point is not None
+        request = self.world.request_for(point.user_id)
+        services = self.world.services_of(point.user_id)
+        backlog = request.backlog if request is not None else 0
+        if request is None or not is_eligible(self.p, backlog, services):
+            why = "no request waiting" if request is None else (
+                "nothing to offload" if backlog <= 0 else f"not eligible with {backlog} tasks "
+                                                          f"after {services} services")
+            binding = Binding(seq, point.user_id, None, why_not=why)
+            out.append(fx.Emit("waypoint_reached", f"point {point.hover_index}: {why}", user_id=point.user_id))
+        else:
+            xyz = np.array([point.x_m, point.y_m, point.z_m])
+            user = np.array([request.x_m, request.y_m, request.z_m])
+            needed = hold_time_s(self.p, xyz, user, backlog * self.rules.scenario.bits_per_task)
+            binding = Binding(seq, point.user_id, request.request_id, backlog, needed,
+                              planned=request.request_id == point.request_id)
+            out.append(fx.Emit("waypoint_reached", f"point {point.hover_index}: serving {backlog} tasks, "
+                                                   f"{needed:.1f} s", user_id=point.user_id,
+                               request_id=request.request_id))
+        return replace(s, binding=binding, last_hover_index=point.hover_index)
+
+    def _maybe_end_hold(self, s: Sortie, out: list[fx.Effect]) -> Sortie:
+        """End the hold once the bound request is served: the replacement uploaded at the
+        arrival restarted the autopilot's hold timer (ArduPilot restarts the current item
+        when the items after it change; PX4 flies the item marked current), so the service,
+        not the timer, ends it, as soon as the next item is the decision made from this
+        point (uploaded) and the reports show the hold the request needs."""
+        w, b, held = s.watch, s.binding, s.held
+        if w is None or b is None or held is None or w.phase != "holding" or s.early_end == w.seq:
+            return s
+        if s.decided_at != w.seq or s.busy == "upload" or s.commanding:
+            return s
+        point = held.point_at(w.seq)
+        assert point is not None
+        if b.request_id is None:
+            why = f"nothing to serve ({b.why_not})"
+        elif b.done:
+            why = "the user's upload is done"
+        elif w.covered_s >= b.needed_s:
+            why = f"held {w.covered_s:.1f} s, the {b.needed_s:.1f} s the bound request needs"
+        else:
+            return s
+        out.append(fx.Command("set_current", w.seq + 1, f"hold at point {point.hover_index} ended: {why}"))
+        return replace(s, early_end=w.seq, commanding="set_current")
+
+    def _judge(self, s: Sortie, out: list[fx.Effect]) -> Sortie:
+        """The vehicle left the point (or passed it): record what the hold carried."""
+        w, b, held = s.watch, s.binding, s.held
+        assert w is not None and held is not None
+        point = held.point_at(w.seq)
+        s = replace(s, watch=None, binding=None, judged=s.judged | {w.seq})
+        if point is None:
+            return s
+        if not w.arrived:
+            out.append(fx.Emit("waypoint_skipped", f"point {point.hover_index}: {w.why_left}", user_id=point.user_id))
+            return s
+        if b is None or b.request_id is None:
+            return s
+        covered = w.covered_s
+        if b.done or covered >= b.needed_s - 0.5:
+            tasks = b.tasks
+        else:
+            tasks = int(b.tasks * covered / b.needed_s) if b.needed_s > 0 else 0
+        if tasks <= 0:
+            out.append(fx.Emit("waypoint_reached", f"point {point.hover_index}: held {w.held_s:.1f} s of "
+                                                   f"{b.needed_s:.1f} s needed ({w.why_left}): nothing served",
+                               user_id=b.user_id, request_id=b.request_id))
+            return s
+        bits = tasks * self.rules.scenario.bits_per_task
+        reward = point.reward if tasks == point.tasks else interval_reward(self.p, tasks, point.energy_j)
+        out.append(fx.RecordService(b.request_id, b.user_id, point.hover_index, (point.x_m, point.y_m, point.z_m),
+                                    tasks, bits, reward, w.held_s, b.planned))
+        detail = f"{tasks} tasks at point {point.hover_index}" + ("" if tasks == b.tasks else f" of {b.tasks}")
+        out.append(fx.Emit("user_served", f"{detail}; held {w.held_s:.1f} s", user_id=b.user_id,
+                           request_id=b.request_id))
+        return replace(s, services=s.services + 1)
+
+    # --- deciding ------------------------------------------------------------------------------
+    def _plan_wanted(self, s: Sortie, v: ins.Vehicle, now: float) -> fx.PlanBasis | None:
+        r = self.rules
+        if not (v.connected and v.position_ok) or v.battery_fraction is None:
+            return None
+        if s.flown and not v.landed_known:
+            return None  # in the air or landed meanwhile? know first
+        if not v.airborne:
+            if s.started or s.flown:
+                return None  # taking off, or landed: the sortie ends
+            if self.world.pending_count() < r.min_requests:
+                return None
+            if s.held is not None and not (s.dirty and now - s.last_plan_at >= r.replan_min_interval_s):
+                return None
+            return fx.PlanBasis("requests before takeoff", s.version, None)
+        if v.mode in RETURNING_MODES:
+            return None  # returning: the safety, the pilot or the mission decided
+        if s.must_upload:
+            return fx.PlanBasis("the vehicle lost its mission", s.version, None)
+        if s.held is None or v.mode not in MISSION_MODES:
+            return None  # not flying a mission of ours: the operator has the vehicle
+        w = s.watch
+        if w is not None and w.phase == "holding" and s.decided_at != w.seq:
+            point = s.held.point_at(w.seq)
+            b = s.binding
+            serving = b.user_id if b is not None and b.request_id is not None else None
+            return fx.PlanBasis(f"arrived at point {point.hover_index if point else w.seq}", s.version, w.seq,
+                                at_point=point, serving=serving, serving_tasks=b.tasks if serving and b else 0)
+        if (s.dirty and v.seq == s.held.rtl_seq and now - s.last_plan_at >= r.replan_min_interval_s
+                and self.world.pending_count() > 0):
+            return fx.PlanBasis("new requests on the way home", s.version, s.held.rtl_seq - 1)
+        return None
+
+    def _planned(self, s: Sortie, basis: fx.PlanBasis, path: PlannedPath, v: ins.Vehicle, now: float,
+                 out: list[fx.Effect]) -> Sortie:
+        if basis.version != s.version or s.over is not None or s.doubt is not None or s.degraded is not None:
+            return replace(s, dirty=True)  # stale: the state it was made on is gone
+        if basis.at_point is not None:
+            s = replace(s, decided_at=basis.keep_through)
+        held = s.held
+        airborne = v.airborne
+        if not path.points:
+            if not airborne and not s.must_upload:
+                return s  # nothing to fly yet
+            if held is not None and basis.keep_through is not None and not held.points_after(basis.keep_through) \
+                    and held.rtl_seq == basis.keep_through + 1:
+                return s  # the mission held already returns next
+        # Each hold is planned one reporting gap longer than the upload needs: a service is
+        # recorded from the reports of the vehicle's position, which see a hold at most one
+        # gap short of what it was.
+        margin = min(max(self.rules.hold_margin_s, v.report_gap_s), MAX_HOLD_MARGIN_S)
+        path = replace(path, points=tuple(replace(p, hold_s=p.hold_s + margin) for p in path.points))
+        try:
+            check_path(path, self.rules.area, self.rules.scenario, path.battery_after_j + path.predicted_energy_j)
+            hover = [HoverPoint(p.x_m, p.y_m, p.z_m, p.hold_s) for p in path.points]
+            plan_id = s.plan_id + 1
+            if basis.keep_through is None or held is None:
+                items = encode_path(hover, self.rules.origin, self.rules.flavour)  # type: ignore[arg-type]
+                mission = HeldMission.fresh(plan_id, items, path.points, self.rules.flavour)
+                current = mission.points[0][0] if airborne and mission.points else None
+            else:
+                items, _ = replacement_items(held.items, basis.keep_through, hover, self.rules.origin,
+                                             self.rules.flavour)  # type: ignore[arg-type]
+                if basis.at_point is not None:  # holding there: that item stays the one flown
+                    items = marked_current(items, basis.keep_through)
+                mission = HeldMission.replacement(plan_id, items, held, basis.keep_through, path.points)
+                current = None
+                if held is not None and len(items) == len(held.items) and same_mission(items, held.items,
+                                                                                      self.rules.flavour):  # type: ignore[arg-type]
+                    return s  # the vehicle flies this already
+            validate_mission(items, self.rules.origin, self.rules.area, self.rules.flavour,  # type: ignore[arg-type]
+                             max_items=self.rules.max_mission_items)
+        except (PlanningError, MissionError) as err:
+            return self._failed(replace(s, plan_id=s.plan_id + 1), f"plan {s.plan_id + 1} not flown: {err}", now, out)
+        out.append(fx.Upload(plan_id, tuple(items), mission, path, current, basis.keep_through))
+        return replace(s, busy="upload", plan_id=plan_id)
+
+    def _uploaded(self, s: Sortie, up: fx.Upload, gen: int, v: ins.Vehicle, out: list[fx.Effect]) -> Sortie:
+        keep = up.keep_through
+        judged = frozenset(q for q in s.judged if keep is not None and q <= keep)
+        watch, binding = s.watch, s.binding
+        if watch is not None and (keep is None or watch.seq > keep):
+            # the point watched was replaced: what it held so far is judged now
+            s = self._judge(replace(s, watch=watch.abandon(f"replaced by plan {up.plan_id}")), out)
+            watch, binding, judged = None, None, frozenset(q for q in s.judged if keep is not None and q <= keep)
+        s = replace(s, held=up.mission, held_gen=gen, unconfirmed=None, must_upload=False, failures=0,
+                    judged=judged, watch=watch, binding=binding, plan_id=up.plan_id)
+        out += [fx.RecordMission(up.plan_id, up.mission, "accepted"),
+                fx.PublishPlan(up.mission, up.path.predicted_energy_j),
+                fx.Emit("mission_uploaded", f"plan {up.plan_id}: {len(up.path.points)} points"
+                                            + (f" after item {keep}" if keep is not None else "")
+                                            + f"; ends: {up.path.stop_reason}")]
+        if not up.path.points:
+            out.append(fx.Emit("returning", f"nothing more to serve ({up.path.stop_reason}): return to launch"))
+        return s
+
+    def _upload_failed(self, s: Sortie, up: fx.Upload, error: str, unknown: bool, now: float,
+                       out: list[fx.Effect]) -> Sortie:
+        out.append(fx.RecordMission(up.plan_id, up.mission, f"{'unknown' if unknown else 'failed'}: {error}"))
+        if unknown:  # the vehicle may hold it: find out before anything else
+            s = self._doubt(replace(s, unconfirmed=up.mission), f"the outcome of plan {up.plan_id}'s upload is unknown",
+                            out)
+        return self._failed(s, f"plan {up.plan_id} not flown: {error}", now, out)
+
+    def _failed(self, s: Sortie, why: str, now: float, out: list[fx.Effect]) -> Sortie:
+        """A plan or upload failed: try again after a growing wait, give up after a bound."""
+        n = s.failures + 1
+        out += [fx.Emit("upload_failed", why[:256]), fx.Log("error", why)]
+        if n >= self.rules.max_failures:
+            out.append(fx.Emit("upload_abandoned", f"{n} failures in a row; no more plans until the link, a "
+                                                   f"request or the operator changes something"[:256]))
+            return replace(s, failures=n, retry_at=math.inf, dirty=True)
+        wait = min(self.rules.retry_s * 2 ** (n - 1), self.rules.max_retry_s)
+        return replace(s, failures=n, retry_at=now + wait, dirty=True)
+
+    # --- doubt ---------------------------------------------------------------------------------
+    def _doubt(self, s: Sortie, why: str, out: list[fx.Effect], *, hold_interrupted: bool = False) -> Sortie:
+        """The vehicle may hold another mission: no reports count until it is read back. A
+        hold being watched goes on being watched once the read-back shows our mission (a
+        radio gap interrupts nothing), unless the vehicle restarted: then it was cut."""
+        out.append(fx.Log("warning", f"{why}: the mission held will be read back before planning"))
+        s = replace(s, doubt=why, held_gen=None, version=s.version + 1, retry_at=0.0)
+        if hold_interrupted and s.watch is not None:
+            s = self._judge(replace(s, watch=s.watch.abandon(why)), out)
+        return s
+
+    def _read_back(self, s: Sortie, items: tuple, gen: int, v: ins.Vehicle, out: list[fx.Effect]) -> Sortie:
+        why = s.doubt
+        s = replace(s, doubt=None)
+        for candidate in (s.held, s.unconfirmed):
+            if candidate is None or not same_mission(items, candidate.items, self.rules.flavour):  # type: ignore[arg-type]
+                continue
+            if candidate is not s.held:  # the upload whose ACK was lost went through
+                s = replace(s, held=candidate, judged=frozenset())
+                out += [fx.RecordMission(candidate.plan_id, candidate, "accepted"), fx.PublishPlan(candidate)]
+            out.append(fx.Log("info", f"{why}: the vehicle holds plan {candidate.plan_id} (read back)"))
+            # A restarted vehicle may hold our mission and still hover where it came back.
+            return replace(s, held_gen=gen, unconfirmed=None, resume_pending=s.restarted and v.airborne,
+                           restarted=False)
+        if s.watch is not None:
+            s = self._judge(replace(s, watch=s.watch.abandon("the vehicle no longer holds our mission")), out)
+        lost = s.held
+        ours = f"plan {lost.plan_id}" if lost is not None else "a mission of ours"
+        detail = f"{why}: the vehicle holds {len(items)} items, not {ours}; re-planning from where it is"
+        out.append(fx.Log("warning", detail))
+        if not why or "restarted" not in why:
+            out.append(fx.Emit("vehicle_restarted", detail[:256]))
+        return replace(s, held=None, held_gen=None, judged=frozenset(), unconfirmed=None, must_upload=v.airborne,
+                       resume_pending=v.airborne, restarted=False, decided_at=None)
+
+    # --- link events -------------------------------------------------------------------------------
+    def _connected(self, s: Sortie, v: ins.Vehicle, mode: str, out: list[fx.Effect]) -> Sortie:
+        out.append(fx.Log("info", f"autopilot connected ({mode})"))
+        if v.airborne:
+            s = replace(s, started=True)
+        if s.held is not None:  # from the journal: does the vehicle still fly it?
+            s = self._doubt(s, f"the service started with plan {s.held.plan_id} in its journal", out)
+        return s
+
+    def _mode(self, s: Sortie, v: ins.Vehicle, mode: str, commanded: bool, out: list[fx.Effect]) -> Sortie:
+        held = s.held
+        mission_return = (held is not None and v.seq == held.rtl_seq and mode in RETURNING_MODES)
+        authority = s.authority.on_mode(mode, armed=v.armed or v.airborne, mission_return=mission_return,
+                                        commanded=commanded)
+        if authority.state == "revoked" and s.authority.granted:
+            out += [fx.Emit("authority_revoked", authority.detail[:256]),
+                    fx.Log("warning", f"authority ended: {authority.detail}; no more commands until the operator "
+                                      f"grants it again")]
+        if mode in RETURNING_MODES:
+            out.append(fx.Emit("returning", f"mode {mode}"))
+        return replace(s, authority=authority)
+
+    # --- commands ------------------------------------------------------------------------------
+    def _command_due(self, s: Sortie, v: ins.Vehicle, out: list[fx.Effect]) -> Sortie:
+        """Start or resume the mission when the service may and should."""
+        if not s.authority.granted or s.held is None or not v.connected:
+            return s
+        if (not v.airborne and not s.started and s.held.points and s.busy == "" and v.position_ok
+                and v.battery_fraction is not None and v.battery_source == "autopilot"):
+            return self._command(s, fx.Command("start", why=f"plan {s.held.plan_id}"), out)
+        if s.resume_pending and s.held_gen is not None and s.busy == "" and v.airborne:
+            if v.mode not in HOLDING_MODES:
+                return replace(s, resume_pending=False)  # flying it, going home, or in the operator's hands
+            first = s.held.points[0][0] if s.held.points else s.held.rtl_seq
+            return self._command(s, fx.Command("resume", first, f"plan {s.held.plan_id} (was {v.mode})"), out)
+        return s
+
+    def _command(self, s: Sortie, cmd: fx.Command, out: list[fx.Effect]) -> Sortie:
+        mode = self.rules.mode_names.get(cmd.kind)
+        authority = s.authority.commanding(mode) if mode else s.authority
+        out.append(cmd)
+        return replace(s, commanding=cmd.kind, authority=authority)
+
+    def _command_done(self, s: Sortie, cmd: fx.Command, out: list[fx.Effect]) -> Sortie:
+        match cmd.kind:
+            case "start":
+                out.append(fx.Log("info", "mission started"))
+                return replace(s, started=True, failures=0)
+            case "resume":
+                out.append(fx.Emit("mission_resumed", f"{cmd.why}; from item {cmd.seq}"))
+                return replace(s, resume_pending=False)
+            case "return":
+                return replace(s, commanded_landing=True)
+            case "hold":
+                return s
+            case "set_current":
+                out.append(fx.Log("info", cmd.why))
+                return s
+        return s
+
+    def _command_failed(self, s: Sortie, cmd: fx.Command, error: str, now: float, out: list[fx.Effect]) -> Sortie:
+        out += [fx.Emit("command_failed", f"{cmd.kind}: {error}"[:256]),
+                fx.Log("warning", f"the autopilot refused {cmd.kind} ({error}); trying again later")]
+        n = s.failures + 1
+        wait = min(self.rules.retry_s * 2 ** (n - 1), self.rules.max_retry_s)
+        if cmd.kind == "set_current":
+            return replace(s, early_end=None)
+        return replace(s, failures=n, retry_at=now + wait)
+
+    def _safety(self, s: Sortie, v: ins.Vehicle, out: list[fx.Effect]) -> Sortie:
+        """Return to launch when the battery reaches the threshold (the planner should never
+        let it: this is the guard if the model and the aircraft disagree)."""
+        f = v.battery_fraction
+        if (f is None or not v.connected or not v.airborne or v.mode in RETURNING_MODES or s.commanding
+                or not s.authority.granted or f > self.rules.rtl_battery_fraction):
+            return s
+        out.append(fx.Emit("returning", f"battery at {f:.0%} ({v.battery_source}): return to launch commanded"))
+        return self._command(s, fx.Command("return", why=f"battery at {f:.0%}"), out)
+
+    # --- requests and the operator --------------------------------------------------------------
+    def _request(self, s: Sortie, user: str, tasks: int, out: list[fx.Effect]) -> Sortie:
+        b = s.binding
+        if b is not None and b.user_id == user and tasks <= 0 and b.request_id is not None and not b.done:
+            s = replace(s, binding=replace(b, done=True))
+        if s.failures >= self.rules.max_failures:
+            s = replace(s, failures=0, retry_at=0.0)
+        return replace(s, dirty=True)
+
+    def operator(self, s: Sortie, cmd: ins.OperatorCommand, v: ins.Vehicle,
+                 now: float) -> tuple[Sortie, list[fx.Effect], bool, str]:
+        """An operator command: the new state, its effects, whether it was accepted, and what
+        the service did (the reply). ``hold`` is always accepted: taking authority away from
+        the service must never fail."""
+        out: list[fx.Effect] = []
+        because = f" ({cmd.reason})" if cmd.reason else ""
+        if cmd.command == "status":
+            return s, out, True, self.describe(s, v)
+        if cmd.command == "hold":
+            if not s.authority.granted:
+                return s, out, True, (f"the service has no authority ({s.authority.state}: {s.authority.detail}); "
+                                      f"nothing changed")
+            did = ""
+            if v.airborne and v.mode not in RETURNING_MODES and s.commanding == "":
+                s = self._command(s, fx.Command("hold", why=f"the operator's hold{because}"), out)
+                did = f"; {self.rules.mode_names['hold']} commanded"
+            authority = s.authority.release(f"handed back by the operator's hold{because}")
+            out.append(fx.Emit("authority_released", authority.detail[:256]))
+            return replace(s, authority=authority, resume_pending=False), out, True, (
+                f"authority withdrawn: the service commands no mode and no arming{did}; the vehicle keeps the "
+                f"mission it holds{because}")
+        refusal = self._start_refusal(s, v)
+        if refusal is not None:
+            return s, out, False, refusal
+        if s.authority.granted:
+            return s, out, True, f"the service already has the authority: {s.authority.detail}"
+        authority = Authority.by_operator(cmd.reason)
+        said = ("authority given: the service may arm, switch to the mission mode and start or resume the "
+                f"mission{because}")
+        if s.over is not None:
+            if not s.beginning:
+                out.append(fx.BeginSortie(v.battery_fraction or 0.0))
+            return replace(s, next_authority=authority, beginning=True), out, True, \
+                f"{said}; sortie {s.number + 1} begins"
+        s = replace(s, authority=authority, failures=0, retry_at=0.0)
+        out.append(fx.Emit("authority_granted", authority.detail[:256]))
+        if v.airborne and v.mode in HOLDING_MODES:
+            s = replace(s, must_upload=True, resume_pending=True)
+            said += "; re-planning from where the vehicle is, then resuming"
+        s = self._next(s, v, now, out)
+        return s, out, True, said
+
+    def _start_refusal(self, s: Sortie, v: ins.Vehicle) -> str | None:
+        """Why the operator's start cannot be taken now, or None."""
+        if s.degraded is not None:
+            return f"the service is degraded: {s.degraded}"
+        if not v.connected:
+            return "the autopilot is not connected"
+        if s.over is not None and (v.airborne or v.armed):
+            return f"sortie {s.number} is over and the vehicle is not on the ground and disarmed"
+        if not v.airborne and not v.position_ok:
+            return "the autopilot has no position yet"
+        if not v.airborne and v.battery_source != "autopilot":
+            return f"the battery's charge is {v.battery_source}: no arming on it"
+        return None
+
+    def describe(self, s: Sortie, v: ins.Vehicle) -> str:
+        held = f"plan {s.held.plan_id}" if s.held is not None else "no mission"
+        state = f"over ({s.over})" if s.over else "running"
+        return (f"authority {s.authority.state}: {s.authority.detail}; sortie {s.number} {state}; {held}; "
+                f"{s.services} services; vehicle {v.mode or '?'} {'armed' if v.armed else 'disarmed'}"
+                f"{', airborne' if v.airborne else ''}" + (f"; degraded: {s.degraded}" if s.degraded else ""))
+
+    # --- sortie end and begin -------------------------------------------------------------------
+    def _end(self, s: Sortie, why: str, v: ins.Vehicle, out: list[fx.Effect]) -> Sortie:
+        if s.over is not None:
+            return s
+        if s.watch is not None:
+            s = self._judge(replace(s, watch=s.watch.abandon(why)), out)
+        out.append(fx.EndSortie(why))
+        commanded = s.authority.granted and s.authority.expected_mode is not None
+        return replace(s, over=why, version=s.version + 1, busy="" if s.busy == "plan" else s.busy,
+                       commanded_landing=commanded)
+
+    def _maybe_begin(self, s: Sortie, v: ins.Vehicle, out: list[fx.Effect]) -> Sortie:
+        """Begin the next sortie once the vehicle is ready again: on the ground, disarmed,
+        its battery swapped or charged (a known reading)."""
+        r = self.rules
+        if s.over is None or not r.repeat or s.degraded is not None or s.beginning:
+            return s
+        if not (v.connected and v.position_ok) or v.airborne or v.armed:
+            return s
+        if v.battery_source != "autopilot" or v.battery_fraction is None or v.battery_fraction < r.next_battery_fraction:
+            return s
+        out.append(fx.BeginSortie(v.battery_fraction))
+        return replace(s, beginning=True)
+
+    def _begun(self, s: Sortie, number: int, out: list[fx.Effect]) -> Sortie:
+        authority = s.next_authority or next_sortie(s.authority, start_mission=self.rules.start_mission,
+                                                    commanded_landing=s.commanded_landing)
+        out.append(fx.Emit("sortie_started", f"sortie {number}: authority {authority.state} ({authority.detail})"))
+        return Sortie(number=number, authority=authority, plan_id=s.plan_id, version=s.version + 1)
+
+
+def marked_current(items: list[MissionItem], seq: int) -> list[MissionItem]:
+    """``items`` with item ``seq`` the only one marked current (PX4 flies the marked item at
+    once after an upload; ArduPilot keeps its own index)."""
+    return [replace(i, current=1 if i.seq == seq else 0) for i in items]
+
+
+def new_sortie(number: int, rules: Rules, plan_id: int = 0) -> Sortie:
+    """The state of a sortie the service starts in (the configuration's authority)."""
+    authority = Authority.by_configuration() if rules.start_mission else Authority()
+    return Sortie(number=number, authority=authority, plan_id=plan_id)

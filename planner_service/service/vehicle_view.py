@@ -1,0 +1,95 @@
+"""The vehicle as the sortie logic sees it, from the link's telemetry. Pure (given the
+clock's readings), and the only place that turns the autopilot's numbers into the service's:
+
+- **Position**: local metres from the configured origin, and only when the autopilot has a
+  position (``Telemetry.position_ok``) that lies near the served area: a fix kilometres
+  away (a wrong origin, a GPS glitch) is flagged, never planned on nor published.
+- **Battery**: the autopilot's reading (energy consumed, or the remaining fraction). An
+  unknown or impossible reading is unknown, never full: the last good reading is carried on
+  less what the model says the vehicle spends since (the most power-hungry of hovering and
+  cruising, in vehicle time), and said to come from the model; with no good reading ever,
+  unknown.
+- **Reporting gap**: vehicle seconds between two position reports, smoothed: the
+  tolerance of a hold judged from them.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+from protocol import Area, GeoOrigin, global_to_local
+
+from ..model import Scenario, pack
+from ..model.energy import flight_energy_j
+from .link import Telemetry
+from .sortie import Vehicle
+
+FAR_OUTSIDE_M = 1000.0
+"""A position this far outside the served area is not believed (never planned on)."""
+
+
+@dataclass
+class VehicleView:
+    scenario: Scenario
+    origin: GeoOrigin
+    area: Area
+    reach_s: float = 0.5
+    """Wall seconds a plan made now takes to be on board (search and upload)."""
+    _good: tuple[float, float] | None = None
+    """(fraction, monotonic time) of the last good battery reading."""
+    _last_boot_s: float = math.nan
+    _gap_s: float = 0.0
+    _power_w: float = field(init=False)
+
+    def __post_init__(self) -> None:
+        s = self.scenario
+        self._power_w = max(s.hover_power_w, flight_energy_j(pack(s), s.speed_mps))  # J in 1 s of cruise
+
+    def see(self, t: Telemetry, now: float) -> tuple[Vehicle, str]:
+        """The vehicle, and what its position waits for ('' when it is believed)."""
+        xyz = (0.0, 0.0, 0.0)
+        position_ok, waiting = t.position_ok, t.waiting_for
+        if position_ok:
+            xyz = global_to_local(self.origin, t.lat_deg, t.lon_deg, self.origin.alt_m + t.rel_alt_m)
+            out = self._outside_m(xyz)
+            if out > FAR_OUTSIDE_M:
+                position_ok = False
+                waiting = (f"a position inside the area: the autopilot reports one {out / 1000:.1f} km outside it "
+                           f"(check [origin] against the autopilot's home)")
+        boot = t.position_boot_s if t.position_boot_s is not None else math.nan
+        self._note_report(boot)
+        fraction, source = self._battery(t, now)
+        return Vehicle(connected=t.connected, position_ok=position_ok, xyz=xyz if position_ok else (0.0, 0.0, 0.0),
+                       boot_s=boot, armed=t.armed, airborne=t.airborne, landed_known=t.landed_known, mode=t.mode,
+                       seq=t.mission_seq, battery_fraction=fraction, battery_source=source,
+                       reach_m=self.scenario.speed_mps * t.time_rate * self.reach_s,
+                       report_gap_s=self._gap_s), waiting
+
+    def _outside_m(self, xyz: tuple[float, float, float]) -> float:
+        side = self.area.side_m
+        dx = max(-xyz[0], 0.0, xyz[0] - side)
+        dy = max(-xyz[1], 0.0, xyz[1] - side)
+        return math.hypot(dx, dy)
+
+    def _note_report(self, boot: float) -> None:
+        last = self._last_boot_s
+        if not math.isnan(boot) and not math.isnan(last) and boot > last:
+            gap = boot - last
+            self._gap_s = gap if self._gap_s == 0.0 else 0.9 * self._gap_s + 0.1 * gap
+        if not math.isnan(boot):
+            self._last_boot_s = boot
+
+    def _battery(self, t: Telemetry, now: float) -> tuple[float | None, str]:
+        if t.energy_used_j is not None:
+            fraction: float | None = max(1.0 - t.energy_used_j / self.scenario.battery_j, 0.0)
+        else:
+            fraction = t.battery_fraction
+        if fraction is not None:
+            self._good = (fraction, t.battery_at or now)
+            return fraction, "autopilot"
+        if self._good is None:
+            return None, "unknown"
+        last, at = self._good
+        spent_j = self._power_w * t.time_rate * max(now - at, 0.0)
+        return max(last - spent_j / self.scenario.battery_j, 0.0), "model"

@@ -1,0 +1,289 @@
+"""The sortie logic as a pure state machine: a whole sortie, holds judged from the vehicle's
+own position, one decision per interval, doubt and read-back, authority, unknown battery
+and bounded retries, each in milliseconds (no processes, no sockets)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+
+import pytest
+
+from planner_service.model import preset
+from planner_service.service.journal import RequestRow
+from planner_service.service.planning import PlannedPath, PlannedPoint
+from planner_service.service.sortie import Rules, Sortie, SortieLogic, Vehicle, new_sortie
+from planner_service.service.sortie import effects as fx
+from planner_service.service.sortie import inputs as ins
+from protocol import Area, GeoOrigin
+
+SCENARIO = preset("field")
+
+
+@dataclass
+class FakeWorld:
+    requests: dict[str, RequestRow] = field(default_factory=dict)
+    served: dict[str, int] = field(default_factory=dict)
+
+    def request_for(self, user_id: str) -> RequestRow | None:
+        return self.requests.get(user_id)
+
+    def services_of(self, user_id: str) -> int:
+        return self.served.get(user_id, 0)
+
+    def pending_count(self) -> int:
+        return len(self.requests)
+
+    def ask(self, user_id: str, x: float, y: float, tasks: int, rid: int) -> None:
+        self.requests[user_id] = RequestRow(rid, user_id, x, y, 0.0, tasks, None, 0.0, "pending", "")
+
+
+def point(k: int, x: float, y: float, user: str, rid: int, tasks: int = 10, hold_s: float = 60.0) -> PlannedPoint:
+    return PlannedPoint(k, x, y, 100.0, hold_s, user, rid, tasks, tasks * 1e5, 5000.0, 0.4)
+
+
+def path(*points: PlannedPoint) -> PlannedPath:
+    return PlannedPath(tuple(points), 20_000.0, 50_000.0, "the planned line ends")
+
+
+def rules(**kw: object) -> Rules:
+    return Rules(SCENARIO, GeoOrigin(), Area(500.0, 120.0, 10.0), start_mission=True, **kw)  # type: ignore[arg-type]
+
+
+GROUND = Vehicle(connected=True, position_ok=True, xyz=(0.0, 0.0, 0.0), boot_s=1.0, landed_known=True,
+                 mode="STABILIZE", battery_fraction=1.0, battery_source="autopilot")
+
+
+def kinds(effects: list[fx.Effect]) -> list[str]:
+    return [type(e).__name__ for e in effects]
+
+
+def only(effects: list[fx.Effect], kind: type) -> list:
+    return [e for e in effects if isinstance(e, kind)]
+
+
+class Run:
+    """Drives the logic as the service does; keeps the effects of each step."""
+
+    def __init__(self, world: FakeWorld, r: Rules | None = None) -> None:
+        self.logic = SortieLogic(r or rules(), world)
+        self.s: Sortie = new_sortie(1, self.logic.rules)
+        self.v = GROUND
+        self.now = 0.0
+        self.effects: list[fx.Effect] = []
+
+    def feed(self, event: ins.Input, **vehicle: object) -> list[fx.Effect]:
+        if vehicle:
+            self.v = replace(self.v, **vehicle)  # type: ignore[arg-type]
+        self.now += 0.05
+        self.s, out = self.logic.step(self.s, event, self.v, self.now)
+        self.effects += out
+        return out
+
+    def tick(self, **vehicle: object) -> list[fx.Effect]:
+        return self.feed(ins.Tick(self.now), **vehicle)
+
+
+def fly_to_first_point(world: FakeWorld) -> tuple[Run, fx.Upload]:
+    """Ground: a request, a plan of two points, upload, start, takeoff."""
+    world.ask("a", 120.0, 200.0, 10, 1)
+    world.ask("b", 320.0, 200.0, 12, 2)
+    run = Run(world)
+    out = run.tick()
+    (plan,) = only(out, fx.Plan)
+    assert plan.basis.keep_through is None
+    out = run.feed(ins.Planned(plan.basis, path(point(3, 120.0, 200.0, "a", 1), point(7, 320.0, 200.0, "b", 2))))
+    (up,) = only(out, fx.Upload)
+    assert [i.seq for i in up.items] == [0, 1, 2, 3, 4] and up.current_seq is None
+    out = run.feed(ins.Uploaded(up, 1))
+    assert only(out, fx.Command)[0].kind == "start"
+    run.feed(ins.CommandDone(fx.Command("start")), armed=True, mode="AUTO")
+    run.tick(airborne=True, seq=1, xyz=(0.0, 0.0, 50.0), boot_s=5.0)
+    return run, up
+
+
+def test_a_sortie_records_only_holds_the_vehicle_was_seen_at() -> None:
+    world = FakeWorld()
+    run, _ = fly_to_first_point(world)
+    assert run.s.flown
+    # On the way to point 3 (item 2): not there yet, nothing judged.
+    run.tick(seq=2, xyz=(60.0, 100.0, 100.0), boot_s=10.0)
+    assert run.s.watch is not None and run.s.watch.phase == "approaching"
+    # Arrives: the request in force is bound and the next point is decided from there.
+    out = run.tick(seq=2, xyz=(119.0, 200.5, 100.0), boot_s=12.0)
+    (plan,) = only(out, fx.Plan)
+    assert plan.basis.keep_through == 2 and plan.basis.serving == "a" and plan.basis.at_point.hover_index == 3
+    assert run.s.binding.request_id == 1 and run.s.binding.planned
+    out = run.feed(ins.Planned(plan.basis, path(point(9, 400.0, 300.0, "b", 2))))
+    (up,) = only(out, fx.Upload)
+    # Index-preserving: home, takeoff, point 3 kept; the new decision at item 3; RTL.
+    assert [i.seq for i in up.items] == [0, 1, 2, 3, 4] and up.keep_through == 2 and up.current_seq is None
+    kept, before = up.items[2], run.s.held.items[2]
+    assert (kept.command, kept.x, kept.y, kept.z, kept.param1) == (before.command, before.x, before.y, before.z,
+                                                                   before.param1)
+    assert [i.seq for i in up.items if i.current] == [2], "the item held stays the one flown (PX4 flies the mark)"
+    run.feed(ins.Uploaded(up, 2))
+    assert run.s.watch.phase == "holding", "the hold goes on across the replacement"
+    # Holds as long as the request needs, then the vehicle flies item 3.
+    needed = run.s.binding.needed_s
+    end = 12 + math.ceil(needed)
+    for t in range(13, end + 1):
+        run.tick(seq=2, xyz=(120.5, 199.5, 100.0), boot_s=float(t))
+    out = run.tick(seq=3, xyz=(140.0, 210.0, 100.0), boot_s=end + 1.0)
+    (svc,) = only(out, fx.RecordService)
+    assert (svc.user_id, svc.request_id, svc.tasks, svc.hover_index) == ("a", 1, 10, 3)
+    assert svc.held_s == pytest.approx(end - 12.0)
+    # Passes item 3's point without ever coming within the radius: no service.
+    out = run.tick(seq=4, xyz=(300.0, 280.0, 100.0), boot_s=50.0)
+    assert not only(out, fx.RecordService)
+    assert [e.event for e in only(out, fx.Emit)] == ["waypoint_skipped"]
+
+
+def test_a_hold_cut_short_serves_what_it_carried() -> None:
+    world = FakeWorld()
+    run, _ = fly_to_first_point(world)
+    run.tick(seq=2, xyz=(120.0, 200.0, 100.0), boot_s=20.0)
+    needed = run.s.binding.needed_s
+    run.tick(seq=2, xyz=(120.0, 200.0, 100.0), boot_s=20.0 + needed / 2)
+    out = run.tick(seq=2, xyz=(150.0, 200.0, 100.0), boot_s=21.0 + needed / 2)  # pushed away
+    (svc,) = only(out, fx.RecordService)
+    assert 0 < svc.tasks < 10
+
+
+def test_a_hold_longer_than_needed_ends_once_the_next_decision_is_on_board() -> None:
+    world = FakeWorld()
+    run, _ = fly_to_first_point(world)
+    out = run.tick(seq=2, xyz=(120.0, 200.0, 100.0), boot_s=20.0)
+    (plan,) = only(out, fx.Plan)
+    needed = run.s.binding.needed_s
+    run.tick(seq=2, boot_s=20.0 + needed + 1)
+    assert not only(run.effects, fx.Command)[1:], "no early end before the replacement is uploaded"
+    (up,) = only(run.feed(ins.Planned(plan.basis, path(point(9, 400.0, 300.0, "b", 2)))), fx.Upload)
+    out = run.feed(ins.Uploaded(up, 2))
+    out += run.tick(seq=2, boot_s=20.0 + needed + 2)
+    (cmd,) = only(out, fx.Command)
+    assert (cmd.kind, cmd.seq) == ("set_current", 3)
+
+
+def test_restart_read_back_and_a_lost_mission_resumed_from_where_it_is() -> None:
+    world = FakeWorld()
+    run, up = fly_to_first_point(world)
+    (searching,) = only(run.tick(seq=2, xyz=(120.0, 200.0, 100.0), boot_s=20.0), fx.Plan)
+    out = run.feed(ins.VehicleRestarted("its clock went back"), boot_s=1.0, mode="LOITER", seq=0)
+    assert [e.event for e in only(out, fx.Emit)][0] == "vehicle_restarted"
+    assert not only(out, fx.RecordService), "a hold of no measurable length serves nothing"
+    # The decision being searched was made on the mission the restart lost: dropped.
+    out = run.feed(ins.Planned(searching.basis, path(point(9, 400.0, 300.0, "b", 2))))
+    assert not only(out, fx.Upload)
+    assert only(out, fx.ReadBack), "read back before anything else"
+    assert run.s.authority.granted, "a restart is not a pilot's mode change"
+    out = run.feed(ins.ReadBackDone((), 3))  # the mission is gone
+    assert run.s.must_upload and run.s.resume_pending
+    (plan,) = only(out, fx.Plan)
+    assert plan.basis.keep_through is None and plan.basis.reason == "the vehicle lost its mission"
+    (up2,) = only(run.feed(ins.Planned(plan.basis, path(point(7, 320.0, 200.0, "b", 2)))), fx.Upload)
+    assert up2.current_seq == 2, "a fresh mission in the air is flown from its first point"
+    out = run.feed(ins.Uploaded(up2, 4))
+    (cmd,) = only(out, fx.Command)
+    assert (cmd.kind, cmd.seq) == ("resume", 2)
+
+
+def test_a_link_gap_read_back_as_ours_keeps_the_hold() -> None:
+    world = FakeWorld()
+    run, up = fly_to_first_point(world)
+    (searching,) = only(run.tick(seq=2, xyz=(120.0, 200.0, 100.0), boot_s=20.0), fx.Plan)
+    run.feed(ins.LinkRestored("AUTO"))
+    out = run.feed(ins.Planned(searching.basis, path(point(9, 400.0, 300.0, "b", 2))))
+    (rb,) = only(out, fx.ReadBack)
+    out = run.feed(ins.ReadBackDone(up.items, 3))
+    assert run.s.held_gen == 3 and run.s.watch is not None and run.s.watch.phase == "holding"
+    # The decision dropped during the doubt is made again from the point.
+    (plan,) = only(out, fx.Plan)
+    assert plan.basis.keep_through == 2
+
+
+def test_uncommanded_mode_change_ends_authority_and_no_command_follows() -> None:
+    world = FakeWorld()
+    run, _ = fly_to_first_point(world)
+    out = run.feed(ins.ModeChanged("LOITER"), mode="LOITER")
+    assert [e.event for e in only(out, fx.Emit)] == ["authority_revoked"]
+    assert run.s.authority.state == "revoked"
+    out = run.tick(battery_fraction=0.05)  # the battery guard would fire with authority
+    assert not only(out, fx.Command)
+    out = run.tick(seq=2, xyz=(120.0, 200.0, 100.0), boot_s=20.0)
+    assert not only(out, fx.Plan), "the pilot has the vehicle: no plans for a mission it does not fly"
+
+
+def test_a_pilots_landing_ends_the_sortie_and_the_next_never_arms() -> None:
+    world = FakeWorld()
+    run, _ = fly_to_first_point(world)
+    run.feed(ins.ModeChanged("LAND"), mode="LAND")
+    run.feed(ins.Landed(), airborne=False)
+    assert run.s.over == "the vehicle landed"
+    out = run.tick(armed=False)
+    (begin,) = only(out, fx.BeginSortie)
+    world.requests.clear()
+    run.feed(ins.SortieBegun(2))
+    assert run.s.number == 2 and run.s.authority.state == "none"
+    world.ask("c", 200.0, 200.0, 9, 3)
+    out = run.feed(ins.RequestIn("c", 9))
+    (plan,) = only(out, fx.Plan)
+    (up,) = only(run.feed(ins.Planned(plan.basis, path(point(5, 200.0, 200.0, "c", 3)))), fx.Upload)
+    out = run.feed(ins.Uploaded(up, 5))
+    out += run.tick()
+    assert not only(out, fx.Command), "no arming after a landing the service did not command"
+    s, out, ok, reply = run.logic.operator(run.s, ins.OperatorCommand("start"), run.v, run.now)
+    assert ok and only(out, fx.Command)[0].kind == "start"
+
+
+def test_after_its_own_landing_the_next_sortie_starts_by_itself() -> None:
+    world = FakeWorld()
+    run, _ = fly_to_first_point(world)
+    run.feed(ins.Landed(), airborne=False, armed=False)
+    run.tick()
+    run.feed(ins.SortieBegun(2))
+    assert run.s.authority.granted
+
+
+def test_unknown_battery_neither_plans_nor_arms() -> None:
+    world = FakeWorld()
+    world.ask("a", 120.0, 200.0, 10, 1)
+    run = Run(world)
+    out = run.tick(battery_fraction=None, battery_source="unknown")
+    assert not only(out, fx.Plan)
+    # A fallback estimate from the model plans, but arming waits for a reading.
+    out = run.tick(battery_fraction=0.9, battery_source="model")
+    (plan,) = only(out, fx.Plan)
+    (up,) = only(run.feed(ins.Planned(plan.basis, path(point(3, 120.0, 200.0, "a", 1)))), fx.Upload)
+    out = run.feed(ins.Uploaded(up, 1))
+    assert not only(out, fx.Command)
+    out = run.tick(battery_fraction=0.9, battery_source="autopilot")
+    assert only(out, fx.Command)[0].kind == "start"
+
+
+def test_failed_uploads_back_off_and_stop_after_the_bound() -> None:
+    world = FakeWorld()
+    world.ask("a", 120.0, 200.0, 10, 1)
+    run = Run(world, rules(max_failures=3))
+    waits = []
+    for n in range(3):
+        run.now = max(run.now, run.s.retry_at)
+        out = run.tick()
+        (plan,) = only(out, fx.Plan)
+        (up,) = only(run.feed(ins.Planned(plan.basis, path(point(3, 120.0, 200.0, "a", 1)))), fx.Upload)
+        run.feed(ins.UploadFailed(up, "NO_ANSWER"))
+        waits.append(run.s.retry_at - run.now)
+    assert waits[0] == pytest.approx(1.0, abs=0.1) and waits[1] == pytest.approx(2.0, abs=0.1)
+    assert math.isinf(run.s.retry_at)
+    assert "upload_abandoned" in [e.event for e in only(run.effects, fx.Emit)]
+    run.now += 100.0
+    assert not only(run.tick(), fx.Plan)
+    run.feed(ins.RequestIn("a", 11))
+    assert run.s.failures == 0
+
+
+def test_operator_hold_releases_authority() -> None:
+    world = FakeWorld()
+    run, _ = fly_to_first_point(world)
+    s, out, ok, reply = run.logic.operator(run.s, ins.OperatorCommand("hold"), run.v, run.now)
+    assert ok and only(out, fx.Command)[0].kind == "hold" and s.authority.state == "none"
