@@ -6,7 +6,7 @@ import argparse
 import importlib
 import sys
 
-COMMANDS = ("serve", "demo", "plan", "experiment", "bench", "submit", "keygen")
+COMMANDS = ("serve", "demo", "plan", "experiment", "bench", "submit", "keygen", "export")
 
 
 def build_parser() -> argparse.ArgumentParser:
