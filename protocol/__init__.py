@@ -10,7 +10,7 @@ from .messages import (
 )
 from .mission import (
     FLAVOURS, Flavour, HoverPoint, MissionItem, MissionPlan, decode_path, encode_path, mission_digest,
-    same_items, same_mission, validate_mission,
+    replacement_items, same_items, same_mission, stored_item, validate_mission,
 )
 from .mission_files import read_plan, read_wpl, write_plan, write_wpl
 
@@ -20,5 +20,5 @@ __all__ = [
     "PendingRequest", "Plan", "PlanPoint", "ProtocolError", "SCHEMA_VERSION", "SigningError", "State", "Status",
     "TaskAck", "TaskRequest", "decode", "decode_path", "decode_reply", "decode_request", "encode",
     "encode_path", "global_to_local", "local_to_global", "mission_digest", "read_plan", "read_wpl",
-    "same_items", "same_mission", "validate_mission", "write_plan", "write_wpl",
+    "replacement_items", "same_items", "same_mission", "stored_item", "validate_mission", "write_plan", "write_wpl",
 ]

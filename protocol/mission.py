@@ -7,6 +7,16 @@ lost link never leaves the aircraft without a way home.
 
 ArduPilot keeps its home position in item 0 and overwrites whatever is uploaded there;
 PX4 has no such item. ``flavour`` selects the convention.
+
+An autopilot does not store every field as it was sent: ArduPilot returns frame 3 for a
+waypoint sent in frame 6, frame 0 for return to launch, 0 where NaN was sent, and the
+waypoint hold as whole seconds (a uint16: 46.117 s is flown as 46 s). ``stored_item`` says
+what a flavour keeps; ``same_mission`` and ``mission_digest`` compare in that form, and the
+holds are rounded up to whole seconds for ArduPilot when encoding, so no hold is cut short.
+
+A mission replaced in flight keeps its index on both autopilots (ArduPilot keeps its current
+item across an upload and restarts the command there; PX4 keeps it unless an uploaded item
+is marked current): ``replacement_items`` builds the index-preserving mission, see there.
 """
 
 from __future__ import annotations
@@ -14,7 +24,7 @@ from __future__ import annotations
 import math
 import struct
 import zlib
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Iterable, Literal, Sequence
 
 from pymavlink.dialects.v20 import common as mavlink
@@ -134,16 +144,49 @@ def same_items(a: Sequence[MissionItem], b: Sequence[MissionItem]) -> bool:
     return len(a) == len(b) and all(x.same_as(y) for x, y in zip(a, b))
 
 
+INT_FRAMES = {FRAME_GLOBAL_INT: FRAME_GLOBAL, FRAME_RELATIVE_INT: FRAME_RELATIVE,
+              mavlink.MAV_FRAME_GLOBAL_TERRAIN_ALT_INT: mavlink.MAV_FRAME_GLOBAL_TERRAIN_ALT}
+"""The ``_INT`` frames and the frames an autopilot stores for them (the same meaning)."""
+UINT16_MAX = 65535
+
+
+def stored_item(item: MissionItem, flavour: Flavour = "ardupilot") -> MissionItem:
+    """``item`` as the autopilot stores it and returns it on a download (``current`` left
+    as it is: it marks where to fly, not what).
+
+    Both flavours: an ``_INT`` frame is its plain twin (frame 6 is 3), values as float32.
+    ArduPilot (read back from ArduCopter 4.7 SITL): NaN parameters are 0; a command without
+    a position (return to launch, change speed) has frame 0 and no position; a waypoint
+    keeps only its hold, in whole seconds (uint16, truncated), not its acceptance radius,
+    pass radius or yaw (``AP_Mission::mavlink_int_to_mission_cmd``)."""
+    _check_flavour(flavour)
+    frame = INT_FRAMES.get(item.frame, item.frame)
+    params = [item.param1, item.param2, item.param3, item.param4]
+    x, y, z = item.x, item.y, item.z
+    if flavour == "ardupilot":
+        params = [0.0 if math.isnan(p) else p for p in params]
+        if item.command == NAV_RTL:
+            frame, x, y, z = FRAME_GLOBAL, 0, 0, 0.0
+        if item.command == NAV_WAYPOINT:
+            hold = params[0]
+            params = [float(min(max(int(hold), 0), UINT16_MAX)) if math.isfinite(hold) else 0.0, 0.0, 0.0, 0.0]
+    params = [p if math.isnan(p) else f32(p) for p in params]
+    return MissionItem(seq=item.seq, frame=frame, command=item.command, current=item.current,
+                       autocontinue=item.autocontinue, param1=params[0], param2=params[1], param3=params[2],
+                       param4=params[3], x=x, y=y, z=z if math.isnan(z) else f32(z), mission_type=item.mission_type)
+
+
 def mission_digest(items: Sequence[MissionItem], flavour: Flavour = "ardupilot") -> str:
     """A short fingerprint (CRC-32, 8 hex digits) of what a mission flies: each item's
-    command, frame, parameters and position as MAVLink carries them (float32), in order.
-    ``current`` is left out (it marks where to start, not what to fly), and so is
-    ArduPilot's item 0, which the autopilot replaces with home. The vehicle stub logs it
-    for every mission it commits, so a test can tell which upload the vehicle holds."""
+    command, frame, parameters and position as the autopilot stores them (``stored_item``,
+    float32), in order. ``current`` is left out (it marks where to start, not what to
+    fly), and so is ArduPilot's item 0, which the autopilot replaces with home. The
+    vehicle stub logs it for every mission it commits, so a test can tell which upload the
+    vehicle holds; a mission read back from ArduPilot has the digest of the one uploaded."""
     _check_flavour(flavour)
     start = 1 if flavour == "ardupilot" and items else 0
     crc = 0
-    for item in items[start:]:
+    for item in (stored_item(i, flavour) for i in items[start:]):
         params = (item.param1, item.param2, item.param3, item.param4, item.z)
         crc = zlib.crc32(struct.pack("<3H5f2i", item.command, item.frame, item.autocontinue,
                                      *(math.nan if math.isnan(v) else f32(v) for v in params),
@@ -153,7 +196,8 @@ def mission_digest(items: Sequence[MissionItem], flavour: Flavour = "ardupilot")
 
 def same_mission(a: Sequence[MissionItem], b: Sequence[MissionItem], flavour: Flavour = "ardupilot") -> bool:
     """``a`` and ``b`` fly the same (a mission read back from the vehicle against the one
-    uploaded: ArduPilot's item 0 and ``current`` aside, float32 values as on the wire)."""
+    uploaded: compared as the autopilot stores them, ``stored_item``; ArduPilot's item 0
+    and ``current`` aside)."""
     return len(a) == len(b) and mission_digest(a, flavour) == mission_digest(b, flavour)
 
 
@@ -215,20 +259,89 @@ def encode_path(
             x=_to_int(origin.lat_deg * E7, "takeoff.x"), y=_to_int(origin.lon_deg * E7, "takeoff.y"),
             z=f32(points[0].z_m),
         ))
+    items.extend(_waypoints(points, len(items), origin, flavour, acceptance_radius_m))
+    items.append(MissionItem(seq=len(items), frame=FRAME_MISSION, command=NAV_RTL))
+    # Exactly one item is marked current, the first, as QGroundControl writes missions
+    # (MAVSDK refuses an upload with none: CURRENT_INVALID).
+    items[0] = replace(items[0], current=1)
+    return items
+
+
+def encoded_hold_s(hold_s: float, flavour: Flavour = "ardupilot") -> float:
+    """The hold as encoded in a waypoint's param1: ArduPilot flies whole seconds (it stores
+    a uint16 and truncates), so the hold is rounded up there, never cut short (46.117 s
+    is sent as 47 s); PX4 takes the float."""
+    return float(math.ceil(hold_s)) if flavour == "ardupilot" else f32(hold_s)
+
+
+def _waypoints(points: Sequence[HoverPoint], first_seq: int, origin: GeoOrigin, flavour: Flavour,
+               acceptance_radius_m: float) -> list[MissionItem]:
+    items = []
     for i, point in enumerate(points):
         where = f"points[{i}]"
         lat, lon, _ = local_to_global(origin, point.x_m, point.y_m, point.z_m)
         items.append(MissionItem(
-            seq=len(items), frame=FRAME_RELATIVE_INT, command=NAV_WAYPOINT,
-            param1=f32(point.hold_s), param2=f32(acceptance_radius_m), param4=math.nan,
+            seq=first_seq + i, frame=FRAME_RELATIVE_INT, command=NAV_WAYPOINT,
+            param1=encoded_hold_s(point.hold_s, flavour), param2=f32(acceptance_radius_m), param4=math.nan,
             x=_to_int(lat * E7, f"{where}.x_m"), y=_to_int(lon * E7, f"{where}.y_m"),
             z=f32(point.z_m),
         ))
-    items.append(MissionItem(seq=len(items), frame=FRAME_MISSION, command=NAV_RTL))
-    # Exactly one item is marked current, the first, as QGroundControl writes missions
-    # (MAVSDK refuses an upload with none: CURRENT_INVALID).
-    items[0] = MissionItem(**{**items[0].__dict__, "current": 1})
     return items
+
+
+def replacement_items(
+    held: Sequence[MissionItem],
+    keep_through_seq: int,
+    points: Sequence[HoverPoint],
+    origin: GeoOrigin,
+    flavour: Flavour = "ardupilot",
+    *,
+    acceptance_radius_m: float = 0.0,
+) -> tuple[list[MissionItem], int]:
+    """A mission that replaces ``held`` in flight without moving the vehicle's index:
+    items ``0..keep_through_seq`` copied from ``held`` as they are (ArduPilot's home, the
+    takeoff, the points already flown or being flown), then the new ``points``, then
+    return to launch. Returns the items and the seq the vehicle must fly next
+    (``keep_through_seq + 1``: the first new point, or the return to launch when
+    ``points`` is empty), which is the only item marked ``current``.
+
+    Why this layout: both autopilots keep their current index across an upload. ArduPilot
+    (``AP_Mission_ChangeDetector::check_for_mission_change``, Copter's ``ModeAuto::run``)
+    compares the next three navigation commands from the current index before and after
+    the upload and, if they differ while the index did not move, restarts the command at
+    the current index with the new content; PX4 (``MissionBase::updateMavlinkMission``)
+    keeps its index unless an uploaded item is marked current, which it then flies at
+    once (it honours the mark set here; ArduPilot ignores it). So a vehicle flying towards
+    item ``keep_through_seq + 1`` goes straight to the new plan's first point, and
+    ``VehicleLink.upload(items, current_seq=next)`` moves any vehicle that is elsewhere.
+
+    The caller's rule: replace once the vehicle has finished item ``keep_through_seq``
+    (its MISSION_CURRENT is past it), or when it means to end it. An upload that lands
+    while the vehicle still holds at ``keep_through_seq`` changes the commands after it, so
+    ArduPilot restarts that hold from zero (the three-command window includes the new
+    ones), and setting the current item to the next one ends the hold at once (PX4 does
+    the same on its own, from the ``current`` mark).
+    """
+    _check_flavour(flavour)
+    held = list(held)
+    if not 0 <= keep_through_seq < len(held):
+        raise MissionError("keep_through_seq", f"{keep_through_seq} is not an item of the {len(held)} held")
+    takeoff = next((i for i, item in enumerate(held) if item.command == NAV_TAKEOFF), None)
+    if takeoff is not None and keep_through_seq < takeoff:
+        raise MissionError("keep_through_seq", f"{keep_through_seq} would drop the takeoff (item {takeoff}): "
+                           "the mission must stay complete on its own; encode a new one with encode_path")
+    ended = next((i for i, item in enumerate(held[:keep_through_seq + 1]) if item.command in (NAV_RTL, NAV_LAND)), None)
+    if ended is not None:
+        raise MissionError("keep_through_seq", f"item {ended} already ends the held mission (return or land)")
+    points = list(points)
+    for i, point in enumerate(points):
+        _check_point(f"points[{i}]", point)
+    kept = [replace(item, current=0) for item in held[:keep_through_seq + 1]]
+    items = kept + _waypoints(points, len(kept), origin, flavour, acceptance_radius_m)
+    items.append(MissionItem(seq=len(items), frame=FRAME_MISSION, command=NAV_RTL))
+    next_seq = keep_through_seq + 1
+    items[next_seq] = replace(items[next_seq], current=1)
+    return items, next_seq
 
 
 def max_points(max_items: int, flavour: Flavour = "ardupilot") -> int:

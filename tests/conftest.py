@@ -5,8 +5,11 @@ from __future__ import annotations
 import os
 import sys
 from pathlib import Path
+from typing import Any, Callable, Iterator
 
 import pytest
+
+from support.sitl import Sitl, free_instance, sitl_binary, skip_reason
 
 REPO = Path(__file__).resolve().parent.parent
 
@@ -22,3 +25,41 @@ def python_env() -> dict[str, str]:
 @pytest.fixture
 def python() -> str:
     return sys.executable
+
+
+@pytest.fixture
+def make_sitl(tmp_path: Path) -> Iterator[Callable[..., Sitl]]:
+    """A factory of ArduCopter SITLs (support/sitl.py; keyword arguments go to ``Sitl``, e.g.
+    ``serials``), each started in its own folder and instance and stopped at the end;
+    skipped where the binary is missing."""
+    binary = sitl_binary()
+    if binary is None:
+        pytest.skip(skip_reason())
+    started: list[Sitl] = []
+
+    def make(**options: Any) -> Sitl:
+        folder = tmp_path / f"sitl-{len(started)}"
+        folder.mkdir()
+        s = Sitl(binary, folder, options.pop("instance", None) or free_instance(), **options)
+        started.append(s)
+        s.start()
+        return s
+
+    try:
+        yield make
+    finally:
+        for s in started:
+            s.stop()
+
+
+@pytest.fixture
+def sitl(make_sitl: Callable[..., Sitl]) -> Sitl:
+    """A fresh ArduCopter SITL, running but not yet with a position."""
+    return make_sitl()
+
+
+@pytest.fixture
+def sitl_ready(sitl: Sitl) -> Sitl:
+    """``sitl`` once its EKF uses the GPS (it can arm and fly AUTO)."""
+    sitl.wait_ready()
+    return sitl

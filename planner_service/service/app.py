@@ -38,7 +38,8 @@ from .config import ServiceConfig
 from .errors import JournalError, LinkError, PlanningError
 from .intake import Accepted, Intake
 from .journal import Journal
-from .link import LinkEvent, LinkSettings, open_link
+from .link import (Connected, Current, Landed, LinkEvent, LinkSettings, Lost, ModeChanged, Reached, Restarted,
+                   Restored, open_link)
 from .link.base import HOLDING_MODES, MISSION_MODES, RETURNING_MODES
 from .planning import (PlannedPath, Planner, VehicleFix, assemble, check_path, not_served_reason, planning_battery_j,
                        should_return)
@@ -264,9 +265,15 @@ class Service:
         x, y, z = global_to_local(self.origin, t.lat_deg, t.lon_deg, self.origin.alt_m + t.rel_alt_m)
         if t.energy_used_j is not None:
             battery = self.scenario.battery_j - t.energy_used_j
-        else:
+        elif t.battery_fraction is not None:
             battery = t.battery_fraction * self.scenario.battery_j
+        else:
+            battery = 0.0  # unknown is never full: nothing is planned on it (``_battery_known``)
         return VehicleFix(x, y, z, battery, t.airborne)
+
+    def _battery_known(self) -> bool:
+        t = self.link.telemetry
+        return t.energy_used_j is not None or t.battery_fraction is not None
 
     def _phase(self) -> str:
         t = self.link.telemetry
@@ -282,10 +289,10 @@ class Service:
 
     def _status(self) -> Status:
         t = self.link.telemetry
-        fix = self._fix() if t.valid else VehicleFix(0.0, 0.0, 0.0, 0.0, False)
+        fix = self._fix() if t.position_ok else VehicleFix(0.0, 0.0, 0.0, 0.0, False)
         return Status(
             vehicle=self.keys.vehicle, time_s=self.clock(), phase=self._phase(), armed=t.armed, mode=t.mode[:256],
-            x_m=fix.x_m, y_m=fix.y_m, z_m=fix.z_m, battery_fraction=min(max(t.battery_fraction, 0.0), 1.0),
+            x_m=fix.x_m, y_m=fix.y_m, z_m=fix.z_m, battery_fraction=min(max(t.battery_fraction or 0.0, 0.0), 1.0),
             mission_seq=max(t.mission_seq, 0), mission_total=max(t.mission_total, 0),
             pending_requests=len(self.journal.pending()),
             served_users=len({s.user_id for s in self.journal.services()}),
@@ -318,7 +325,7 @@ class Service:
         """Return to launch when the battery reaches the threshold (the planner should never
         let it: this is the guard if the model and the aircraft disagree)."""
         t = self.link.telemetry
-        if not t.valid or not t.connected:
+        if not t.position_ok or not t.connected or t.battery_fraction is None:
             return
         now = time.monotonic()
         if now - self._rtl_sent_t < 2.0:
@@ -333,37 +340,38 @@ class Service:
 
     def _on_link_event(self, ev: LinkEvent) -> None:
         t = self.link.telemetry
-        if ev.kind == "connected":
-            log.info("autopilot connected (%s)", ev.text)
-            if t.airborne:
-                self.started = True
-                self._mark_flown()
-            if self.held is not None:  # from the journal: does the vehicle still fly it?
-                self._doubt(f"the service started with plan {self.held.plan_id} in its journal")
-            self._wake.set()
-        elif ev.kind == "lost":
-            self._event("link_lost", detail=ev.text)
-        elif ev.kind == "restored":
-            self._event("link_restored", detail=ev.text)
-            if self.held is not None or self.flown:
-                self._doubt("the link was lost")  # a radio gap, or the vehicle restarted
-            self._urgent.set()
-            self._wake.set()
-        elif ev.kind == "restarted":
-            self._vehicle_restarted = True
-            self._event("vehicle_restarted", detail=ev.text[:256])
-            self._doubt(f"the vehicle restarted: {ev.text}")
-        elif ev.kind == "reached":
-            self._progress(ev.seq, ev.mission, including=True)
-        elif ev.kind == "current":
-            self._on_current(ev)
-        elif ev.kind == "landed":
-            if self.flown:
-                self._end_sortie("the vehicle landed")
-        elif ev.kind == "mode" and ev.text in RETURNING_MODES:
-            self._event("returning", detail=f"mode {ev.text}")
-        elif ev.kind == "text":
-            log.info("autopilot: %s", ev.text)
+        match ev:
+            case Connected(mode=mode):
+                log.info("autopilot connected (%s)", mode)
+                if t.airborne:
+                    self.started = True
+                    self._mark_flown()
+                if self.held is not None:  # from the journal: does the vehicle still fly it?
+                    self._doubt(f"the service started with plan {self.held.plan_id} in its journal")
+                self._wake.set()
+            case Lost(detail=detail):  # the link logs it
+                self._event("link_lost", detail=detail[:256])
+            case Restored(mode=mode):
+                self._event("link_restored", detail=mode[:256])
+                if self.held is not None or self.flown:
+                    self._doubt("the link was lost")  # a radio gap, or the vehicle restarted
+                self._urgent.set()
+                self._wake.set()
+            case Restarted(detail=detail):
+                self._vehicle_restarted = True
+                self._event("vehicle_restarted", detail=detail[:256])
+                self._doubt(f"the vehicle restarted: {detail}")
+            case Reached(seq=seq, mission=mission):
+                self._progress(seq, mission, including=True)
+            case Current():
+                self._on_current(ev)
+            case Landed():
+                if self.flown:
+                    self._end_sortie("the vehicle landed")
+            case ModeChanged(mode=mode) if mode in RETURNING_MODES:
+                self._event("returning", detail=f"mode {mode}")
+            case _:
+                pass  # StatusText, TelemetryMissing, PositionChanged: logged by the link
         if t.airborne:
             self._mark_flown()
 
@@ -393,7 +401,7 @@ class Service:
         self._urgent.set()
         self._wake.set()
 
-    def _on_current(self, ev: LinkEvent) -> None:
+    def _on_current(self, ev: Current) -> None:
         held = self.held
         if self._previous is not None and ev.mission == self._previous[1]:
             self._progress(ev.seq, ev.mission, including=False)
@@ -488,7 +496,7 @@ class Service:
         t = self.link.telemetry
         if not self.sortie_over or not self.cfg.sortie.repeat or self.stopping.is_set():
             return
-        if not (t.valid and t.connected) or t.airborne or t.armed:
+        if not (t.position_ok and t.connected) or t.airborne or t.armed or t.battery_fraction is None:
             return
         if t.battery_fraction < self.cfg.sortie.next_battery_fraction:
             return
@@ -545,7 +553,7 @@ class Service:
         t = self.link.telemetry
         if self.sortie_over:
             return False
-        if not t.connected or not t.valid:  # no vehicle yet: look again soon
+        if not t.connected or not t.position_ok or not self._battery_known():  # no vehicle yet: look again soon
             asyncio.get_running_loop().call_later(RETRY_S / 2, self._wake.set)
             return False
         if self.flown and not t.landed_known:  # in the air or landed meanwhile? know first
@@ -754,6 +762,10 @@ class Service:
     async def _maybe_start(self) -> None:
         t = self.link.telemetry
         if self.started or not self.cfg.mavlink.start_mission or t.airborne or self.held is None or not self.held.points:
+            return
+        if not self._battery_known():
+            log.warning("not starting the mission: the battery's charge is unknown")
+            asyncio.get_running_loop().call_later(RETRY_S * 2, self._wake.set)
             return
         try:
             await self.link.start()

@@ -31,7 +31,8 @@ def test_structure(flavour: str, home: int) -> None:
     waypoints = items[home + 1:-1]
     assert all(w.command == mavlink.MAV_CMD_NAV_WAYPOINT for w in waypoints)
     assert all(w.frame == mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT for w in waypoints)
-    assert [w.param1 for w in waypoints] == [31.25, 0.0, 12.5]
+    # ArduPilot flies whole seconds: holds are rounded up, never cut short.
+    assert [w.param1 for w in waypoints] == ([32.0, 0.0, 13.0] if flavour == "ardupilot" else [31.25, 0.0, 12.5])
     assert items[-1].command == mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH
     validate_mission(items, ORIGIN, AREA, flavour)
 
@@ -56,7 +57,7 @@ def test_decode_recovers_the_path(flavour: str) -> None:
     for got, want in zip(plan.points, POINTS):
         # 1e-7 degree is 1.1 cm of latitude and 0.75 cm of longitude here.
         assert math.hypot(got.x_m - want.x_m, got.y_m - want.y_m) < 0.01
-        assert got.z_m == want.z_m and got.hold_s == want.hold_s
+        assert got.z_m == want.z_m and got.hold_s == (math.ceil(want.hold_s) if flavour == "ardupilot" else want.hold_s)
 
 
 @settings(max_examples=100, deadline=None)
@@ -70,7 +71,8 @@ def test_round_trip_property(points, flavour) -> None:
     plan = decode_path(items, ORIGIN, flavour)
     for got, want in zip(plan.points, path):
         assert math.hypot(got.x_m - want.x_m, got.y_m - want.y_m) < 0.01
-        assert got.z_m == f32(want.z_m) and got.hold_s == f32(want.hold_s)
+        assert got.z_m == f32(want.z_m)
+        assert got.hold_s == (math.ceil(want.hold_s) if flavour == "ardupilot" else f32(want.hold_s))
     # Encoding what was decoded gives the same items again.
     assert same_items(encode_path(plan.points, ORIGIN, flavour), items)
 

@@ -24,7 +24,7 @@ from planner_service.service.processes import Child, free_port
 from protocol import Status, TaskAck
 
 os.environ.setdefault("MAVLINK20", "1")
-from pymavlink.dialects.v20 import common as M  # noqa: E402
+from pymavlink.dialects.v20 import ardupilotmega as M  # noqa: E402
 
 HOME = (473977420, 85455940)  # the configured origin (PX4 SITL's home), degrees * 1e7
 
@@ -83,6 +83,12 @@ class FakeAutopilot:
         self._send(M.MAVLink_global_position_int_message(boot_ms, *HOME, 488000, 0, 0, 0, 0, 0))
         self._send(M.MAVLink_extended_sys_state_message(0, M.MAV_LANDED_STATE_ON_GROUND))
         self._send(M.MAVLink_battery_status_message(0, 0, 0, 2000, [4000] * 10, -1, 20, -1, 90))
+        # What an autopilot with a position reports (the link plans on nothing less).
+        self._send(M.MAVLink_gps_raw_int_message(boot_ms * 1000, M.GPS_FIX_TYPE_3D_FIX, *HOME, 488000, 80, 120, 0,
+                                                 65535, 12))
+        self._send(M.MAVLink_ekf_status_report_message(0x33F, 0, 0, 0, 0, 0))
+        self._send(M.MAVLink_home_position_message(*HOME, 488000, 0, 0, 0, [1, 0, 0, 0], 0, 0, 0))
+        self._send(M.MAVLink_sys_status_message(0, 0, 0, 0, 16000, 0, 90, 0, 0, 0, 0, 0, 0))
 
     def _run(self) -> None:
         start = time.monotonic()

@@ -1,13 +1,20 @@
 """The autopilot link: one small interface (``VehicleLink``), two backends (pymavlink by
-default, the native mavsdk 4 binding by configuration)."""
+default, the native mavsdk 4 binding by configuration), typed events (``events``), and the
+pure judgements both share (``telemetry``, ``streams``, ``state``)."""
 
 from __future__ import annotations
 
 from typing import Callable
 
-from .base import LinkEvent, LinkSettings, Telemetry, VehicleLink, mode_name
+from .base import LinkSettings, VehicleLink
+from .events import (EVENT_TYPES, Connected, Current, Landed, LinkEvent, Lost, ModeChanged, PositionChanged, Reached,
+                     Restarted, Restored, StatusText, TelemetryMissing, escape_text)
+from .modes import HOLDING_MODES, MISSION_MODES, RETURNING_MODES, mode_name
+from .telemetry import Telemetry
 
-__all__ = ["LinkEvent", "LinkSettings", "Telemetry", "VehicleLink", "mode_name", "open_link"]
+__all__ = ["Connected", "Current", "EVENT_TYPES", "HOLDING_MODES", "Landed", "LinkEvent", "LinkSettings", "Lost",
+           "MISSION_MODES", "ModeChanged", "PositionChanged", "RETURNING_MODES", "Reached", "Restarted", "Restored",
+           "StatusText", "Telemetry", "TelemetryMissing", "VehicleLink", "escape_text", "mode_name", "open_link"]
 
 
 def open_link(backend: str, settings: LinkSettings, on_event: Callable[[LinkEvent], None]) -> VehicleLink:

@@ -1,13 +1,19 @@
 """The pymavlink backend: a reader thread turns bytes into messages and hands each to the
 event loop (``call_soon_threadsafe``); everything else (uploads, commands, heartbeats,
-the link watchdog) runs on the loop and never blocks it: UDP sends do not block, and the
-mission protocol waits with ``asyncio.wait_for`` on a queue.
+the link watchdog, the telemetry requests) runs on the loop and never blocks it: sends do
+not block, and the mission protocol waits with ``asyncio.wait_for`` on a queue.
 
-Reconnect: the reader reopens the connection after a socket error (TCP); over UDP a
-silent vehicle (no message at all from it) is "lost" after ``link_timeout_s`` and
-"restored" on its next message (our heartbeats keep going, so a ``udpin`` vehicle learns
-our address again). Any message counts, not only heartbeats: at 20 % loss three heartbeats
-in a row go missing every couple of minutes, the telemetry stream never does.
+Connections that survive (TCP, UDP, serial): the reader owns the connection and reopens
+it after any failure, with a back-off; nothing that comes off the wire or out of pymavlink
+ends the thread. pymavlink's own TCP reconnect is not used (it dies inside
+``reconnect`` with ``AttributeError: 'NoneType' object has no attribute 'close'`` when the
+autopilot restarts): an end of stream or a reset raises, the reader reports the link
+``Lost`` at once and reconnects. Over UDP a silent vehicle (no message at all from it) is
+lost after ``link_timeout_s`` and restored on its next message (our heartbeats keep going,
+so a ``udpin`` vehicle learns our address again). Any message counts, not only
+heartbeats: at 20 % loss three heartbeats in a row go missing every couple of minutes,
+the telemetry stream never does. After every (re)connection the telemetry is asked for
+again (``streams``): a restarted ArduPilot streams nothing until asked.
 
 Which mission a report is about: the mission protocol runs on the reader's order (each
 message is fed to the upload or download state machine as it is handed over), and the
@@ -23,8 +29,8 @@ last item and the end of the upload the vehicle may already fly the new mission:
 of that span are held back and sorted by the ACK's sequence number when it comes (all
 about the old mission if the upload fails; dropped if only a read-back could tell).
 
-A vehicle restart shows as its clock (time_boot_ms) going back by more than reordering can
-explain: a "restarted" event and a new generation (its mission is gone or stale).
+Trust: only the autopilot's own (system, component) counts (``state.VehicleState``), for
+telemetry, mission replies, reports and COMMAND_ACKs alike.
 
 Signing (``signing_key_file``): one ``protocol.signing.Signer`` for the link's life, attached
 to every connection it opens, so the timestamp keeps growing across reopens and restarts;
@@ -49,27 +55,42 @@ from protocol.errors import SigningError  # noqa: E402
 from protocol.signing import Signer, TimestampStore, default_timestamp_path, load_key  # noqa: E402
 
 from ..errors import LinkError  # noqa: E402
-from .base import ClockRate, LinkEvent, LinkSettings, Telemetry, VehicleLink, mode_name  # noqa: E402
+from .base import CURRENT_WAIT_S, LinkSettings, VehicleLink  # noqa: E402
+from .events import Current, LinkEvent, Reached  # noqa: E402
+from .modes import mode_number  # noqa: E402
 from .rtt import RetryTimer  # noqa: E402
+from .streams import INTERVAL_CMD, Request  # noqa: E402
 from .upload import MissionDownload, MissionUpload, cancel_message  # noqa: E402
 
 M = mavutil.mavlink
 log = logging.getLogger(__name__)
-AIRBORNE_STATES = frozenset({M.MAV_LANDED_STATE_IN_AIR, M.MAV_LANDED_STATE_TAKEOFF, M.MAV_LANDED_STATE_LANDING})
 MISSION_REPLIES = frozenset({"MISSION_REQUEST_INT", "MISSION_REQUEST", "MISSION_ACK", "MISSION_COUNT",
                              "MISSION_ITEM_INT"})
 REORDER_WINDOW_S = 1.0
 """A datagram sent before another arrives after it only within this much wall time."""
-RESTART_SLACK_S = 2.0
-"""Wall seconds (times the vehicle's clock rate) by which its clock must go back to count
-as a restart rather than a reordered datagram."""
 SIGNING_WARN_S = 10.0
 """Least time between two warnings about dropped (wrongly signed or unsigned) messages."""
+REFUSAL_TEXT_WAIT_S = 0.3
+"""After a refused command, wait this long for the STATUSTEXT that says why."""
+STREAM_RETRIES = 2
+"""Tries of one SET_MESSAGE_INTERVAL before falling back (an autopilot that never answers
+must not hold the other requests up)."""
+BACKOFF_S = (0.2, 2.0)
+"""Reopening a failed connection: first and longest wait."""
+REFUSED = frozenset({M.MAV_RESULT_DENIED, M.MAV_RESULT_UNSUPPORTED, M.MAV_RESULT_FAILED})
 
 
 def result_name(code: int) -> str:
     entry = M.enums["MAV_RESULT"].get(code)
     return entry.name if entry is not None else f"MAV_RESULT {code}"
+
+
+class _Closed(ConnectionResetError):
+    """The TCP peer closed or reset the connection."""
+
+
+def _raise_closed() -> None:
+    raise _Closed("connection closed by the autopilot")
 
 
 class PymavlinkLink(VehicleLink):
@@ -80,8 +101,6 @@ class PymavlinkLink(VehicleLink):
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self._target = (1, 1)
-        self._last_heard = 0.0
-        self._lost = False
         self._connected = asyncio.Event()
         self._mission_op: MissionUpload | MissionDownload | None = None
         self._mission_moved = asyncio.Event()
@@ -91,20 +110,25 @@ class PymavlinkLink(VehicleLink):
         self._commit_possible = False
         """An upload's last item went out: the vehicle may hold either mission until it ends."""
         self._unsorted: list[Any] = []
-        self._generation_on_download = True
         """Progress reports that came while ``_commit_possible``: sorted when the upload ends."""
-        self._boot_s: float | None = None
-        """The vehicle's clock (time_boot_ms, s): the latest reading."""
+        self._generation_on_download = True
+        self._current: tuple[int, int] | None = None
+        """(generation, seq) of the latest MISSION_CURRENT about the mission held."""
+        self._current_moved = asyncio.Event()
         self._acks: dict[int, asyncio.Future[int]] = {}
         self._mission_lock = asyncio.Lock()
         self._command_lock = asyncio.Lock()
         self._tasks: list[asyncio.Task[None]] = []
-        self._clock_rate = ClockRate()
+        self._streams_task: asyncio.Task[None] | None = None
+        self._reopened = False
+        """The connection was (re)opened: ask for telemetry at the next heartbeat."""
         self._signer: Signer | None = None
         self._warned_drops = 0
         self._warned_at = -SIGNING_WARN_S
         self.timer = RetryTimer(settings.item_timeout_s)
         """Wait before repeating a mission message or a command: the measured round trip."""
+        self.state.request_streams = self._request_streams
+        self.state.on_restart = self._on_restart
 
     # --- lifecycle ------------------------------------------------------------------------
     async def connect(self, timeout_s: float) -> None:
@@ -122,14 +146,15 @@ class PymavlinkLink(VehicleLink):
 
     async def close(self) -> None:
         self._stop.set()
-        for task in self._tasks:
+        tasks = [*self._tasks, *([self._streams_task] if self._streams_task is not None else [])]
+        for task in tasks:
             task.cancel()
-        await asyncio.gather(*self._tasks, return_exceptions=True)
+        await asyncio.gather(*tasks, return_exceptions=True)
         if self._thread is not None:
             await asyncio.to_thread(self._thread.join, 2.0)
         conn, self._conn = self._conn, None
         if conn is not None:
-            conn.close()
+            _close_quietly(conn)
         signer, self._signer = self._signer, None
         if signer is not None:
             try:
@@ -150,9 +175,14 @@ class PymavlinkLink(VehicleLink):
     def _open(self) -> Any:
         s = self.settings
         kwargs: dict[str, Any] = {"source_system": s.source_system, "source_component": s.source_component}
-        if s.url.startswith("tcp:"):
-            kwargs["autoreconnect"] = True
+        tcp = s.url.startswith("tcp:")
+        if tcp:
+            kwargs.update(autoreconnect=False, retries=0)  # we reconnect ourselves (see the module's notes)
         conn = mavutil.mavlink_connection(s.url, **kwargs)
+        if tcp:
+            # pymavlink only prints on an end of stream and returns b"" for ever after:
+            # raise instead, so the reader sees the autopilot go and reconnects.
+            conn.handle_eof = conn.handle_disconnect = _raise_closed
         if self._signer is not None:
             self._signer.attach(conn.mav)  # before anything is sent on it
         return conn
@@ -174,33 +204,59 @@ class PymavlinkLink(VehicleLink):
                 f"holds the key in {self.settings.signing_key_file})")
 
     def _reader(self) -> None:
-        """Reader thread: messages to the loop; reopen the connection after an error."""
-        backoff = 0.2
+        """Reader thread: messages to the loop; reopen the connection after any failure.
+        Nothing raised here may end the thread: the link would be dead for ever."""
+        backoff = BACKOFF_S[0]
+        failed_to_open = ""
         while not self._stop.is_set():
             conn = self._conn
             if conn is None:
                 try:
                     conn = self._conn = self._open()
-                    backoff = 0.2
-                except (OSError, ValueError):
+                except Exception as err:  # noqa: BLE001 - any failure to open: try again later
+                    if str(err) != failed_to_open:
+                        log.info("cannot open %s (%s); trying again", self.settings.url, err)
+                        failed_to_open = str(err)
                     self._stop.wait(backoff)
-                    backoff = min(backoff * 2, 2.0)
+                    backoff = min(backoff * 2, BACKOFF_S[1])
                     continue
+                backoff, failed_to_open = BACKOFF_S[0], ""
+                self._to_loop(self._on_opened)
             try:
                 msg = conn.recv_match(blocking=True, timeout=0.05)
-            except (OSError, ValueError):
+            except Exception as err:  # noqa: BLE001 - a closed socket, a vanished serial device, a pymavlink bug
                 self._conn = None
-                try:
-                    conn.close()
-                except OSError:
-                    pass
+                _close_quietly(conn)
+                self._to_loop(self._on_broken, f"{type(err).__name__}: {err}")
+                self._stop.wait(backoff)
                 continue
             if msg is None or msg.get_type() == "BAD_DATA" or self._stop.is_set():
                 continue
-            try:
-                self._loop.call_soon_threadsafe(self._on_message, msg)  # type: ignore[union-attr]
-            except RuntimeError:  # the loop closed under us: shutting down
+            if not self._to_loop(self._on_message, msg):
                 return
+
+    def _to_loop(self, fn: Callable[..., None], *args: Any) -> bool:
+        try:
+            self._loop.call_soon_threadsafe(self._guarded, fn, *args)  # type: ignore[union-attr]
+            return True
+        except RuntimeError:  # the loop closed under us: shutting down
+            return False
+
+    def _guarded(self, fn: Callable[..., None], *args: Any) -> None:
+        """Run a handler on the loop; a message that trips a bug is logged and dropped, it
+        never stops the link."""
+        try:
+            fn(*args)
+        except Exception:  # noqa: BLE001
+            log.exception("link: handling %s failed", args[0].get_type() if args and hasattr(args[0], "get_type")
+                          else getattr(fn, "__name__", fn))
+
+    def _on_opened(self) -> None:
+        self._reopened = True  # a new TCP connection may reach a new boot: ask again at its heartbeat
+
+    def _on_broken(self, detail: str) -> None:
+        log.warning("connection %s broken (%s): reconnecting", self.settings.url, detail)
+        self.state.lose(f"connection broken: {detail}")
 
     def _send(self, msg: Any) -> None:
         conn = self._conn
@@ -208,24 +264,27 @@ class PymavlinkLink(VehicleLink):
             raise LinkError("send", f"{msg.get_type()}: the connection is not open")
         try:
             conn.mav.send(msg)
-        except OSError as err:
+        except (OSError, AttributeError) as err:  # AttributeError: pymavlink after its socket went
             raise LinkError("send", f"{msg.get_type()}: {err}") from None
 
     async def _heartbeats(self) -> None:
         """Our heartbeat at 1 Hz (a udpin vehicle answers the last peer heard), the link
-        watchdog, and the signing timestamp's upkeep."""
+        watchdog, the telemetry bookkeeping and the signing timestamp's upkeep. Never ends
+        but by cancellation: a failure in one round is logged and the next goes on."""
         while True:
-            self._signing_upkeep()
-            if self._conn is not None:
-                try:
-                    self._conn.mav.heartbeat_send(M.MAV_TYPE_GCS, M.MAV_AUTOPILOT_INVALID, 0, 0, 0)
-                except OSError:
-                    pass
-            silent = time.monotonic() - self._last_heard
-            if self._connected.is_set() and not self._lost and silent > self.settings.link_timeout_s:
-                self._lost = True
-                self._set(connected=False)
-                self.on_event(LinkEvent("lost", text=f"nothing heard from the autopilot for {silent:.1f} s"))
+            try:
+                self._signing_upkeep()
+                conn = self._conn
+                if conn is not None:
+                    try:
+                        conn.mav.heartbeat_send(M.MAV_TYPE_GCS, M.MAV_AUTOPILOT_INVALID, 0, 0, 0)
+                    except (OSError, AttributeError):
+                        pass  # the reader sees the broken connection and reopens it
+                repeat = self.state.tick()
+                if repeat and self._connected.is_set():
+                    self._spawn_requests(repeat)
+            except Exception:  # noqa: BLE001
+                log.exception("link: heartbeat round failed")
             await asyncio.sleep(0.5 if not self._connected.is_set() else 1.0)
 
     def _signing_upkeep(self) -> None:
@@ -245,10 +304,50 @@ class PymavlinkLink(VehicleLink):
                         self.signing_hint())
             self._warned_drops, self._warned_at = total, now
 
-    # --- incoming -------------------------------------------------------------------------
-    def _set(self, **changes: Any) -> None:
-        self.telemetry = Telemetry(**{**self.telemetry.__dict__, **changes})
+    # --- telemetry requests -------------------------------------------------------------------
+    def _request_streams(self) -> None:
+        """Ask for every message the service needs (on connect, reconnect, restart)."""
+        if self._loop is None or not self._connected.is_set():
+            return
+        if self._streams_task is not None and not self._streams_task.done():
+            self._streams_task.cancel()
+        self._streams_task = asyncio.ensure_future(self._send_requests(self.state.streams.begin()))
 
+    def _spawn_requests(self, requests: list[Request]) -> None:
+        if self._streams_task is not None and not self._streams_task.done():
+            return  # a round is under way
+        self._streams_task = asyncio.ensure_future(self._send_requests(requests))
+
+    async def _send_requests(self, requests: list[Request]) -> None:
+        streams = self.state.streams
+        groups: dict[int, float] = {}
+        for spec in streams.plan:  # a stream group at the highest rate any of its messages needs
+            if spec.group is not None:
+                groups[spec.group] = max(groups.get(spec.group, 0.0), 1.0 / spec.interval_s)
+        for request in requests:
+            spec = request.spec
+            try:
+                if request.kind == "interval":
+                    result = await self._command_result(INTERVAL_CMD, spec.msg_id, spec.interval_s * 1e6,
+                                                        retries=STREAM_RETRIES)
+                    if result != "MAV_RESULT_ACCEPTED":
+                        log.info("%s: SET_MESSAGE_INTERVAL refused (%s); falling back", spec.name, result)
+                    for fallback in streams.on_interval_result(spec.name, result):
+                        await self._send_fallback(fallback, groups)
+                else:
+                    await self._send_fallback(request, groups)
+            except LinkError as err:
+                log.debug("telemetry request for %s not sent: %s", spec.name, err)
+
+    async def _send_fallback(self, request: Request, groups: dict[int, float]) -> None:
+        spec = request.spec
+        if request.kind == "stream" and spec.group is not None:
+            rate = max(1, round(groups.get(spec.group, 1.0)))
+            self._send(M.MAVLink_request_data_stream_message(*self._target, spec.group, rate, 1))
+        else:
+            await self._command_result(M.MAV_CMD_REQUEST_MESSAGE, spec.msg_id, retries=1)
+
+    # --- incoming -------------------------------------------------------------------------
     def _fresh(self, msg: Any) -> bool:
         """Was ``msg`` sent after the message that began the current generation?"""
         if self._mark is None:
@@ -261,61 +360,44 @@ class PymavlinkLink(VehicleLink):
 
     def _new_generation(self, msg: Any | None) -> None:
         self.generation += 1
+        self._current = None
         self._mark = (msg.get_seq(), time.monotonic()) if msg is not None else None
+
+    def _set_progress(self, seq: int, total: int) -> None:
+        self.state.set_progress(seq, total)
+
+    def _on_restart(self) -> None:
+        self._new_generation(None)
 
     def _on_message(self, msg: Any) -> None:
         kind = msg.get_type()
+        source = (msg.get_srcSystem(), msg.get_srcComponent())
         if kind == "HEARTBEAT":
-            if msg.autopilot == M.MAV_AUTOPILOT_INVALID or msg.get_srcComponent() != 1:
-                return  # another ground station or a component that is not the autopilot
-            source = (msg.get_srcSystem(), msg.get_srcComponent())
-            if self._connected.is_set() and source != self._target:
-                # Another vehicle on the same network: the link stays with the first
-                # autopilot heard. Following it would show that vehicle's state as ours,
-                # and its landing would end our sortie.
+            first = self.state.autopilot is None
+            if not self.state.on_heartbeat(*source, msg):
                 return
-            self._target = source
-            armed = bool(msg.base_mode & M.MAV_MODE_FLAG_SAFETY_ARMED)
-            mode = mode_name(self.settings.flavour, msg.custom_mode)
-            old_mode = self.telemetry.mode
-            self._set(armed=armed, mode=mode, connected=True)
-            self._heard()
-            if not self._connected.is_set():
+            if first:
+                self._target = source
                 self._connected.set()
-                self.on_event(LinkEvent("connected", text=mode))
-            if old_mode and mode != old_mode:
-                self.on_event(LinkEvent("mode", text=mode))
+                self._reopened = False
+                self._request_streams()
+            elif self._reopened:
+                self._reopened = False
+                self._request_streams()
             return
-        if msg.get_srcSystem() != self._target[0]:
+        if kind in MISSION_REPLIES or kind in ("COMMAND_ACK", "MISSION_CURRENT", "MISSION_ITEM_REACHED"):
+            if not self.state.trusted(*source):
+                return
+            self.state.heard()
+            self.state.streams.heard(msg.get_msgId())
+        elif not self.state.on_message(kind, msg.get_msgId(), *source, msg):
             return
-        if self._connected.is_set():
-            self._heard()
         if kind in MISSION_REPLIES:
             self._on_mission_reply(msg)
         elif kind == "COMMAND_ACK":
             future = self._acks.get(msg.command)
             if future is not None and not future.done():
                 future.set_result(int(msg.result))
-        elif kind == "GLOBAL_POSITION_INT":
-            self._check_clock(msg.time_boot_ms / 1e3)
-            rate = self._clock_rate.update(msg.time_boot_ms / 1e3, time.monotonic())
-            self._set(valid=True, lat_deg=msg.lat / 1e7, lon_deg=msg.lon / 1e7, rel_alt_m=msg.relative_alt / 1e3,
-                      time_rate=rate, position_at=time.monotonic())
-        elif kind == "BATTERY_STATUS":
-            changes: dict[str, Any] = {"battery_at": time.monotonic()}
-            if msg.energy_consumed >= 0:
-                changes["energy_used_j"] = msg.energy_consumed * 100.0  # hJ -> J
-            if msg.battery_remaining >= 0:
-                changes["battery_fraction"] = msg.battery_remaining / 100.0
-            self._set(**changes)
-        elif kind == "SYS_STATUS" and msg.battery_remaining >= 0 and self.telemetry.energy_used_j is None:
-            self._set(battery_fraction=msg.battery_remaining / 100.0, battery_at=time.monotonic())
-        elif kind == "EXTENDED_SYS_STATE":
-            airborne = msg.landed_state in AIRBORNE_STATES
-            was = self.telemetry.airborne
-            self._set(airborne=airborne, landed_known=True)
-            if was and msg.landed_state == M.MAV_LANDED_STATE_ON_GROUND:
-                self.on_event(LinkEvent("landed"))
         elif kind in ("MISSION_CURRENT", "MISSION_ITEM_REACHED"):
             if self._commit_possible:
                 self._unsorted.append(msg)  # about either mission: the ACK's sequence number will say
@@ -324,26 +406,27 @@ class PymavlinkLink(VehicleLink):
             elif kind == "MISSION_ITEM_REACHED":
                 self._report(msg, self.generation - 1)
             # else a MISSION_CURRENT sent before the ACK: about either mission (below)
-        elif kind == "STATUSTEXT":
-            self.on_event(LinkEvent("text", text=str(msg.text)))
 
     def _report(self, msg: Any, mission: int) -> None:
         """A progress report about ``mission`` (a generation): the current one updates the
         telemetry; the one before is passed on too, since the points it completed just
         before a new mission replaced it are services all the same."""
         if msg.get_type() == "MISSION_ITEM_REACHED":
-            self.on_event(LinkEvent("reached", seq=int(msg.seq), mission=mission))
+            self.on_event(Reached(int(msg.seq), mission))
             return
         raw = int(getattr(msg, "total", 0) or 0)
         # MAVLink: 0 when the autopilot does not say, UINT16_MAX when it has no mission.
         total = -1 if raw == 0 else 0 if raw == 0xFFFF else raw
         if mission != self.generation:
-            self.on_event(LinkEvent("current", seq=int(msg.seq), total=total, mission=mission))
+            self.on_event(Current(int(msg.seq), total, mission))
             return
-        changed = (msg.seq, total) != (self.telemetry.mission_seq, self.telemetry.mission_total)
-        self._set(mission_seq=int(msg.seq), mission_total=total)
+        t = self.telemetry
+        changed = (msg.seq, total) != (t.mission_seq, t.mission_total)
+        self._set_progress(int(msg.seq), total)
+        self._current = (mission, int(msg.seq))
+        self._current_moved.set()
         if changed:
-            self.on_event(LinkEvent("current", seq=int(msg.seq), total=total, mission=mission))
+            self.on_event(Current(int(msg.seq), total, mission))
 
     def _sort_reports(self, ack: Any | None, total: int = 0) -> None:
         """Pass on the reports held back while an upload could commit: a MISSION_ITEM_REACHED
@@ -363,28 +446,10 @@ class PymavlinkLink(VehicleLink):
             if msg.get_type() == "MISSION_ITEM_REACHED":
                 self._report(msg, self.generation)
         self._new_generation(ack)
-        self._set(mission_seq=0, mission_total=total)
+        self._set_progress(0, total)
         for msg in held:
             if msg not in before:
                 self._report(msg, self.generation)
-
-    def _heard(self) -> None:
-        self._last_heard = time.monotonic()
-        if self._lost:
-            self._lost = False
-            self._set(connected=True)
-            self.on_event(LinkEvent("restored", text=self.telemetry.mode))
-
-    def _check_clock(self, boot_s: float) -> None:
-        """A restart: the vehicle's clock went back further than reordering explains."""
-        last = self._boot_s
-        if last is not None and boot_s < last - RESTART_SLACK_S * max(self.telemetry.time_rate, 1.0):
-            self._boot_s = boot_s
-            self._new_generation(None)
-            self._set(mission_seq=0, mission_total=0)
-            self.on_event(LinkEvent("restarted", text=f"its clock went back from {last:.1f} s to {boot_s:.1f} s"))
-            return
-        self._boot_s = boot_s if last is None else max(last, boot_s)
 
     def _on_mission_reply(self, msg: Any) -> None:
         """Feed the upload or download in progress, in the order messages arrived."""
@@ -399,7 +464,7 @@ class PymavlinkLink(VehicleLink):
             self._sort_reports(msg, len(op.items))
         elif done is not None and isinstance(op, MissionDownload) and done.ok and self._generation_on_download:
             self._new_generation(msg)
-            self._set(mission_seq=-1, mission_total=-1)  # the next MISSION_CURRENT is news
+            self._set_progress(-1, -1)  # the next MISSION_CURRENT is news
         if done is not None or op.sent != sent:
             self._mission_moved.set()
 
@@ -442,15 +507,22 @@ class PymavlinkLink(VehicleLink):
             except LinkError:
                 return
 
-    async def upload(self, items: Sequence[MissionItem]) -> None:
+    def _check_link(self, operation: str) -> None:
+        if not self._connected.is_set() or self.state.lost:
+            raise LinkError(operation, f"NO_LINK: the autopilot is not connected{self.signing_hint()}")
+
+    async def upload(self, items: Sequence[MissionItem], *, current_seq: int | None = None) -> None:
+        if current_seq is not None and not 0 <= current_seq < len(items):
+            raise LinkError("upload_mission()", f"current_seq {current_seq} is not an item of the {len(items)}")
         async with self._mission_lock:
-            if not self._connected.is_set() or self._lost:
-                raise LinkError("upload_mission()", f"NO_LINK: the autopilot is not connected{self.signing_hint()}")
+            self._check_link("upload_mission()")
             try:
                 await self._upload(items)
             finally:
                 self._commit_possible = False
                 self._sort_reports(None)  # left over: the upload failed, the vehicle kept its mission
+            if current_seq is not None:
+                await self._ensure_current(current_seq, wait_for_report=True)
 
     async def _upload(self, items: Sequence[MissionItem]) -> None:
         done = await self._run(MissionUpload(items, self._send, self._target, self.settings.retries))
@@ -470,14 +542,62 @@ class PymavlinkLink(VehicleLink):
         if same_mission(held, items, self.settings.flavour):  # type: ignore[arg-type]
             self._unsorted.clear()  # about either mission, sent while it committed
             self._new_generation(None)
-            self._set(mission_seq=-1, mission_total=-1)  # the next MISSION_CURRENT is news
+            self._set_progress(-1, -1)  # the next MISSION_CURRENT is news
             return
         raise LinkError("upload_mission()", f"{done.result}; the vehicle kept its previous mission (read back)")
 
+    async def set_current(self, seq: int) -> None:
+        async with self._mission_lock:
+            self._check_link("set_current()")
+            await self._ensure_current(seq, wait_for_report=False)
+
+    async def _wait_current(self, timeout_s: float, want: int | None = None) -> int | None:
+        """The vehicle's current item of the mission held, as its next MISSION_CURRENT (or
+        the latest already heard of this generation, unless ``want`` is not it yet) says
+        within ``timeout_s``; None when none came."""
+        deadline = time.monotonic() + timeout_s
+        while True:
+            seen = self._current
+            if seen is not None and seen[0] == self.generation and (want is None or seen[1] == want):
+                return seen[1]
+            remaining = deadline - time.monotonic()
+            if remaining <= 0:
+                return seen[1] if seen is not None and seen[0] == self.generation else None
+            self._current_moved.clear()
+            try:
+                await asyncio.wait_for(self._current_moved.wait(), remaining)
+            except TimeoutError:
+                pass
+
+    async def _ensure_current(self, seq: int, *, wait_for_report: bool) -> None:
+        """Make the vehicle fly ``seq``: nothing when its MISSION_CURRENT already says so (a
+        command would restart the item), else MAV_CMD_DO_SET_MISSION_CURRENT, or the older
+        MISSION_SET_CURRENT message where the command is refused; confirmed from
+        MISSION_CURRENT."""
+        wait_s = CURRENT_WAIT_S if wait_for_report else 0.0
+        seen = await self._wait_current(wait_s)
+        if seen == seq:
+            return
+        sent_at = time.monotonic()
+        use_message = False
+        for _ in range(max(self.settings.retries // 3, 2)):
+            if not use_message:
+                result = await self._command_result(M.MAV_CMD_DO_SET_MISSION_CURRENT, seq, 0,
+                                                    retries=max(self.settings.retries // 3, 2))
+                if result != "MAV_RESULT_ACCEPTED":
+                    log.info("MAV_CMD_DO_SET_MISSION_CURRENT %d: %s; trying MISSION_SET_CURRENT", seq, result)
+                    use_message = True  # refused or no answer: the message every autopilot knows
+            if use_message:
+                self._send(M.MAVLink_mission_set_current_message(*self._target, seq))
+            seen = await self._wait_current(CURRENT_WAIT_S, want=seq)
+            if seen == seq:
+                log.info("mission: current item set to %d", seq)
+                return
+        raise LinkError("set_current()", f"the vehicle reports item {seen}, not {seq}{await self._refusal_texts(sent_at)}")
+
     async def download(self) -> list[MissionItem]:
         async with self._mission_lock:
-            if not self._connected.is_set() or self._lost:
-                raise LinkError("download_mission()", f"NO_LINK: the autopilot is not connected{self.signing_hint()}")
+            self._check_link("download_mission()")
             return await self._download()
 
     async def _download(self, *, new_generation: bool = True) -> list[MissionItem]:
@@ -489,12 +609,14 @@ class PymavlinkLink(VehicleLink):
             raise LinkError("download_mission()", done.result)
         return list(done.items)
 
-    async def command(self, command: int, *params: float, what: str) -> None:
-        """COMMAND_LONG with the confirmation counting up on each repeat."""
+    async def _command_result(self, command: int, *params: float, retries: int | None = None) -> str:
+        """COMMAND_LONG with the confirmation counting up on each repeat; the result's name
+        (MAV_RESULT_*) or "NO_ANSWER"."""
         p = [float(x) for x in params] + [0.0] * (7 - len(params))
+        tries = self.settings.retries if retries is None else retries
         async with self._command_lock:
             assert self._loop is not None
-            for confirmation in range(self.settings.retries):
+            for confirmation in range(tries):
                 future: asyncio.Future[int] = self._loop.create_future()
                 self._acks[command] = future
                 try:
@@ -507,22 +629,76 @@ class PymavlinkLink(VehicleLink):
                     continue
                 finally:
                     self._acks.pop(command, None)
-                if result in (M.MAV_RESULT_ACCEPTED, M.MAV_RESULT_IN_PROGRESS):
-                    return
-                raise LinkError(what, result_name(result))
+                return "MAV_RESULT_ACCEPTED" if result == M.MAV_RESULT_IN_PROGRESS else result_name(result)
+            return "NO_ANSWER"
+
+    async def _refusal_texts(self, since: float) -> str:
+        """What the autopilot said (STATUSTEXT) since ``since``: why it refused."""
+        await asyncio.sleep(REFUSAL_TEXT_WAIT_S)
+        texts = self.state.texts_since(since)
+        return f" (autopilot: {'; '.join(texts)})" if texts else ""
+
+    async def command(self, command: int, *params: float, what: str) -> None:
+        """A command that must be accepted: ``LinkError`` names the result and what the
+        autopilot said about it."""
+        sent_at = time.monotonic()
+        result = await self._command_result(command, *params)
+        if result == "MAV_RESULT_ACCEPTED":
+            return
+        if result == "NO_ANSWER":
             raise LinkError(what, f"NO_ANSWER after {self.settings.retries} tries{self.signing_hint()}")
+        raise LinkError(what, result + await self._refusal_texts(sent_at))
+
+    async def _set_mode(self, name: str) -> None:
+        main, sub = mode_number(self.settings.flavour, name)
+        self.state.expect_mode(name)
+        await self.command(M.MAV_CMD_DO_SET_MODE, M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, main, sub,
+                           what=f"set_mode({name})")
 
     async def start(self) -> None:
-        await self.command(M.MAV_CMD_COMPONENT_ARM_DISARM, 1, what="arm()")
-        await self.resume()
+        t = self.telemetry
+        self._check_link("start()")
+        if not t.position_ok:
+            raise LinkError("start()", f"no position: waiting for {t.waiting_for}")
+        armed_here = False
+        try:
+            if self.settings.flavour == "ardupilot" and t.mode != "GUIDED":
+                # ArduCopter refuses to arm in AUTO (unless AUTO_OPTIONS allows it); GUIDED
+                # arms from a ground station and checks the position as AUTO will.
+                await self._set_mode("GUIDED")
+            await self.command(M.MAV_CMD_COMPONENT_ARM_DISARM, 1, what="arm()")
+            armed_here = True
+            await self._resume()
+        except LinkError as err:
+            if armed_here or self.telemetry.armed:
+                await self._disarm_on_ground(err)
+            raise
+
+    async def _disarm_on_ground(self, why: LinkError) -> None:
+        """A start that failed after arming must not leave motors armed on the ground."""
+        if self.telemetry.airborne:
+            return
+        try:
+            await self.command(M.MAV_CMD_COMPONENT_ARM_DISARM, 0, what="disarm()")
+            log.warning("start failed (%s): disarmed again", why)
+        except LinkError as err:
+            log.error("start failed (%s) and disarming failed too: %s", why, err)
 
     async def resume(self) -> None:
-        if self.settings.flavour == "px4":
-            await self.command(M.MAV_CMD_DO_SET_MODE, M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 4, 4, what="set_mode(AUTO.MISSION)")
-        else:
-            await self.command(M.MAV_CMD_DO_SET_MODE, M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 3, what="set_mode(AUTO)")
+        self._check_link("resume()")
+        await self._resume()
+
+    async def _resume(self) -> None:
+        await self._set_mode("AUTO.MISSION" if self.settings.flavour == "px4" else "AUTO")
         await self.command(M.MAV_CMD_MISSION_START, 0, 0, what="start_mission()")
 
     async def return_to_launch(self) -> None:
+        self.state.expect_mode("AUTO.RTL" if self.settings.flavour == "px4" else "RTL")
         await self.command(M.MAV_CMD_NAV_RETURN_TO_LAUNCH, what="return_to_launch()")
 
+
+def _close_quietly(conn: Any) -> None:
+    try:
+        conn.close()
+    except Exception:  # noqa: BLE001 - pymavlink may fail closing what is already gone
+        pass

@@ -1,48 +1,54 @@
 """The MAVSDK backend: the native mavsdk 4 binding (no mavsdk_server), asyncio API.
 
-Missions go through ``mission_raw`` (MISSION_ITEM_INT as the protocol encodes them): the
-``mission`` plugin is written for PX4 and loses the first waypoint to ArduPilot's home
-item. Progress comes from mission_raw's progress stream: the current item moving from c
-to c' means items c .. c'-1 were completed. MAVSDK's coloured log lines are routed to the
-``mavsdk`` logger (stderr) instead of stdout.
+MAVSDK moves the missions (``mission_raw``: MISSION_ITEM_INT as the protocol encodes
+them; the ``mission`` plugin is written for PX4 and loses the first waypoint to
+ArduPilot's home item) and keeps the connection (it reconnects by itself). Everything else
+goes through its ``mavlink_direct`` plugin, so that both backends judge the same messages
+the same way (``state.VehicleState``): every incoming message with its source (system,
+component), for trust, telemetry and progress; and the commands (stream requests, modes,
+arming, the current item) as COMMAND_LONG. MAVSDK alone asks ArduPilot for nothing but
+HOME_POSITION and AUTOPILOT_VERSION (seen on ArduCopter SITL: no GLOBAL_POSITION_INT, no
+EXTENDED_SYS_STATE), so the link asks for what it needs, as the pymavlink backend does.
+MAVSDK's coloured log lines are routed to the ``mavsdk`` logger instead of stdout.
 
 Which mission a report is about: ``generation`` grows after each accepted upload or
-download (MAVSDK hides the packets, so a progress report delayed past an upload cannot be
-told apart; the progress baseline below guards against most). A vehicle restart shows as
-the attitude's timestamp going back: a "restarted" event. MAVSDK itself reconnects to the
-restarted vehicle on its own (same system id); the service then uploads and resumes.
-
-Battery: MAVSDK reports the remaining percentage (1 % steps) but no energy consumed, so the
-battery in joules is that fraction of the scenario's pack (the planner's margin covers the
-step). Vehicle time (for the clock rate) comes from the attitude's timestamp.
+download. MAVSDK hides the packets, so there is no sequence number to sort by; a report
+arrives on the loop in the order MAVSDK received it, before the upload's result (the ACK
+is handled after the messages before it). A MISSION_CURRENT whose total does not fit the
+mission just uploaded is about the one before and is dropped.
 """
 
 from __future__ import annotations
 
 import asyncio
+import json
 import logging
-import math
 import time
-from typing import Any, AsyncIterator, Callable, Sequence
+from types import SimpleNamespace
+from typing import Any, Callable, Sequence
 
 from mavsdk import log_subscribe
 from mavsdk.asyncio import ComponentType, Configuration, Mavsdk
-from mavsdk.asyncio.plugins.action import ActionAsync
+from mavsdk.asyncio.plugins.mavlink_direct import MavlinkDirectAsync
 from mavsdk.asyncio.plugins.mission_raw import MissionRawAsync
-from mavsdk.asyncio.plugins.telemetry import TelemetryAsync
-from mavsdk.plugins.action import ActionError
+from mavsdk.plugins.mavlink_direct import MavlinkDirectError, MavlinkMessage
 from mavsdk.plugins.mission_raw import MissionItem as RawItem
 from mavsdk.plugins.mission_raw import MissionRawError, MissionRawResult
+from pymavlink.dialects.v20 import ardupilotmega as M
 
 from protocol import MissionItem
 
 from ..errors import LinkError
-from .base import ClockRate, LinkEvent, LinkSettings, Telemetry, VehicleLink
+from .base import CURRENT_WAIT_S, LinkSettings, VehicleLink
+from .events import Current, LinkEvent, Reached
+from .modes import mode_number
+from .streams import INTERVAL_CMD, Request
 
 _log = logging.getLogger("mavsdk")
-RESTART_SLACK_S = 2.0
-"""Wall seconds (times the clock rate) the vehicle's clock must go back to count as a restart."""
+log = logging.getLogger(__name__)
 RETRYABLE = {MissionRawResult.BUSY, MissionRawResult.TIMEOUT, MissionRawResult.ERROR}
+REPORTS = frozenset({"MISSION_CURRENT", "MISSION_ITEM_REACHED"})
+REFUSAL_TEXT_WAIT_S = 0.3
 
 
 def _to_logging(level: Any, message: str, file: str | None, line: int) -> bool:
@@ -74,6 +80,11 @@ def _name(result: Any) -> str:
     return str(getattr(result, "name", result))
 
 
+def result_name(code: int) -> str:
+    entry = M.enums["MAV_RESULT"].get(code)
+    return entry.name if entry is not None else f"MAV_RESULT {code}"
+
+
 def mission_item(raw: RawItem) -> MissionItem:
     return MissionItem(seq=raw.seq, frame=raw.frame, command=raw.command, current=raw.current,
                        autocontinue=raw.autocontinue, param1=raw.param1, param2=raw.param2, param3=raw.param3,
@@ -86,18 +97,30 @@ def raw_item(item: MissionItem) -> RawItem:
                    param4=item.param4, x=item.x, y=item.y, z=item.z, mission_type=item.mission_type)
 
 
+def fields(message: Any) -> SimpleNamespace:
+    """A mavlink_direct message's fields as attributes (the names of the MAVLink XML, as
+    pymavlink's)."""
+    return SimpleNamespace(**json.loads(message.fields_json or "{}"))
+
+
 class MavsdkLink(VehicleLink):
     def __init__(self, settings: LinkSettings, on_event: Callable[[LinkEvent], None]) -> None:
         super().__init__(settings, on_event)
         self._sdk: Any = None
         self._tasks: list[asyncio.Task[None]] = []
-        self._clock_rate = ClockRate()
-        self._progress: tuple[int, int] | None = None  # (current, total) baseline
-        self._expect_total: int | None = None
-        self._heard = 0.0
-        self._lost = False
-        self._boot_s: float | None = None
+        self._streams_task: asyncio.Task[None] | None = None
         self._upload_lock = asyncio.Lock()
+        self._expect_total: int | None = None
+        """After an upload: the mission's size, which a MISSION_CURRENT about it reports."""
+        self._current: tuple[int, int] | None = None
+        self._current_moved = asyncio.Event()
+        self._connected = asyncio.Event()
+        self._inflight: set[asyncio.Future[Any]] = set()
+        """MAVSDK calls running in executor threads: a cancelled task leaves them running, and
+        destroying MAVSDK under them hangs, so ``close`` waits for them (MAVSDK times a
+        command out after about 2 s)."""
+        self.state.request_streams = self._request_streams
+        self.state.on_restart = self._on_restart
 
     async def connect(self, timeout_s: float) -> None:
         self._sdk = Mavsdk(Configuration.create_with_component_type(ComponentType.GROUND_STATION))
@@ -107,110 +130,185 @@ class MavsdkLink(VehicleLink):
         if system is None:
             raise LinkError("connect", f"no autopilot at {url} within {timeout_s:g} s")
         self._raw = MissionRawAsync(system)
-        self._action = ActionAsync(system)
-        tel = TelemetryAsync(system)
-        self._heard = time.monotonic()
-        self._set(connected=True)
-        streams: list[tuple[Callable[[], AsyncIterator[Any]], Callable[[Any], None]]] = [
-            (tel.subscribe_position, self._on_position), (tel.subscribe_battery, self._on_battery),
-            (tel.subscribe_armed, lambda v: self._set(armed=bool(v))), (tel.subscribe_in_air, self._on_in_air),
-            (tel.subscribe_flight_mode, self._on_mode), (tel.subscribe_attitude_euler, self._on_attitude),
-            (self._raw.subscribe_mission_progress, self._on_progress),
-        ]
-        self._tasks = [asyncio.create_task(self._pump(sub, handler)) for sub, handler in streams]
-        self._tasks.append(asyncio.create_task(self._watchdog()))
-        self.on_event(LinkEvent("connected", text="mavsdk"))
+        self._direct = MavlinkDirectAsync(system)
+        self._tasks = [asyncio.create_task(self._pump(), name="mavsdk-messages"),
+                       asyncio.create_task(self._watchdog(), name="mavsdk-watchdog")]
+        try:
+            await asyncio.wait_for(self._connected.wait(), timeout_s)
+        except TimeoutError:
+            raise LinkError("connect", f"no autopilot heartbeat at {url} within {timeout_s:g} s") from None
 
     async def close(self) -> None:
-        for task in self._tasks:
+        tasks = [*self._tasks, *([self._streams_task] if self._streams_task is not None else [])]
+        for task in tasks:
             task.cancel()
-        await asyncio.gather(*self._tasks, return_exceptions=True)
+        await asyncio.gather(*tasks, return_exceptions=True)
         self._tasks = []
+        if self._inflight:
+            await asyncio.wait(set(self._inflight), timeout=5.0)
         if self._sdk is not None:
             result = self._sdk.destroy()
             if asyncio.iscoroutine(result):
                 await result
             self._sdk = None
 
-    # --- telemetry ----------------------------------------------------------------------------
-    def _set(self, **changes: Any) -> None:
-        self.telemetry = Telemetry(**{**self.telemetry.__dict__, **changes})
+    # --- incoming -----------------------------------------------------------------------------
+    async def _pump(self) -> None:
+        """Every message MAVSDK receives, with its source; a message that trips a bug is
+        logged and dropped, it never ends the stream."""
+        while True:
+            try:
+                async for message in self._direct.subscribe_message(""):
+                    try:
+                        self._on_message(message)
+                    except Exception:  # noqa: BLE001
+                        log.exception("link: handling %s failed", message.message_name)
+            except asyncio.CancelledError:
+                raise
+            except Exception:  # noqa: BLE001
+                log.exception("link: the message subscription failed; subscribing again")
+                await asyncio.sleep(1.0)
 
-    async def _pump(self, subscribe: Callable[[], AsyncIterator[Any]], handler: Callable[[Any], None]) -> None:
-        async for value in subscribe():
-            handler(value)
-
-    def _on_position(self, pos: Any) -> None:
-        if math.isnan(pos.latitude_deg):
+    def _on_message(self, message: Any) -> None:
+        name, source = message.message_name, (int(message.system_id), int(message.component_id))
+        if name == "HEARTBEAT":
+            first = self.state.autopilot is None
+            if self.state.on_heartbeat(*source, fields(message)) and first:
+                self._connected.set()
+                self._request_streams()
             return
-        self._heard = time.monotonic()
-        if self._lost:
-            self._lost = False
-            self._set(connected=True)
-            self.on_event(LinkEvent("restored"))
-        self._set(valid=True, lat_deg=pos.latitude_deg, lon_deg=pos.longitude_deg, rel_alt_m=pos.relative_altitude_m,
-                  position_at=self._heard)
-
-    def _on_battery(self, battery: Any) -> None:
-        if not math.isnan(battery.remaining_percent):
-            self._set(battery_fraction=battery.remaining_percent / 100.0, battery_at=time.monotonic())
-
-    def _on_attitude(self, attitude: Any) -> None:
-        if not attitude.timestamp_us:
+        msg = fields(message)
+        msg_id = int(getattr(msg, "message_id", -1))
+        if name in REPORTS:
+            if not self.state.trusted(*source):
+                return
+            self.state.heard()
+            self.state.streams.heard(msg_id)
+            self._report(name, msg)
             return
-        boot_s = attitude.timestamp_us / 1e6
-        last = self._boot_s
-        if last is not None and boot_s < last - RESTART_SLACK_S * max(self.telemetry.time_rate, 1.0):
-            self.generation += 1
-            self._progress, self._expect_total = None, None
-            self.on_event(LinkEvent("restarted", text=f"its clock went back from {last:.1f} s to {boot_s:.1f} s"))
-            last = None
-        self._boot_s = boot_s if last is None else max(last, boot_s)
-        self._set(time_rate=self._clock_rate.update(boot_s, time.monotonic()))
+        self.state.on_message(name, msg_id, *source, msg)
 
-    def _on_in_air(self, in_air: Any) -> None:
-        was = self.telemetry.airborne
-        self._set(airborne=bool(in_air), landed_known=True)
-        if was and not in_air:
-            self.on_event(LinkEvent("landed"))
+    def _report(self, name: str, msg: Any) -> None:
+        if name == "MISSION_ITEM_REACHED":
+            self.on_event(Reached(int(msg.seq), self.generation))
+            return
+        raw = int(getattr(msg, "total", 0) or 0)
+        total = -1 if raw == 0 else 0 if raw == 0xFFFF else raw
+        expect = self._expect_total
+        if expect is not None and total >= 0 and total not in (expect, expect - 1):
+            return  # about the mission before the last upload (ArduPilot leaves home out of total)
+        t = self.telemetry
+        changed = (int(msg.seq), total) != (t.mission_seq, t.mission_total)
+        self.state.set_progress(int(msg.seq), total)
+        self._current = (self.generation, int(msg.seq))
+        self._current_moved.set()
+        if changed:
+            self.on_event(Current(int(msg.seq), total, self.generation))
 
-    def _on_mode(self, mode: Any) -> None:
-        name = getattr(mode, "name", str(mode))
-        old = self.telemetry.mode
-        self._set(mode=name)
-        if old and old != name:
-            self.on_event(LinkEvent("mode", text=name))
-
-    def _on_progress(self, progress: Any) -> None:
-        current, total = int(progress.current), int(progress.total)
-        self._set(mission_seq=max(current, 0), mission_total=max(total, 0))
-        if self._expect_total is not None and total != self._expect_total:
-            return  # a report about the mission held before the last upload
-        base = self._progress
-        self._progress = (current, total)
-        if base is None or base[1] != total or current < base[0]:
-            return  # a new baseline: nothing completed yet
-        for seq in range(base[0], current):
-            self.on_event(LinkEvent("reached", seq=seq, mission=self.generation))
-        if current != base[0]:
-            self.on_event(LinkEvent("current", seq=current, total=total, mission=self.generation))
+    def _on_restart(self) -> None:
+        self.generation += 1
+        self._expect_total, self._current = None, None
 
     async def _watchdog(self) -> None:
         while True:
-            await asyncio.sleep(0.5)
-            silent = time.monotonic() - self._heard
-            if not self._lost and silent > self.settings.link_timeout_s:
-                self._lost = True
-                self._set(connected=False)
-                self.on_event(LinkEvent("lost", text=f"no position for {silent:.1f} s"))
+            await asyncio.sleep(1.0)
+            try:
+                repeat = self.state.tick()
+                if repeat and (self._streams_task is None or self._streams_task.done()):
+                    self._streams_task = asyncio.ensure_future(self._send_requests(repeat))
+            except Exception:  # noqa: BLE001
+                log.exception("link: watchdog round failed")
+
+    # --- commands -----------------------------------------------------------------------------
+    def _request_streams(self) -> None:
+        if not self._connected.is_set():
+            return
+        if self._streams_task is not None and not self._streams_task.done():
+            self._streams_task.cancel()
+        self._streams_task = asyncio.ensure_future(self._send_requests(self.state.streams.begin()))
+
+    async def _send_requests(self, requests: list[Request]) -> None:
+        streams = self.state.streams
+        for request in requests:
+            spec = request.spec
+            results = [request]
+            if request.kind == "interval":
+                result = await self._command_result(INTERVAL_CMD, spec.msg_id, spec.interval_s * 1e6)
+                if result != "MAV_RESULT_ACCEPTED":
+                    log.info("%s: SET_MESSAGE_INTERVAL refused (%s); falling back", spec.name, result)
+                results = streams.on_interval_result(spec.name, result)
+            for fallback in results:
+                if fallback.kind == "stream" and spec.group is not None:
+                    rate = max(1, round(max(1.0 / s.interval_s for s in streams.plan if s.group == spec.group)))
+                    await self._send_message("REQUEST_DATA_STREAM", req_stream_id=spec.group, req_message_rate=rate,
+                                             start_stop=1)
+                elif fallback.kind == "message":
+                    await self._command_result(M.MAV_CMD_REQUEST_MESSAGE, spec.msg_id)
+
+    def _target(self) -> tuple[int, int]:
+        return self.state.autopilot or (1, 1)
+
+    async def _send_message(self, name: str, **values: Any) -> None:
+        target = self._target()
+        body = {"target_system": target[0], "target_component": target[1], **values}
+        try:
+            await self._direct.send_message(MavlinkMessage(message_name=name, target_system_id=target[0],
+                                                           target_component_id=target[1],
+                                                           fields_json=json.dumps(body)))
+        except MavlinkDirectError as err:
+            log.debug("%s not sent: %s", name, err)
+
+    async def _command_result(self, command: int, *params: float) -> str:
+        """COMMAND_LONG through MAVSDK (it repeats and waits for the final ACK): the
+        result's name or NO_ANSWER."""
+        target = self._target()
+        p = [float(x) for x in params] + [0.0] * (7 - len(params))
+        body = {"target_system": target[0], "target_component": target[1], "command": command, "confirmation": 0,
+                **{f"param{i + 1}": v for i, v in enumerate(p)}}
+        message = MavlinkMessage(message_name="COMMAND_LONG", target_system_id=target[0],
+                                 target_component_id=target[1], fields_json=json.dumps(body))
+        call = asyncio.get_running_loop().run_in_executor(None, self._direct._plugin.send_command, message)
+        self._inflight.add(call)
+        call.add_done_callback(self._inflight.discard)
+        try:
+            ack = await asyncio.shield(call)
+        except MavlinkDirectError as err:
+            return "NO_ANSWER" if err.result.name == "TIMEOUT" else f"NO_ANSWER ({_name(err.result)})"
+        if (int(ack.system_id), int(ack.component_id)) != target and ack.system_id:
+            return "NO_ANSWER (an ACK from another component)"
+        result = int(fields(ack).result)
+        return "MAV_RESULT_ACCEPTED" if result == M.MAV_RESULT_IN_PROGRESS else result_name(result)
+
+    async def _refusal_texts(self, since: float) -> str:
+        await asyncio.sleep(REFUSAL_TEXT_WAIT_S)
+        texts = self.state.texts_since(since)
+        return f" (autopilot: {'; '.join(texts)})" if texts else ""
+
+    async def command(self, command: int, *params: float, what: str) -> None:
+        sent_at = time.monotonic()
+        result = await self._command_result(command, *params)
+        if result != "MAV_RESULT_ACCEPTED":
+            raise LinkError(what, result + await self._refusal_texts(sent_at))
+
+    async def _set_mode(self, name: str) -> None:
+        main, sub = mode_number(self.settings.flavour, name)
+        self.state.expect_mode(name)
+        await self.command(M.MAV_CMD_DO_SET_MODE, M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, main, sub,
+                           what=f"set_mode({name})")
+
+    def _check_link(self, operation: str) -> None:
+        if not self._connected.is_set() or self.state.lost:
+            raise LinkError(operation, "NO_LINK: the autopilot is not connected")
 
     # --- operations ---------------------------------------------------------------------------
-    async def upload(self, items: Sequence[MissionItem]) -> None:
+    async def upload(self, items: Sequence[MissionItem], *, current_seq: int | None = None) -> None:
+        if current_seq is not None and not 0 <= current_seq < len(items):
+            raise LinkError("upload_mission()", f"current_seq {current_seq} is not an item of the {len(items)}")
         raw = [raw_item(i) for i in items]
         async with self._upload_lock:
-            if self._lost:
-                raise LinkError("upload_mission()", "NO_LINK: the autopilot is not connected")
+            self._check_link("upload_mission()")
             last: MissionRawError | None = None
+            accepted = False
             for _ in range(self.settings.retries):
                 try:
                     await self._raw.upload_mission(raw)
@@ -219,39 +317,99 @@ class MavsdkLink(VehicleLink):
                     if err.result not in RETRYABLE:
                         break
                     continue
-                self._expect_total, self._progress = len(raw), None
-                self.generation += 1
+                accepted = True
+                break
+            if not accepted:
+                raise LinkError("upload_mission()", _name(last.result) if last is not None else "UNKNOWN")
+            self.generation += 1
+            self._expect_total, self._current = len(raw), None
+            self.state.set_progress(0, len(raw))
+            if current_seq is not None:
+                await self._ensure_current(current_seq, wait_for_report=True)
+
+    async def set_current(self, seq: int) -> None:
+        async with self._upload_lock:
+            self._check_link("set_current()")
+            await self._ensure_current(seq, wait_for_report=False)
+
+    async def _wait_current(self, timeout_s: float, want: int | None = None) -> int | None:
+        deadline = time.monotonic() + timeout_s
+        while True:
+            seen = self._current
+            if seen is not None and seen[0] == self.generation and (want is None or seen[1] == want):
+                return seen[1]
+            remaining = deadline - time.monotonic()
+            if remaining <= 0:
+                return seen[1] if seen is not None and seen[0] == self.generation else None
+            self._current_moved.clear()
+            try:
+                await asyncio.wait_for(self._current_moved.wait(), remaining)
+            except TimeoutError:
+                pass
+
+    async def _ensure_current(self, seq: int, *, wait_for_report: bool) -> None:
+        """As the pymavlink backend: nothing when MISSION_CURRENT already says ``seq``, else
+        MAV_CMD_DO_SET_MISSION_CURRENT, or MAVSDK's MISSION_SET_CURRENT where refused."""
+        seen = await self._wait_current(CURRENT_WAIT_S if wait_for_report else 0.0)
+        if seen == seq:
+            return
+        sent_at = time.monotonic()
+        for attempt in range(3):
+            result = await self._command_result(M.MAV_CMD_DO_SET_MISSION_CURRENT, seq, 0)
+            if result != "MAV_RESULT_ACCEPTED":
+                try:
+                    await self._raw.set_current_mission_item(seq)
+                except MissionRawError as err:
+                    log.info("set_current(%d): %s, then %s", seq, result, _name(err.result))
+            seen = await self._wait_current(CURRENT_WAIT_S, want=seq)
+            if seen == seq:
+                log.info("mission: current item set to %d", seq)
                 return
-            result = _name(last.result) if last is not None else "UNKNOWN"
-            raise LinkError("upload_mission()", result)
+        raise LinkError("set_current()", f"the vehicle reports item {seen}, not {seq}{await self._refusal_texts(sent_at)}")
 
     async def download(self) -> list[MissionItem]:
         async with self._upload_lock:
+            self._check_link("download_mission()")
             try:
                 raw = await self._raw.download_mission()
             except MissionRawError as err:
                 if err.result != MissionRawResult.NO_MISSION_AVAILABLE:
                     raise LinkError("download_mission()", _name(err.result)) from None
                 raw = []  # the vehicle holds none
-            self._expect_total, self._progress = len(raw), None
             self.generation += 1
+            self._expect_total, self._current = len(raw), None
+            self.state.set_progress(-1, -1)
             return [mission_item(r) for r in raw]
 
     async def start(self) -> None:
+        t = self.telemetry
+        self._check_link("start()")
+        if not t.position_ok:
+            raise LinkError("start()", f"no position: waiting for {t.waiting_for}")
+        armed_here = False
         try:
-            await self._action.arm()
-            await self._raw.start_mission()
-        except (ActionError, MissionRawError) as err:
-            raise LinkError("start()", _name(err.result)) from None
+            if self.settings.flavour == "ardupilot" and t.mode != "GUIDED":
+                await self._set_mode("GUIDED")  # ArduCopter refuses to arm in AUTO (see the pymavlink backend)
+            await self.command(M.MAV_CMD_COMPONENT_ARM_DISARM, 1, what="arm()")
+            armed_here = True
+            await self._resume()
+        except LinkError as err:
+            if (armed_here or self.telemetry.armed) and not self.telemetry.airborne:
+                try:
+                    await self.command(M.MAV_CMD_COMPONENT_ARM_DISARM, 0, what="disarm()")
+                    log.warning("start failed (%s): disarmed again", err)
+                except LinkError as disarm:
+                    log.error("start failed (%s) and disarming failed too: %s", err, disarm)
+            raise
 
     async def resume(self) -> None:
-        try:
-            await self._raw.start_mission()  # PX4: AUTO.MISSION; ArduPilot: AUTO and MISSION_START
-        except MissionRawError as err:
-            raise LinkError("resume()", _name(err.result)) from None
+        self._check_link("resume()")
+        await self._resume()
+
+    async def _resume(self) -> None:
+        await self._set_mode("AUTO.MISSION" if self.settings.flavour == "px4" else "AUTO")
+        await self.command(M.MAV_CMD_MISSION_START, 0, 0, what="start_mission()")
 
     async def return_to_launch(self) -> None:
-        try:
-            await self._action.return_to_launch()
-        except ActionError as err:
-            raise LinkError("return_to_launch()", _name(err.result)) from None
+        self.state.expect_mode("AUTO.RTL" if self.settings.flavour == "px4" else "RTL")
+        await self.command(M.MAV_CMD_NAV_RETURN_TO_LAUNCH, what="return_to_launch()")

@@ -1,0 +1,256 @@
+"""The link's pure judgements, in milliseconds: a position only when the autopilot has one,
+an unknown battery kept unknown, the landed state derived where none is reported, restarts
+believed on two readings, the telemetry asked for and missed, trust in the autopilot's own
+(system, component) only, and wire text escaped. Messages are real pymavlink objects;
+clocks are pinned."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import pytest
+from pymavlink.dialects.v20 import ardupilotmega as M
+
+from planner_service.service.link import (Connected, Landed, LinkEvent, ModeChanged, PositionChanged, Restarted,
+                                          StatusText, TelemetryMissing, escape_text)
+from planner_service.service.link.state import DERIVED, VehicleState
+from planner_service.service.link.streams import (MISSING_AFTER_S, REREQUEST_S, UNAVAILABLE_AFTER_S, Streams,
+                                                  stream_plan)
+from planner_service.service.link.telemetry import (ClockWatch, PositionInputs, assess_position, battery_fraction,
+                                                    derived_airborne, energy_used_j)
+
+READY = PositionInputs(lat_e7=473977420, lon_e7=85455940, gps_fix=6, estimator_flags=0x33F, home_set=True)
+
+
+class Clock:
+    def __init__(self) -> None:
+        self.now = 100.0
+
+    def __call__(self) -> float:
+        return self.now
+
+
+def with_(p: PositionInputs, **changes: Any) -> PositionInputs:
+    return PositionInputs(**{**p.__dict__, **changes})
+
+
+# --- a position only when the autopilot has one ------------------------------------------------
+def test_a_position_needs_fix_estimator_home_and_not_zero() -> None:
+    assert assess_position(READY) == ""
+    assert "no GLOBAL_POSITION_INT" in assess_position(PositionInputs())
+    assert "stopped arriving" in assess_position(with_(READY, position_fresh=False))
+    assert "no GPS_RAW_INT" in assess_position(with_(READY, gps_fix=None))
+    assert "no 3D fix (fix type 2)" in assess_position(with_(READY, gps_fix=2))
+    # ArduCopter SITL before "EKF3 IMU0 is using GPS": constant-position mode, no absolute position.
+    assert assess_position(with_(READY, estimator_flags=0xA7)) == (
+        "position estimate: EKF has no GPS position yet (flags 0x00a7)")
+    assert "uninitialised" in assess_position(with_(READY, estimator_flags=0x33F | 1024))
+    assert "no EKF_STATUS_REPORT" in assess_position(with_(READY, estimator_flags=None))
+    assert assess_position(with_(READY, home_set=False)) == "home position: not set yet"
+    assert "0/0" in assess_position(with_(READY, lat_e7=0, lon_e7=0))
+
+
+def test_a_criterion_the_autopilot_will_not_report_is_skipped() -> None:
+    assert assess_position(with_(READY, estimator_flags=None, estimator_available=False)) == ""
+    assert assess_position(with_(READY, gps_fix=None, gps_available=False)) == ""
+    assert assess_position(with_(READY, home_set=False, home_available=False)) == ""
+    # ...but never the 0/0 test.
+    assert "0/0" in assess_position(with_(READY, lat_e7=0, lon_e7=0, estimator_available=False,
+                                          gps_available=False, home_available=False))
+
+
+# --- an unknown battery is unknown ----------------------------------------------------------------
+@pytest.mark.parametrize("remaining, fraction", [(-1, None), (101, None), (127, None), (-128, None), (0, 0.0),
+                                                 (55, 0.55), (100, 1.0)])
+def test_battery_remaining_outside_0_to_100_is_unknown(remaining: int, fraction: float | None) -> None:
+    assert battery_fraction(remaining) == fraction
+
+
+def test_energy_consumed_is_kept_when_reported() -> None:
+    assert energy_used_j(-1) is None
+    assert energy_used_j(1234) == 123400.0
+
+
+# --- the landed state where the autopilot gives none ------------------------------------------------
+def test_derived_airborne_has_a_hysteresis() -> None:
+    assert not derived_airborne(False, 30.0, 0.0, True)  # disarmed: on the ground
+    assert not derived_airborne(True, 0.6, 0.0, False)  # armed, on the ground
+    assert derived_airborne(True, 1.5, 0.0, False)
+    assert derived_airborne(True, 0.2, 1.0, False)  # climbing off the ground
+    assert derived_airborne(True, 0.8, 0.0, True)  # hovering low stays airborne
+    assert not derived_airborne(True, 0.3, 0.1, True)  # down and still
+
+
+# --- restarts take two readings ------------------------------------------------------------------------
+def test_one_reading_from_the_past_is_only_a_suspicion() -> None:
+    watch = ClockWatch(slack_s=2.0)
+    assert [watch.observe(t) for t in (100.0, 100.25, 0.0, 100.5, 100.75)] == ["ok", "ok", "suspect", "ok", "ok"]
+    assert watch.boot_s == 100.75
+    assert [watch.observe(t) for t in (1.0, 1.25, 1.5)] == ["suspect", "restart", "ok"]
+    fast = ClockWatch(slack_s=2.0)
+    assert [fast.observe(100.0), fast.observe(85.0, rate=10.0)] == ["ok", "ok"]  # 10x: 20 vehicle s of slack
+    assert fast.observe(70.0, rate=1.0) == "suspect"
+
+
+# --- the telemetry asked for ----------------------------------------------------------------------------
+def test_every_message_is_asked_for_and_a_refusal_falls_back() -> None:
+    clock = Clock()
+    streams = Streams(stream_plan("ardupilot"), clock)
+    requests = streams.begin()
+    names = [r.spec.name for r in requests]
+    assert all(r.kind == "interval" for r in requests)
+    assert {"GLOBAL_POSITION_INT", "SYS_STATUS", "BATTERY_STATUS", "EXTENDED_SYS_STATE", "MISSION_CURRENT",
+            "GPS_RAW_INT", "HOME_POSITION", "EKF_STATUS_REPORT"} == set(names)
+    assert "ESTIMATOR_STATUS" in [s.name for s in stream_plan("px4")]
+    assert streams.on_interval_result("GLOBAL_POSITION_INT", "MAV_RESULT_ACCEPTED") == []
+    [fallback] = streams.on_interval_result("EKF_STATUS_REPORT", "MAV_RESULT_UNSUPPORTED")
+    assert (fallback.kind, fallback.spec.group) == ("stream", M.MAV_DATA_STREAM_EXTRA3)
+    assert streams.available("EKF_STATUS_REPORT")  # refused, but the fallback may still bring it
+    [fallback] = streams.on_interval_result("EXTENDED_SYS_STATE", "NO_ANSWER")
+    assert fallback.kind == "message"  # in no stream group: asked for once, and again while missing
+    assert streams.missing() == ()  # not yet: the autopilot is given MISSING_AFTER_S
+    streams.heard(M.MAVLINK_MSG_ID_GLOBAL_POSITION_INT)
+    clock.now += MISSING_AFTER_S
+    assert "GLOBAL_POSITION_INT" not in streams.missing() and "EKF_STATUS_REPORT" in streams.missing()
+    clock.now += max(UNAVAILABLE_AFTER_S - MISSING_AFTER_S, 0.0)
+    assert not streams.available("EKF_STATUS_REPORT") and streams.available("SYS_STATUS")
+    clock.now += REREQUEST_S
+    again = {r.spec.name: r.kind for r in streams.due()}
+    assert again["EKF_STATUS_REPORT"] == "stream" and again["SYS_STATUS"] == "interval"
+    assert "GLOBAL_POSITION_INT" in again  # not heard since: missing now
+    assert streams.due() == []  # not again before REREQUEST_S
+
+
+# --- trust only the autopilot ------------------------------------------------------------------------------
+def heartbeat(mode: int = 0, armed: bool = False, autopilot: int = M.MAV_AUTOPILOT_ARDUPILOTMEGA) -> Any:
+    base = M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | (M.MAV_MODE_FLAG_SAFETY_ARMED if armed else 0)
+    return M.MAVLink_heartbeat_message(M.MAV_TYPE_QUADROTOR, autopilot, base, mode, 4, 3)
+
+
+def position(boot_ms: int, alt_mm: int = 30000, vz: int = 0) -> Any:
+    return M.MAVLink_global_position_int_message(boot_ms, 473977420, 85455940, 488000 + alt_mm, alt_mm, 0, 0, vz, 0)
+
+
+def feed(state: VehicleState, msg: Any, source: tuple[int, int] = (1, 1)) -> bool:
+    return state.on_message(msg.get_type(), msg.get_msgId(), *source, msg)
+
+
+def vehicle(clock: Clock) -> tuple[VehicleState, list[LinkEvent]]:
+    events: list[LinkEvent] = []
+    state = VehicleState("ardupilot", events.append, clock=clock)
+    assert not state.on_heartbeat(1, 190, heartbeat(autopilot=M.MAV_AUTOPILOT_INVALID))  # a ground station
+    assert not state.on_heartbeat(1, 2, heartbeat())  # not the autopilot's component
+    assert state.on_heartbeat(1, 1, heartbeat(mode=3, armed=True))
+    state.streams.begin()
+    return state, events
+
+
+def test_forged_messages_from_another_component_change_nothing() -> None:
+    clock = Clock()
+    state, events = vehicle(clock)
+    assert isinstance(events[0], Connected) and state.autopilot == (1, 1)
+    for t in range(10):
+        feed(state, position(50_000 + 250 * t))
+        clock.now += 0.25
+    feed(state, M.MAVLink_extended_sys_state_message(0, M.MAV_LANDED_STATE_IN_AIR))
+    before = state.telemetry
+    forged = [position(0), position(1), M.MAVLink_extended_sys_state_message(0, M.MAV_LANDED_STATE_ON_GROUND),
+              M.MAVLink_battery_status_message(0, 0, 0, 0, [0] * 10, 0, 0, 0, 3),
+              M.MAVLink_statustext_message(M.MAV_SEVERITY_CRITICAL, b"PreArm: forged")]
+    for msg in forged:
+        assert not feed(state, msg, (1, 2))
+    assert not state.on_heartbeat(1, 2, heartbeat(mode=6))  # RTL, says another component
+    assert state.telemetry == before and state.untrusted == len(forged) + 1
+    assert [e for e in events if isinstance(e, (Restarted, Landed, StatusText, ModeChanged))] == []
+
+
+def test_a_restart_is_believed_only_on_two_reports() -> None:
+    clock = Clock()
+    state, events = vehicle(clock)
+    for t in range(8):
+        feed(state, position(80_000 + 250 * t))
+    assert not feed(state, position(0))  # forged with the autopilot's own ids, or reordered: ignored
+    assert state.telemetry.position_boot_s == 81.75
+    feed(state, position(82_000))
+    assert not [e for e in events if isinstance(e, Restarted)]
+    feed(state, position(500))
+    feed(state, position(750))  # the second: a real restart
+    assert [e for e in events if isinstance(e, Restarted)] and state.telemetry.position_boot_s == 0.75
+    assert not state.telemetry.home_set and not state.telemetry.position_ok
+
+
+def test_commanded_and_foreign_mode_changes_are_told_apart() -> None:
+    clock = Clock()
+    state, events = vehicle(clock)
+    state.expect_mode("RTL")
+    state.on_heartbeat(1, 1, heartbeat(mode=6, armed=True))
+    clock.now += 10.0
+    state.on_heartbeat(1, 1, heartbeat(mode=9, armed=True))  # LAND by a pilot
+    assert [e for e in events if isinstance(e, ModeChanged)] == [ModeChanged("RTL", True), ModeChanged("LAND", False)]
+
+
+def test_landed_state_is_derived_and_said_so_where_the_autopilot_gives_none() -> None:
+    clock = Clock()
+    state, events = vehicle(clock)
+    state.streams.on_interval_result("EXTENDED_SYS_STATE", "MAV_RESULT_UNSUPPORTED")
+    boot = 10_000
+    for alt_mm, vz in [(0, 0), (500, -100), (5000, -100), (20000, 0)]:  # armed, climbing out
+        clock.now += 1.0
+        boot += 1000
+        feed(state, position(boot, alt_mm, vz))
+    t = state.telemetry
+    assert t.airborne and t.landed_known and t.landed_source == DERIVED
+    for alt_mm in (2000, 200, 0):
+        clock.now += 1.0
+        boot += 1000
+        feed(state, position(boot, alt_mm, 0))
+    assert not state.telemetry.airborne and Landed(DERIVED) in events
+
+
+def test_the_position_event_says_what_is_awaited() -> None:
+    clock = Clock()
+    state, events = vehicle(clock)
+    feed(state, position(1000))
+    feed(state, M.MAVLink_gps_raw_int_message(0, 6, 473977420, 85455940, 0, 0, 0, 0, 0, 10))
+    feed(state, M.MAVLink_ekf_status_report_message(0xA7, 0, 0, 0, 0, 0))
+    feed(state, M.MAVLink_home_position_message(473977420, 85455940, 488000, 0, 0, 0, [1, 0, 0, 0], 0, 0, 0))
+    assert state.telemetry.waiting_for.startswith("position estimate") and not state.telemetry.position_ok
+    feed(state, M.MAVLink_ekf_status_report_message(0x33F, 0, 0, 0, 0, 0))
+    assert state.telemetry.position_ok and PositionChanged(True, "") in events
+
+
+def test_what_does_not_arrive_is_missing_and_said_once() -> None:
+    clock = Clock()
+    state, events = vehicle(clock)
+    clock.now += MISSING_AFTER_S + 0.1
+    state.heard()
+    state.tick()
+    state.tick()
+    missing = [e for e in events if isinstance(e, TelemetryMissing)]
+    assert len(missing) == 1 and "GLOBAL_POSITION_INT" in missing[0].missing
+    assert state.telemetry.missing == missing[0].missing
+
+
+def test_an_unknown_battery_reading_is_never_full() -> None:
+    clock = Clock()
+    state, _ = vehicle(clock)
+    feed(state, M.MAVLink_sys_status_message(0, 0, 0, 0, 12600, 0, -1, 0, 0, 0, 0, 0, 0))
+    assert state.telemetry.battery_fraction is None
+    feed(state, M.MAVLink_battery_status_message(0, 0, 0, 0, [12600] + [65535] * 9, 0, 0, 420, 64))
+    assert state.telemetry.battery_fraction == 0.64 and state.telemetry.energy_used_j == 42000.0
+
+
+# --- wire text ------------------------------------------------------------------------------------------------
+def test_wire_text_is_escaped_of_control_characters() -> None:
+    assert escape_text("PreArm: \x1b[31mred\x1b[0m\nfake log line\r\x00") == (
+        "PreArm: \\x1b[31mred\\x1b[0m\\nfake log line\\r\\x00")
+    assert escape_text("ok \u2028 \x85") == "ok \\u2028 \\x85"
+    assert escape_text("é ü Zürich") == "é ü Zürich"
+    assert len(escape_text("x" * 1000)) == 256
+
+
+def test_statustext_is_escaped_before_it_is_told() -> None:
+    clock = Clock()
+    state, events = vehicle(clock)
+    feed(state, M.MAVLink_statustext_message(M.MAV_SEVERITY_WARNING, b"Arm: \x1b[2Jcleared\nscreen"))
+    assert StatusText("Arm: \\x1b[2Jcleared\\nscreen", M.MAV_SEVERITY_WARNING) in events
