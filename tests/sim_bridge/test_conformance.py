@@ -7,11 +7,11 @@ there is no position at first and arming in a position mode is refused then; an 
 reads back as ArduPilot stores it (frames, whole-second holds, home at item 0); an upload
 in flight keeps the current index and restarts the command there.
 
-The SITL binary comes from ``ARDUPILOT_SITL`` or the shared ``ardupilot/arducopter`` beside
-the repository; without it the ``sitl`` cases are skipped. Each SITL runs in its own
-temporary folder (it writes eeprom.bin and logs there), on its own instance number (ports
-5760 + 10 N), and is stopped with SIGTERM. Rates are not compared: SITL's are simulated time
-(ten times faster at ``--speedup 10``), the stub's wall time (docs/VEHICLE.md).
+SITL comes from the shared harness (``tests/support/sitl.py``: ``ARDUPILOT_SITL`` or the
+shared binary, its own temporary folder, SIGTERM at the end; skipped without the binary) on
+this file's instance numbers 22-29; the ground station uses its SERIAL1 (the harness keeps
+SERIAL0). Rates are not compared: SITL's are simulated time (ten times faster at
+``--speedup 10``), the stub's wall time (docs/VEHICLE.md).
 """
 
 from __future__ import annotations
@@ -24,22 +24,21 @@ import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Iterator
+from typing import Callable, Iterator
 
 import pytest
 
 from gcs import M, GroundStation
 from planner_service.service.processes import free_port
+from support.sitl import Sitl
 from protocol.geodesy import GeoOrigin
 from protocol.mission import MissionItem
 
 REPO = Path(__file__).resolve().parents[2]
 ORIGIN = GeoOrigin()
 SPEEDUP = 10
-SITL_INSTANCES = (27, 28, 29)
-"""This file's SITL instance numbers (ports 6030, 6040, 6050): the first free one is used."""
-SHARED_SITL = [base / "shared" / "ardupilot" / "arducopter" for base in (REPO.parent, REPO.parent.parent)]
-"""``../shared/ardupilot/arducopter`` beside the checkout (or beside a worktree's parent)."""
+SITL_INSTANCES = tuple(range(22, 30))
+"""This file's SITL instance numbers (ports 5980-6050): the first free one is used."""
 TARGETS = ["stub", pytest.param("sitl", marks=pytest.mark.sitl)]
 STREAMED = {"GLOBAL_POSITION_INT", "LOCAL_POSITION_NED", "SYS_STATUS", "ATTITUDE", "GPS_RAW_INT",
             "EXTENDED_SYS_STATE", "MISSION_CURRENT", "BATTERY_STATUS", "VFR_HUD", "EKF_STATUS_REPORT"}
@@ -48,13 +47,11 @@ DLON = 1e7 / (111_320.0 * math.cos(math.radians(ORIGIN.lat_deg)))
 LAT, LON = round(ORIGIN.lat_deg * 1e7), round(ORIGIN.lon_deg * 1e7)
 
 
-def sitl_binary() -> Path | None:
-    candidates = [Path(os.environ["ARDUPILOT_SITL"])] if os.environ.get("ARDUPILOT_SITL") else SHARED_SITL
-    return next((p for p in candidates if p.is_file() and os.access(p, os.X_OK)), None)
-
-
 def port_free(port: int) -> bool:
+    """Nothing listens on ``port`` (a port in TIME_WAIT after the last SITL counts as free:
+    SITL binds with SO_REUSEADDR)."""
     with socket.socket() as sock:
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
         try:
             sock.bind(("127.0.0.1", port))
         except OSError:
@@ -65,12 +62,8 @@ def port_free(port: int) -> bool:
 @dataclass
 class Autopilot:
     kind: str
-    port: int
-    proc: subprocess.Popen
-    log_path: Path
-
-    def log(self) -> str:
-        return self.log_path.read_text(errors="replace")
+    url: str
+    stop: Callable[[], None]
 
 
 def start_stub(tmp: Path) -> Autopilot:
@@ -85,45 +78,42 @@ def start_stub(tmp: Path) -> Autopilot:
         if proc.poll() is not None or time.monotonic() > deadline:
             raise RuntimeError(f"the stub did not start:\n{log_path.read_text()}")
         time.sleep(0.05)
-    return Autopilot("stub", port, proc, log_path)
+
+    def stop() -> None:
+        proc.terminate()
+        try:
+            proc.wait(10)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait(5)
+
+    return Autopilot("stub", f"tcp:127.0.0.1:{port}", stop)
 
 
-def start_sitl(tmp: Path) -> Autopilot:
-    binary = sitl_binary()
-    if binary is None:
-        pytest.skip("no ArduCopter SITL binary (set ARDUPILOT_SITL)")
-    instance = next((i for i in SITL_INSTANCES if port_free(5760 + 10 * i)), None)
+def start_sitl(make_sitl: Callable[..., Sitl], speedup: int) -> Autopilot:
+    """SITL from the shared harness (tests/support/sitl.py: its own folder, SIGTERM at the
+    end), on one of this file's instance numbers; the ground station uses SERIAL1."""
+    instance = next((i for i in SITL_INSTANCES if all(port_free(p) for p in range(5760 + 10 * i, 5764 + 10 * i))),
+                    None)
     if instance is None:
         pytest.skip(f"SITL instances {SITL_INSTANCES} all busy")
-    port = 5760 + 10 * instance
-    log_path = tmp / "sitl.log"
-    defaults = binary.parent / "copter.parm"
-    args = [str(binary), "--model", "+", "--speedup", str(SPEEDUP), "--home",
-            f"{ORIGIN.lat_deg},{ORIGIN.lon_deg},{ORIGIN.alt_m},0", "-I", str(instance)]
-    if defaults.is_file():
-        args += ["--defaults", str(defaults)]
-    with open(log_path, "w") as log:
-        proc = subprocess.Popen(args, cwd=tmp, stdout=log, stderr=subprocess.STDOUT)
-    deadline = time.monotonic() + 20
-    while "Waiting for connection" not in log_path.read_text():
-        if proc.poll() is not None or time.monotonic() > deadline:
-            raise RuntimeError(f"SITL did not start:\n{log_path.read_text()}")
-        time.sleep(0.05)
-    return Autopilot("sitl", port, proc, log_path)
+    sitl = make_sitl(instance=instance, speedup=speedup)
+    return Autopilot("sitl", sitl.url(1), lambda: None)  # make_sitl stops it
 
 
 @pytest.fixture(params=TARGETS)
 def autopilot(request: pytest.FixtureRequest, tmp_path: Path) -> Iterator[Autopilot]:
-    target = start_sitl(tmp_path) if request.param == "sitl" else start_stub(tmp_path)
+    if request.param == "sitl":
+        # SITL starts its clock when the harness connects: a slower one leaves time to see
+        # its first seconds without a position.
+        speedup = 2 if "no_position" in request.node.name else SPEEDUP
+        yield start_sitl(request.getfixturevalue("make_sitl"), speedup)
+        return
+    target = start_stub(tmp_path)
     try:
         yield target
     finally:
-        target.proc.terminate()
-        try:
-            target.proc.wait(10)
-        except subprocess.TimeoutExpired:
-            target.proc.kill()
-            target.proc.wait(5)
+        target.stop()
 
 
 @pytest.fixture
@@ -131,7 +121,7 @@ def gcs(autopilot: Autopilot) -> Iterator[GroundStation]:
     deadline = time.monotonic() + 10
     while True:
         try:
-            station = GroundStation(f"tcp:127.0.0.1:{autopilot.port}", timeout_s=0.5, retries=10)
+            station = GroundStation(autopilot.url, timeout_s=0.5, retries=10)
             break
         except OSError:
             if time.monotonic() > deadline:
@@ -192,7 +182,7 @@ def waypoints(*points: tuple[float, float, float]) -> list[MissionItem]:
 
 
 def wait_for_position(gcs: GroundStation) -> None:
-    assert wait_text(gcs, "EKF3 IMU0 is using GPS", 15.0), "no position estimate"
+    assert wait_text(gcs, "EKF3 IMU0 is using GPS", 40.0), "no position estimate"
 
 
 # --- the checks ---------------------------------------------------------------------------------
