@@ -205,7 +205,11 @@ def test_a_first_waypoint_at_ground_level_does_not_stall(flavour: str) -> None:
 
 
 def test_ardupilot_reads_back_whole_seconds_and_flies_them() -> None:
-    flight = flying("ardupilot", [HoverPoint(50.0, 0.0, 20.0, 46.117)])
+    flight = Flight(preset("field"), ORIGIN, "ardupilot")
+    items = encode_path([HoverPoint(50.0, 0.0, 20.0, 46.0)], ORIGIN, "ardupilot")
+    items[2] = MissionItem(**{**items[2].__dict__, "param1": 46.117})  # as a ground station may send it
+    flight.set_mission(stored(items))
+    assert flight.arm() is None and flight.set_mode(Mode.AUTO) is None and flight.mission_start() is None
     assert flight.mission[2].param1 == 46.0 and flight.mission[2].command == NAV_WAYPOINT
     until(flight, lambda f, _: at(f, 2))
     started = flight.time_s
