@@ -254,6 +254,20 @@ class Flight:
         """Arm; the reasons if the pre-arm checks refuse."""
         if self.armed:
             return None
+        reasons = self.arm_checks()
+        if reasons:
+            return Refusal(tuple(reasons))
+        self.armed = True
+        self.auto_armed = False
+        self.ground_s = 0.0
+        self.ground_armed_s = 0.0
+        self._events.append(Armed())
+        if self.stage >= Stage.ORIGIN and self.landed:
+            self._set_home()  # both autopilots take home where they arm
+        return None
+
+    def arm_checks(self) -> list[str]:
+        """The failing pre-arm checks, in the autopilot's words (empty: it would arm)."""
         reasons: list[str] = []
         if self.energy_j <= self.energy_floor_j:
             reasons.append("Battery below the return threshold")
@@ -268,16 +282,7 @@ class Flight:
                 reasons.append("AUTO mode not armable" if self.mission_present else "Mode requires mission")
         elif not self.position_ok:
             reasons.append("Navigation error: No valid global position estimate")
-        if reasons:
-            return Refusal(tuple(reasons))
-        self.armed = True
-        self.auto_armed = False
-        self.ground_s = 0.0
-        self.ground_armed_s = 0.0
-        self._events.append(Armed())
-        if self.stage >= Stage.ORIGIN and self.landed:
-            self._set_home()  # both autopilots take home where they arm
-        return None
+        return reasons
 
     def disarm(self, force: bool = False, why: str = "command") -> Refusal | None:
         if not self.armed:

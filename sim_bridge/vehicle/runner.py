@@ -50,6 +50,9 @@ TIMESYNC_INTERVAL_S = 10.0
 """ArduPilot sends TIMESYNC (tc1 0) unasked every 10 s (seen on SITL)."""
 REACHED_REPEATS = 10
 """PX4 sends MISSION_ITEM_REACHED again at 1 Hz, ten times (MavlinkMissionManager::send)."""
+PREARM_REPORT_S = 30.0
+"""ArduPilot reports failing pre-arm checks unasked every 30 s while disarmed (``PreArm: Need
+Position Estimate`` on SITL), in simulated time."""
 
 
 @dataclass(frozen=True)
@@ -158,6 +161,7 @@ class Vehicle:
         self._signing_due = clock() + SIGNING_TICK_S
         self._timesync_due = clock() + TIMESYNC_INTERVAL_S
         self._reached_repeat: tuple[int, int, float] | None = None
+        self._prearm_due = PREARM_REPORT_S
         """PX4: (seq, repeats left, next wall time) of MISSION_ITEM_REACHED."""
 
     @staticmethod
@@ -267,6 +271,12 @@ class Vehicle:
         if self.ardupilot and now >= self._timesync_due:
             self._timesync_due = now + TIMESYNC_INTERVAL_S
             self._send_to(M.MAVLink_timesync_message(0, time.monotonic_ns()), None)
+        f = self.flight
+        if self.ardupilot and f.since_boot_s >= self._prearm_due:
+            self._prearm_due = f.since_boot_s + PREARM_REPORT_S
+            if not f.armed:
+                for reason in f.arm_checks():
+                    self._text(M.MAV_SEVERITY_CRITICAL, f"PreArm: {reason}")
         if self._reached_repeat is not None and now >= self._reached_repeat[2]:
             seq, left, _ = self._reached_repeat
             self._send_to(M.MAVLink_mission_item_reached_message(seq), None)

@@ -123,6 +123,8 @@ def test_arming_and_mode_refusals_say_what_sitl_says(vehicle, gcs_factory) -> No
     said = [m.text for m in gcs.seen if m.get_type() == "STATUSTEXT"] + [
         m.text for m in iter(lambda: gcs.recv(["STATUSTEXT"], 0.5), None)]
     assert "Arm: Need Position Estimate" in said and "Arm: Mode requires mission" in said, said
+    # And unasked every 30 s (simulated) while disarmed, as ArduPilot's pre-arm report.
+    assert gcs.recv(["STATUSTEXT"], 2.0, lambda m: m.text == "PreArm: Need Position Estimate") is not None
 
 
 @pytest.mark.timeout(30)
