@@ -13,9 +13,11 @@ from typing import Union
 
 @dataclass(frozen=True)
 class Reached:
-    """Mission item ``seq`` is complete (its hold over): MISSION_ITEM_REACHED."""
+    """Mission item ``seq`` is complete (its hold over): MISSION_ITEM_REACHED; ``command`` is
+    the command that was flown (the mission may have changed under it since)."""
 
     seq: int
+    command: int = 0
 
 
 @dataclass(frozen=True)

@@ -514,7 +514,7 @@ class Flight:
             if item.command == DO_CHANGE_SPEED and item.param2 > 0:
                 self.speed_mps = float(item.param2)
             if not self.ardupilot:
-                self._events.append(Reached(i))
+                self._events.append(Reached(i, item.command))
             i += 1
         self._complete()
 
@@ -536,7 +536,7 @@ class Flight:
 
     def _item_done(self, events: list[FlightEvent]) -> None:
         """The loaded command completed: report it and go on with the next item."""
-        events.append(Reached(self.current))
+        events.append(Reached(self.current, self.loaded.command if self.loaded is not None else 0))
         self._events_into(events)
         self._advance(self.current + 1)
         self._events_into(events)
@@ -775,7 +775,7 @@ class Flight:
         self.vel = (0.0, 0.0, 0.0)
         events.append(Landed())
         if in_mission:
-            events.append(Reached(self.current))
+            events.append(Reached(self.current, self.loaded.command if self.loaded is not None else 0))
             self.state = MissionState.COMPLETE
             self.loaded = None
             events.append(MissionDone(self.current))

@@ -304,10 +304,10 @@ class Vehicle:
     def _report(self, event: FlightEvent) -> None:
         f = self.flight
         match event:
-            case Reached(seq=seq):
+            case Reached(seq=seq, command=command):
                 log.info("mission item %d reached", seq)
                 self._send_to(M.MAVLink_mission_item_reached_message(seq), None)
-                if self.ardupilot and 0 <= seq < len(f.mission) and f.mission[seq].command == M.MAV_CMD_NAV_WAYPOINT:
+                if self.ardupilot and command == M.MAV_CMD_NAV_WAYPOINT:  # verify_nav_wp's text
                     self._text(M.MAV_SEVERITY_INFO, f"Reached command #{seq}")
                 if not self.ardupilot:
                     self._reached_repeat = (seq, REACHED_REPEATS, self.clock() + 1.0)
