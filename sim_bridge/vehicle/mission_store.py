@@ -354,5 +354,4 @@ class MissionStore:
         self._ack(peer, src, mavlink.MAV_MISSION_ACCEPTED, mission_type)
 
     def _on_set_current_msg(self, msg: Any, peer: Hashable, src: tuple[int, int]) -> None:
-        if not self.hooks.on_set_current(int(msg.seq), peer):
-            log.info("MISSION_SET_CURRENT %d refused (mission has %d items)", msg.seq, len(self.items))
+        self.hooks.on_set_current(int(msg.seq), peer)

@@ -52,7 +52,8 @@ REACHED_REPEATS = 10
 """PX4 sends MISSION_ITEM_REACHED again at 1 Hz, ten times (MavlinkMissionManager::send)."""
 PREARM_REPORT_S = 30.0
 """ArduPilot reports failing pre-arm checks unasked every 30 s while disarmed (``PreArm: Need
-Position Estimate`` on SITL), in simulated time."""
+Position Estimate`` on SITL); wall-clock here, as the telemetry rates, so that a high
+speed-up does not flood the link and the logs."""
 
 
 @dataclass(frozen=True)
@@ -161,7 +162,7 @@ class Vehicle:
         self._signing_due = clock() + SIGNING_TICK_S
         self._timesync_due = clock() + TIMESYNC_INTERVAL_S
         self._reached_repeat: tuple[int, int, float] | None = None
-        self._prearm_due = PREARM_REPORT_S
+        self._prearm_due = clock() + PREARM_REPORT_S
         """PX4: (seq, repeats left, next wall time) of MISSION_ITEM_REACHED."""
 
     @staticmethod
@@ -272,8 +273,8 @@ class Vehicle:
             self._timesync_due = now + TIMESYNC_INTERVAL_S
             self._send_to(M.MAVLink_timesync_message(0, time.monotonic_ns()), None)
         f = self.flight
-        if self.ardupilot and f.since_boot_s >= self._prearm_due:
-            self._prearm_due = f.since_boot_s + PREARM_REPORT_S
+        if self.ardupilot and now >= self._prearm_due:
+            self._prearm_due = now + PREARM_REPORT_S
             if not f.armed:
                 for reason in f.arm_checks():
                     self._text(M.MAV_SEVERITY_CRITICAL, f"PreArm: {reason}")
@@ -499,6 +500,8 @@ class Vehicle:
 
     def _on_set_current(self, seq: int, peer: Hashable) -> bool:
         ok = self.flight.set_current(seq)
+        log.info("MISSION_SET_CURRENT %d %s: current %d, mission %s", seq, "accepted" if ok else "refused",
+                 self.flight.current, self.flight.state.value)
         if ok and self.ardupilot:
             # GCS_MAVLINK::handle_mission_set_current echoes the requested seq to the sender.
             self._send_to(tm.mission_current(self.flight, seq), peer)
