@@ -7,7 +7,7 @@ import sys
 
 from protocol.arguments import OneLineParser
 
-COMMANDS = ("serve", "demo", "plan", "experiment", "bench", "submit", "keygen", "operator")
+COMMANDS = ("serve", "demo", "plan", "experiment", "bench", "submit", "keygen", "operator", "export")
 
 
 def build_parser() -> OneLineParser:

@@ -179,8 +179,14 @@ def write_wpl(items: Sequence[MissionItem], flavour: Flavour, home: GeoOrigin | 
     """The mission as a WPL 110 text file (line 0 is home, as Mission Planner expects)."""
     home_pos, body = _split_home(items, flavour, home or GeoOrigin())
     lines = [WPL_HEADER]
-    # Mission Planner marks the home line current; ArduPilot's item 0 keeps its own flag.
-    home_line = _with(home_item(home_pos), current=items[0].current if flavour == "ardupilot" else 1)
+    # Exactly one line is current (MAVSDK refuses a mission with none or two). ArduPilot's
+    # item 0 keeps its own flag; for PX4 home is not an item: its line is current only when
+    # no item is, as Mission Planner marks it.
+    if flavour == "ardupilot":
+        home_current = items[0].current
+    else:
+        home_current = 0 if any(item.current for item in body) else 1
+    home_line = _with(home_item(home_pos), current=home_current)
     for item in [home_line] + [_renumber(item, i + 1) for i, item in enumerate(body)]:
         x = _degrees(item.x, item.frame)
         y = _degrees(item.y, item.frame)

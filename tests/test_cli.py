@@ -12,7 +12,7 @@ def run(python, env, *args, check=True):
 
 def test_help_lists_the_commands(python, python_env):
     out = run(python, python_env, "-m", "planner_service", "--help").stdout
-    for name in ("serve", "demo", "plan", "experiment", "bench", "submit", "keygen"):
+    for name in ("serve", "demo", "plan", "experiment", "bench", "submit", "keygen", "export"):
         assert name in out
     out = run(python, python_env, "-m", "sim_bridge", "--help").stdout
     for name in ("vehicle", "users", "lossy-proxy", "router"):

@@ -41,7 +41,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--mavlink", default="udpin:127.0.0.1:14550", metavar="URL", type=_url,
                         help="udpin:HOST:PORT, udpout:HOST:PORT or tcpin:HOST:PORT (default %(default)s)")
     parser.add_argument("--flavour", choices=("ardupilot", "px4"), default="ardupilot",
-                        help="autopilot to imitate: item-0 convention and mode numbers (default %(default)s)")
+                        help="autopilot to imitate: ArduCopter (streams nothing until asked, item 0 is home, "
+                             "missions written item by item) or PX4 (default streams, atomic uploads); "
+                             "docs/VEHICLE.md (default %(default)s)")
     parser.add_argument("--preset", default="field", help="scenario preset for the energy model (default %(default)s)")
     parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
                         help="override a scenario field, e.g. --set speed_mps=10 (repeatable)")
@@ -71,6 +73,13 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--recharge-s", type=non_negative_float, default=None, metavar="SECONDS",
                         help="battery swap: SECONDS of simulated time after landing and disarming, the battery "
                              "is full again (default: never)")
+    parser.add_argument("--gps-delay-s", type=float, default=40.0, metavar="SECONDS",
+                        help="simulated seconds after boot until the vehicle has a position estimate, as ArduCopter "
+                             "SITL's 'EKF3 IMU0 is using GPS' (about 41 s): no position, no home and arming refused "
+                             "in a position mode before; 0: a position from the start (default %(default)s)")
+    parser.add_argument("--disarm-delay-s", type=float, default=10.0, metavar="SECONDS",
+                        help="armed on the ground this many simulated seconds without taking off, the motors stop "
+                             "(ArduPilot DISARM_DELAY, PX4 COM_DISARM_PRFLT); 0: never (default %(default)s)")
     parser.add_argument("--log-level", default="INFO", choices=("DEBUG", "INFO", "WARNING", "ERROR"))
 
 
@@ -93,7 +102,8 @@ def run(args: argparse.Namespace) -> int:
             max_retries=args.retries, fence_margin_m=args.fence_margin,
             max_mission_items=args.max_mission_items,
             signing_key_file=args.signing_key, signing_timestamp_file=args.signing_timestamp_file,
-            state_file=args.state_file, recharge_s=args.recharge_s,
+            state_file=args.state_file, recharge_s=args.recharge_s, gps_delay_s=args.gps_delay_s,
+            disarm_delay_s=args.disarm_delay_s,
         )
         vehicle = Vehicle(config)
     except (ScenarioError, MissionError, VehicleError, SigningError) as exc:

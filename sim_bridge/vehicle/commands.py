@@ -1,43 +1,65 @@
-"""COMMAND_LONG / COMMAND_INT on the vehicle: what each command does and its MAV_RESULT."""
+"""COMMAND_LONG / COMMAND_INT on the vehicle: what each command does and its MAV_RESULT.
+
+The result codes and texts are each autopilot's. ArduPilot (checked on ArduCopter SITL
+V4.7.0-dev; ``ArduCopter/GCS_MAVLink_Copter.cpp``, ``libraries/GCS_MAVLink/GCS_Common.cpp``,
+``ArduCopter/mode.cpp``): a refused arm is MAV_RESULT_FAILED with one STATUSTEXT
+``Arm: <check>`` per failing check; a refused mode change is FAILED with
+``Mode change to AUTO failed: requires position``; MAV_CMD_MISSION_START with a first or last
+item is DENIED; DO_SET_MISSION_CURRENT out of range is DENIED; SET_MESSAGE_INTERVAL for a
+message it cannot send is DENIED; REQUEST_MESSAGE for one is FAILED. PX4 refuses arming and
+mode changes it cannot run with MAV_RESULT_TEMPORARILY_REJECTED.
+"""
 
 from __future__ import annotations
 
 import logging
 import math
 from dataclasses import dataclass, field
-from typing import Any, Callable
+from typing import Any, Callable, Hashable
 
 from pymavlink.dialects.v20 import common as mavlink
 
-from .flight import Flight
-from .modes import Mode, mode_from_command
+from .flight import Flight, Refusal
+from .modes import ARDUPILOT_NAMES, Mode, mode_from_command
 
 log = logging.getLogger(__name__)
 
+M = mavlink
 ARM_FORCE_MAGIC = 21196
 """param2 of MAV_CMD_COMPONENT_ARM_DISARM that forces disarming in the air."""
 
 
 @dataclass
 class CommandOutcome:
-    """The MAV_RESULT and the messages to send after the ACK (a requested message)."""
+    """The MAV_RESULT, STATUSTEXTs to broadcast (severity, text) and messages to send to the
+    requester before and after the ACK."""
 
     result: int
     reason: str = ""
+    texts: list[tuple[int, str]] = field(default_factory=list)
+    before: list[Any] = field(default_factory=list)
     follow_up: list[Any] = field(default_factory=list)
 
 
 class Commands:
     """Executes commands on a ``Flight``. ``message_for(id)`` builds a message that
-    MAV_CMD_REQUEST_MESSAGE may ask for (None if the vehicle does not have it)."""
+    MAV_CMD_REQUEST_MESSAGE may ask for (None if the vehicle does not have it now);
+    ``set_interval(peer, id, interval_us)`` changes a peer's stream; ``knows(id)`` says
+    whether the vehicle can send message ``id`` at all."""
 
     def __init__(self, flight: Flight, message_for: Callable[[int], Any | None],
-                 set_interval: Callable[[int, float], bool]) -> None:
+                 set_interval: Callable[[Hashable, int, float], bool], knows: Callable[[int], bool]) -> None:
         self.flight = flight
         self.message_for = message_for
         self.set_interval = set_interval
+        self.knows = knows
+        self._peer: Hashable = None
 
-    def execute(self, msg: Any) -> CommandOutcome:
+    @property
+    def ardupilot(self) -> bool:
+        return self.flight.flavour == "ardupilot"
+
+    def execute(self, msg: Any, peer: Hashable = None) -> CommandOutcome:
         """Run a COMMAND_LONG or COMMAND_INT; never raises for bad parameters."""
         command = int(msg.command)
         params = [msg.param1, msg.param2, msg.param3, msg.param4]
@@ -47,38 +69,51 @@ class Commands:
             params += [msg.param5, msg.param6, msg.param7]
         handler = getattr(self, f"_cmd_{command}", None)
         if handler is None:
-            return CommandOutcome(mavlink.MAV_RESULT_UNSUPPORTED, f"command {command} is not supported")
+            return CommandOutcome(M.MAV_RESULT_UNSUPPORTED, f"command {command} is not supported")
+        self._peer = peer
         try:
             return handler(params)
         except (ValueError, OverflowError) as exc:
-            return CommandOutcome(mavlink.MAV_RESULT_DENIED, f"bad parameters: {exc}")
+            return CommandOutcome(M.MAV_RESULT_DENIED, f"bad parameters: {exc}")
 
-    @staticmethod
-    def _outcome(reason: str | None) -> CommandOutcome:
-        if reason is None:
-            return CommandOutcome(mavlink.MAV_RESULT_ACCEPTED)
-        return CommandOutcome(mavlink.MAV_RESULT_DENIED, reason)
+    # --- refusals as each autopilot words them -------------------------------------------------
+    def _refused(self, refusal: Refusal | None, *, prefix: str = "", px4: int = M.MAV_RESULT_TEMPORARILY_REJECTED,
+                 ardupilot: int = M.MAV_RESULT_FAILED, severity: int = M.MAV_SEVERITY_CRITICAL) -> CommandOutcome:
+        if refusal is None:
+            return CommandOutcome(M.MAV_RESULT_ACCEPTED)
+        texts = [(M.MAV_SEVERITY_CRITICAL, note) for note in refusal.notes]
+        texts += [(severity, prefix + reason) for reason in refusal.reasons]
+        return CommandOutcome(ardupilot if self.ardupilot else px4, refusal.text, texts)
 
+    def _mode(self, mode: Mode, number: int | None = None) -> CommandOutcome:
+        refusal = self.flight.set_mode(mode)
+        if refusal is not None and self.ardupilot:
+            name = ARDUPILOT_NAMES.get(number, mode.value) if number is not None else _ap_name(mode)
+            return self._refused(refusal, prefix=f"Mode change to {name} failed: ", severity=M.MAV_SEVERITY_WARNING)
+        return self._refused(refusal)
+
+    # --- commands -------------------------------------------------------------------------
     def _cmd_400(self, p: list[float]) -> CommandOutcome:  # MAV_CMD_COMPONENT_ARM_DISARM
         if p[0] >= 0.5:
-            reason = self.flight.arm()
-            return self._outcome(reason) if reason is None else CommandOutcome(
-                mavlink.MAV_RESULT_TEMPORARILY_REJECTED, reason)
-        return self._outcome(self.flight.disarm(force=int(p[1]) == ARM_FORCE_MAGIC))
+            return self._refused(self.flight.arm(), prefix="Arm: ")
+        return self._refused(self.flight.disarm(force=int(p[1]) == ARM_FORCE_MAGIC), px4=M.MAV_RESULT_DENIED)
 
     def _cmd_176(self, p: list[float]) -> CommandOutcome:  # MAV_CMD_DO_SET_MODE
-        if not int(p[0]) & mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
-            return CommandOutcome(mavlink.MAV_RESULT_UNSUPPORTED, "only custom modes are supported")
+        if not int(p[0]) & M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
+            return CommandOutcome(M.MAV_RESULT_UNSUPPORTED, "only custom modes are supported")
         mode = mode_from_command(self.flight.flavour, p[1], p[2])
         if mode is None:
-            return CommandOutcome(mavlink.MAV_RESULT_DENIED, f"unknown mode {p[1]:.0f}/{p[2]:.0f}")
-        return self._outcome(self.flight.set_mode(mode))
+            return CommandOutcome(M.MAV_RESULT_FAILED if self.ardupilot else M.MAV_RESULT_DENIED,
+                                  f"unknown mode {p[1]:.0f}/{p[2]:.0f}")
+        return self._mode(mode, int(p[1]) if self.ardupilot else None)
 
     def _cmd_300(self, p: list[float]) -> CommandOutcome:  # MAV_CMD_MISSION_START
-        first = int(p[0])
-        if first > 0 and not self.flight.set_current(first):
-            return CommandOutcome(mavlink.MAV_RESULT_DENIED, f"no mission item {first}")
-        return self._outcome(self.flight.set_mode(Mode.AUTO))
+        refusal = self.flight.mission_start(int(p[0]), int(p[1]))
+        if refusal is not None and self.ardupilot and (int(p[0]) or int(p[1])):
+            return CommandOutcome(M.MAV_RESULT_DENIED, refusal.text)
+        if refusal is not None and self.ardupilot:
+            return self._refused(refusal, prefix="Mode change to AUTO failed: ", severity=M.MAV_SEVERITY_WARNING)
+        return self._refused(refusal, px4=M.MAV_RESULT_DENIED)
 
     def _cmd_22(self, p: list[float]) -> CommandOutcome:  # MAV_CMD_NAV_TAKEOFF
         alt = p[6]
@@ -86,41 +121,59 @@ class Commands:
             alt -= self.flight.origin.alt_m  # PX4 takes the altitude above mean sea level
         elif not math.isfinite(alt):
             alt = 2.5  # PX4's MIS_TAKEOFF_ALT default when no altitude is given
-        return self._outcome(self.flight.takeoff(alt))
+        return self._refused(self.flight.takeoff(alt), px4=M.MAV_RESULT_DENIED)
 
     def _cmd_20(self, p: list[float]) -> CommandOutcome:  # MAV_CMD_NAV_RETURN_TO_LAUNCH
-        return self._outcome(self.flight.set_mode(Mode.RTL))
+        return self._mode(Mode.RTL)
 
     def _cmd_21(self, p: list[float]) -> CommandOutcome:  # MAV_CMD_NAV_LAND
-        return self._outcome(self.flight.set_mode(Mode.LAND))
+        return self._mode(Mode.LAND)
 
     def _cmd_17(self, p: list[float]) -> CommandOutcome:  # MAV_CMD_NAV_LOITER_UNLIM
-        return self._outcome(self.flight.set_mode(Mode.HOLD))
+        return self._mode(Mode.HOLD)
 
     def _cmd_252(self, p: list[float]) -> CommandOutcome:  # MAV_CMD_DO_PAUSE_CONTINUE
-        return self._outcome(self.flight.set_mode(Mode.AUTO if p[0] >= 0.5 else Mode.HOLD))
+        if int(p[0]) not in (0, 1):
+            return CommandOutcome(M.MAV_RESULT_DENIED, "param1 must be 0 (pause) or 1 (continue)")
+        return self._refused(self.flight.pause(int(p[0]) == 0), severity=M.MAV_SEVERITY_INFO)
 
     def _cmd_178(self, p: list[float]) -> CommandOutcome:  # MAV_CMD_DO_CHANGE_SPEED
-        return self._outcome(self.flight.set_speed(p[1]))
+        refusal = self.flight.set_speed(p[1])
+        return self._refused(refusal, ardupilot=M.MAV_RESULT_DENIED, px4=M.MAV_RESULT_DENIED)
 
     def _cmd_224(self, p: list[float]) -> CommandOutcome:  # MAV_CMD_DO_SET_MISSION_CURRENT
         if self.flight.set_current(int(p[0])):
-            return CommandOutcome(mavlink.MAV_RESULT_ACCEPTED)
-        return CommandOutcome(mavlink.MAV_RESULT_DENIED, f"no mission item {int(p[0])}")
+            return CommandOutcome(M.MAV_RESULT_ACCEPTED)
+        return CommandOutcome(M.MAV_RESULT_DENIED, f"no mission item {int(p[0])}")
 
     def _cmd_512(self, p: list[float]) -> CommandOutcome:  # MAV_CMD_REQUEST_MESSAGE
-        message = self.message_for(int(p[0]))
-        if message is None:
-            return CommandOutcome(mavlink.MAV_RESULT_UNSUPPORTED, f"message {int(p[0])} is not available")
-        return CommandOutcome(mavlink.MAV_RESULT_ACCEPTED, follow_up=[message])
+        msg_id = int(p[0])
+        if not self.knows(msg_id):
+            return CommandOutcome(M.MAV_RESULT_FAILED if self.ardupilot else M.MAV_RESULT_UNSUPPORTED,
+                                  f"message {msg_id} is not available")
+        message = self.message_for(msg_id)
+        # A message the vehicle has no data for yet (home before it is set) is accepted and
+        # not sent, as ArduPilot does.
+        return CommandOutcome(M.MAV_RESULT_ACCEPTED, follow_up=[message] if message is not None else [])
 
     def _cmd_520(self, p: list[float]) -> CommandOutcome:  # MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES
-        return self._cmd_512([float(mavlink.MAVLINK_MSG_ID_AUTOPILOT_VERSION)])
+        return self._cmd_512([float(M.MAVLINK_MSG_ID_AUTOPILOT_VERSION)])
 
     def _cmd_410(self, p: list[float]) -> CommandOutcome:  # MAV_CMD_GET_HOME_POSITION
-        return self._cmd_512([float(mavlink.MAVLINK_MSG_ID_HOME_POSITION)])
+        home = self.message_for(M.MAVLINK_MSG_ID_HOME_POSITION)
+        before = [home] if home is not None else []
+        if self.ardupilot and home is not None:
+            # GCS_MAVLINK::handle_command_get_home_position sends home and origin, then the ACK.
+            origin = self.message_for(M.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN)
+            before += [origin] if origin is not None else []
+        return CommandOutcome(M.MAV_RESULT_ACCEPTED, before=before)
 
     def _cmd_511(self, p: list[float]) -> CommandOutcome:  # MAV_CMD_SET_MESSAGE_INTERVAL
-        if self.set_interval(int(p[0]), p[1]):
-            return CommandOutcome(mavlink.MAV_RESULT_ACCEPTED)
-        return CommandOutcome(mavlink.MAV_RESULT_UNSUPPORTED, f"message {int(p[0])} is not streamed")
+        if self.set_interval(self._peer, int(p[0]), p[1]):
+            return CommandOutcome(M.MAV_RESULT_ACCEPTED)
+        return CommandOutcome(M.MAV_RESULT_DENIED, f"message {int(p[0])} is not streamed")
+
+
+def _ap_name(mode: Mode) -> str:
+    return {Mode.MANUAL: "STABILIZE", Mode.HOLD: "LOITER", Mode.GUIDED: "GUIDED", Mode.TAKEOFF: "GUIDED",
+            Mode.AUTO: "AUTO", Mode.RTL: "RTL", Mode.LAND: "LAND"}[mode]

@@ -43,6 +43,11 @@ ARDUPILOT_MODES: dict[int, Mode] = {
     16: Mode.HOLD,  # POSHOLD
     17: Mode.HOLD,  # BRAKE
 }
+ARDUPILOT_NAMES: dict[int, str] = {
+    0: "STABILIZE", 2: "ALT_HOLD", 3: "AUTO", 4: "GUIDED", 5: "LOITER", 6: "RTL", 9: "LAND", 16: "POSHOLD",
+    17: "BRAKE",
+}
+"""Copter's mode names (Mode::name()), as its STATUSTEXTs spell them."""
 ARDUPILOT_NUMBERS: dict[Mode, int] = {
     Mode.MANUAL: 0, Mode.HOLD: 5, Mode.GUIDED: 4, Mode.TAKEOFF: 4, Mode.AUTO: 3,
     Mode.RTL: 6, Mode.LAND: 9,

@@ -11,46 +11,49 @@ import logging
 import math
 import threading
 import time
-from pathlib import Path
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any, Callable, Hashable
 
 from pymavlink.dialects.v20 import common as mavlink
 
 from planner_service.model import Scenario
-from protocol.geodesy import GeoOrigin, local_to_global
 from protocol.errors import SigningError
+from protocol.geodesy import GeoOrigin, local_to_global
 from protocol.mission import GLOBAL_FRAMES, NAV_POSITION_COMMANDS, MissionItem, f32, item_local, mission_digest
 from protocol.signing import Signer, TimestampStore, default_timestamp_path, load_key
 
 from . import telemetry as tm
 from .commands import Commands
 from .errors import VehicleError
-from .flight import Flight, FlightEvent
+from .estimator import DEFAULT_GPS_DELAY_S
+from .events import (
+    Armed, BatteryLow, BatterySwapped, CommandStarted, CurrentChanged, Disarmed, FlightEvent, GpsFix, HomeSet,
+    Landed, MissionDone, MissionRestarted, MissionRestartFailed, ModeChanged, OriginSet, Reached, UsingGps,
+)
+from .flight import Flight, MissionState, Refusal
 from .link import Link, Received
-from .mission_store import MissionStore
+from .mission_store import MissionStore, StoreHooks
+from .modes import ARDUPILOT_NAMES, mode_from_custom, mode_name
+from .params import ParamTable, vehicle_params
 from .state_file import SAVE_INTERVAL_S, load_state, save_state
-from .modes import mode_from_custom, mode_name
+from .stored_items import Problem, ardupilot_problem, ardupilot_stored, px4_problem
+from .streams import EKF_STATUS_REPORT_ID, PeerStreams
 
 log = logging.getLogger(__name__)
 
 M = mavlink
-DEFAULT_INTERVALS_S: dict[int, float] = {
-    M.MAVLINK_MSG_ID_HEARTBEAT: 1.0,
-    M.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: 0.25,
-    M.MAVLINK_MSG_ID_LOCAL_POSITION_NED: 0.25,
-    M.MAVLINK_MSG_ID_ATTITUDE: 0.25,
-    M.MAVLINK_MSG_ID_SYS_STATUS: 0.5,
-    M.MAVLINK_MSG_ID_BATTERY_STATUS: 0.5,
-    M.MAVLINK_MSG_ID_EXTENDED_SYS_STATE: 0.5,
-    M.MAVLINK_MSG_ID_MISSION_CURRENT: 0.5,
-    M.MAVLINK_MSG_ID_GPS_RAW_INT: 1.0,
-    M.MAVLINK_MSG_ID_HOME_POSITION: 5.0,
-}
-MIN_INTERVAL_S = 0.02
 MAX_STEP_TICKS = 5
 SIGNING_TICK_S = 1.0
 """How often the signing timestamp is brought up to the clock (and its reservation stored)."""
+TIMESYNC_INTERVAL_S = 10.0
+"""ArduPilot sends TIMESYNC (tc1 0) unasked every 10 s (seen on SITL)."""
+REACHED_REPEATS = 10
+"""PX4 sends MISSION_ITEM_REACHED again at 1 Hz, ten times (MavlinkMissionManager::send)."""
+PREARM_REPORT_S = 30.0
+"""ArduPilot reports failing pre-arm checks unasked every 30 s while disarmed (``PreArm: Need
+Position Estimate`` on SITL); wall-clock here, as the telemetry rates, so that a high
+speed-up does not flood the link and the logs."""
 
 
 @dataclass(frozen=True)
@@ -82,6 +85,12 @@ class VehicleConfig:
     recharge_s: float | None = None
     """Battery swap: simulated seconds on the ground, disarmed, until the battery is full
     again; None: never (one sortie's battery)."""
+    gps_delay_s: float = DEFAULT_GPS_DELAY_S
+    """Simulated seconds after boot until the estimator navigates with GPS (no position,
+    no arming in a position mode before; estimator.py)."""
+    disarm_delay_s: float = 10.0
+    """Armed on the ground this many simulated seconds without taking off, the motors stop
+    (ArduPilot's DISARM_DELAY, PX4's COM_DISARM_PRFLT); 0: never."""
 
     def __post_init__(self) -> None:
         if self.flavour not in ("ardupilot", "px4"):
@@ -96,6 +105,10 @@ class VehicleConfig:
             raise VehicleError("max_mission_items", f"must lie in 1..65535, got {self.max_mission_items}")
         if self.recharge_s is not None and not (math.isfinite(self.recharge_s) and self.recharge_s >= 0):
             raise VehicleError("recharge_s", f"must be a finite number of seconds >= 0, got {self.recharge_s}")
+        for name in ("gps_delay_s", "disarm_delay_s"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0):
+                raise VehicleError(name, f"must be a finite number of seconds >= 0, got {value}")
 
 
 class Vehicle:
@@ -104,7 +117,9 @@ class Vehicle:
     def __init__(self, config: VehicleConfig, clock: Callable[[], float] = time.monotonic) -> None:
         self.config = config
         self.clock = clock
-        self.flight = Flight(config.scenario, config.origin, config.flavour, recharge_s=config.recharge_s)
+        self.ardupilot = config.flavour == "ardupilot"
+        self.flight = Flight(config.scenario, config.origin, config.flavour, recharge_s=config.recharge_s,
+                             gps_delay_s=config.gps_delay_s, disarm_delay_s=config.disarm_delay_s)
         self.signer = self._signer(config)
         try:
             self.link = Link(config.url, config.system_id, config.component_id, clock, self.signer)
@@ -112,14 +127,22 @@ class Vehicle:
             if self.signer is not None:
                 self.signer.close()
             raise
+        hooks = StoreHooks(
+            problem=self._item_problem, stored=ardupilot_stored if self.ardupilot else (lambda item: item),
+            on_change=self.flight.mission_changed, on_commit=self.flight.replace_mission,
+            on_accepted=self._on_accepted, on_set_current=self._on_set_current, current_flag=self._current_flag,
+            home_item=self._home_item if self.ardupilot else (lambda: None), can_clear=self._can_clear,
+            text=lambda text, peer: self._send_to(tm.statustext(M.MAV_SEVERITY_INFO, text), peer),
+        )
         self.store = MissionStore(
-            self._send_to, clock, check=self._check_mission, on_commit=self._on_commit,
-            on_set_current=self._on_set_current, item_timeout_s=config.item_timeout_s,
+            self._send_to, clock, flavour=config.flavour, hooks=hooks, item_timeout_s=config.item_timeout_s,
             max_retries=config.max_retries, capacity=config.max_mission_items,
         )
-        self.commands = Commands(self.flight, self._message_for, self._set_interval)
-        self.intervals = dict(DEFAULT_INTERVALS_S)
-        self._due: dict[int, float] = {}
+        self.streams: dict[Hashable, PeerStreams] = {}
+        self.commands = Commands(self.flight, self._message_for, self._set_interval, self._knows)
+        self.params: ParamTable = vehicle_params(
+            config.flavour, config.system_id, lambda: self.flight.speed_mps, self.flight.climb_mps,
+            self.flight.rtl_min_alt_m, config.disarm_delay_s, lambda: len(self.store.items))
         self._last_tick = clock()
         self._power_w = 0.0
         self._state_path = Path(config.state_file) if config.state_file else None
@@ -128,6 +151,8 @@ class Vehicle:
             snap = load_state(self._state_path)
             if snap is not None:
                 self.flight.resume(snap)
+                if self.flight.home_set:
+                    self.store.home_known()
                 f = self.flight
                 log.info("restarted from %s: %s at (%.0f, %.0f, %.0f) m, battery %.1f%%, mode %s, mission lost",
                          self._state_path, "airborne" if not f.landed else "on the ground", *f.pos,
@@ -135,6 +160,10 @@ class Vehicle:
         self._last_mode = self.flight.mode
         self._last_armed = self.flight.armed
         self._signing_due = clock() + SIGNING_TICK_S
+        self._timesync_due = clock() + TIMESYNC_INTERVAL_S
+        self._reached_repeat: tuple[int, int, float] | None = None
+        self._prearm_due = clock() + PREARM_REPORT_S
+        """PX4: (seq, repeats left, next wall time) of MISSION_ITEM_REACHED."""
 
     @staticmethod
     def _signer(config: VehicleConfig) -> Signer | None:
@@ -148,8 +177,9 @@ class Vehicle:
     # --- loop ------------------------------------------------------------------------------
     def run(self, stop: threading.Event) -> None:
         """Serve until ``stop`` is set."""
-        log.info("vehicle (%s) listening on %s, speed-up %g%s", self.config.flavour, self.config.url,
-                 self.config.speedup, ", signing enforced" if self.signer is not None else "")
+        log.info("vehicle (%s) listening on %s, speed-up %g, position after %g s%s", self.config.flavour,
+                 self.config.url, self.config.speedup, self.config.gps_delay_s,
+                 ", signing enforced" if self.signer is not None else "")
         try:
             while not stop.is_set():
                 wait = self._last_tick + self.config.tick_s - self.clock()
@@ -189,14 +219,11 @@ class Vehicle:
         if dt_sim > 0:
             self._power_w = (before - self.flight.energy_j) / dt_sim
         if was_landed and not self.flight.landed:
-            # Report the takeoff at once, as the landing is: at a high speed-up a short
-            # flight can begin and end between two periodic reports.
-            self._send_to(tm.extended_sys_state(self.flight), None)
-        for event in events:
-            self._report(event)
-        if self.flight.mode is not self._last_mode or self.flight.armed != self._last_armed:
-            self._last_mode, self._last_armed = self.flight.mode, self.flight.armed
-            self._send_to(tm.heartbeat(self.flight), None)
+            # Report the takeoff at once, as the landing is, to the peers that stream it:
+            # rates are wall-clock here, and at a high speed-up a short flight could begin
+            # and end between two periodic reports.
+            self._send_streamed(M.MAVLINK_MSG_ID_EXTENDED_SYS_STATE, tm.extended_sys_state(self.flight))
+        self._report_all(events)
         self.store.tick()
         if self.signer is not None and now >= self._signing_due:
             self._signing_due = now + SIGNING_TICK_S
@@ -205,6 +232,7 @@ class Vehicle:
             except SigningError as err:  # a full disk must not stop the telemetry below
                 log.error("signing timestamp not stored (a restart could reuse timestamps): %s", err)
         self._stream(now)
+        self._periodic(now)
         self._save_state()
 
     def _save_state(self, force: bool = False) -> None:
@@ -215,36 +243,144 @@ class Vehicle:
         self._saved_at = now
         save_state(self._state_path, self.flight.snapshot())
 
+    # --- streams ------------------------------------------------------------------------------
+    def _peer_streams(self, peer: Hashable) -> PeerStreams:
+        table = self.streams.get(peer)
+        if table is None:
+            table = self.streams[peer] = PeerStreams(self.config.flavour)
+        return table
+
     def _stream(self, now: float) -> None:
-        for msg_id, interval in self.intervals.items():
-            if interval <= 0 or now < self._due.get(msg_id, 0.0):
-                continue
-            self._due[msg_id] = now + interval
-            message = self._message_for(msg_id)
-            if message is not None:
-                self._send_to(message, None)
+        peers = self.link.peers
+        for gone in set(self.streams) - set(peers):
+            del self.streams[gone]
+        built: dict[int, Any] = {}
+        for peer in peers:
+            for msg_id in self._peer_streams(peer).due_now(now):
+                if msg_id not in built:
+                    built[msg_id] = self._message_for(msg_id)
+                if built[msg_id] is not None:
+                    self._send_to(built[msg_id], peer)
+
+    def _send_streamed(self, msg_id: int, message: Any) -> None:
+        """An extra report of a streamed message, to the peers that stream it."""
+        for peer in self.link.peers:
+            if self._peer_streams(peer).enabled(msg_id):
+                self._send_to(message, peer)
+
+    def _periodic(self, now: float) -> None:
+        if self.ardupilot and now >= self._timesync_due:
+            self._timesync_due = now + TIMESYNC_INTERVAL_S
+            self._send_to(M.MAVLink_timesync_message(0, time.monotonic_ns()), None)
+        f = self.flight
+        if self.ardupilot and now >= self._prearm_due:
+            self._prearm_due = now + PREARM_REPORT_S
+            if not f.armed:
+                for reason in f.arm_checks():
+                    self._text(M.MAV_SEVERITY_CRITICAL, f"PreArm: {reason}")
+        if self._reached_repeat is not None and now >= self._reached_repeat[2]:
+            seq, left, _ = self._reached_repeat
+            self._send_to(M.MAVLink_mission_item_reached_message(seq), None)
+            self._reached_repeat = (seq, left - 1, now + 1.0) if left > 1 else None
+
+    def _set_interval(self, peer: Hashable, msg_id: int, interval_us: float) -> bool:
+        if peer is None:
+            return False
+        return self._peer_streams(peer).set_interval(msg_id, interval_us)
+
+    def _knows(self, msg_id: int) -> bool:
+        return msg_id in PeerStreams(self.config.flavour).streamable
+
+    # --- events -------------------------------------------------------------------------------
+    def _report_all(self, events: list[FlightEvent]) -> None:
+        for event in events:
+            self._report(event)
+        if self.flight.mode is not self._last_mode or self.flight.armed != self._last_armed:
+            self._last_mode, self._last_armed = self.flight.mode, self.flight.armed
+            self._send_to(tm.heartbeat(self.flight), None)
+
+    def _text(self, severity: int, text: str, peer: Hashable = None) -> None:
+        self._send_to(tm.statustext(severity, text), peer)
 
     def _report(self, event: FlightEvent) -> None:
-        if event.kind == "reached":
-            log.info("mission item %d reached", event.seq)
-            self._send_to(mavlink.MAVLink_mission_item_reached_message(event.seq), None)
-        elif event.kind == "current":
-            self._send_to(tm.mission_current(self.flight, event.seq, M.MISSION_STATE_ACTIVE), None)
-        elif event.kind == "mission_done":
-            self._send_to(tm.mission_current(self.flight, event.seq, M.MISSION_STATE_COMPLETE), None)
-            self._send_to(tm.statustext(M.MAV_SEVERITY_INFO, "Mission complete"), None)
-        elif event.kind == "battery_swapped":
-            log.info("%s at t=%.1f s (sim): battery %.1f%%", event.text, self.flight.time_s,
-                     100 * self.flight.battery_fraction)
-            self._send_to(tm.statustext(M.MAV_SEVERITY_INFO, "Battery swapped: full"), None)
-            self._send_to(tm.battery_status(self.flight, 0.0), None)
-        elif event.kind == "battery_low":
-            log.warning("%s", event.text)
-            self._send_to(tm.statustext(M.MAV_SEVERITY_CRITICAL, event.text), None)
-        elif event.kind in ("landed", "disarmed"):
-            log.info("%s at t=%.1f s (sim), battery %.1f%%", event.kind, self.flight.time_s,
-                     100 * self.flight.battery_fraction)
-            self._send_to(tm.extended_sys_state(self.flight), None)
+        f = self.flight
+        match event:
+            case Reached(seq=seq, command=command):
+                log.info("mission item %d reached", seq)
+                self._send_to(M.MAVLink_mission_item_reached_message(seq), None)
+                if self.ardupilot and command == M.MAV_CMD_NAV_WAYPOINT:  # verify_nav_wp's text
+                    self._text(M.MAV_SEVERITY_INFO, f"Reached command #{seq}")
+                if not self.ardupilot:
+                    self._reached_repeat = (seq, REACHED_REPEATS, self.clock() + 1.0)
+            case CurrentChanged(seq=seq):
+                self._mission_current(tm.mission_current(f, seq))
+            case MissionDone(seq=seq):
+                log.info("mission complete at item %d", seq)
+                self._mission_current(tm.mission_current(f, seq, M.MISSION_STATE_COMPLETE))
+                if not self.ardupilot:
+                    self._text(M.MAV_SEVERITY_INFO, "Mission finished, loitering")
+            case CommandStarted(seq=seq, name=name):
+                if self.ardupilot:
+                    self._text(M.MAV_SEVERITY_INFO, f"Mission: {seq} {name}")
+            case MissionRestarted(seq=seq):
+                log.info("mission changed in flight: command %d restarted", seq)
+                if self.ardupilot:
+                    self._text(M.MAV_SEVERITY_CRITICAL, "Auto mission changed, restarted command")
+            case MissionRestartFailed(seq=seq):
+                log.info("mission changed in flight: item %d is gone, the command in progress goes on", seq)
+                self._text(M.MAV_SEVERITY_CRITICAL, "Auto mission changed but failed to restart command")
+            case ModeChanged():
+                log.info("mode %s", mode_name(self.config.flavour, f.mode))
+            case Landed():
+                log.info("landed at t=%.1f s (sim), battery %.1f%%", f.time_s, 100 * f.battery_fraction)
+                self._send_streamed(M.MAVLINK_MSG_ID_EXTENDED_SYS_STATE, tm.extended_sys_state(f))
+            case Armed():
+                log.info("armed at t=%.1f s (sim)", f.time_s)
+                if self.ardupilot:
+                    self._text(M.MAV_SEVERITY_INFO, "Arming motors")
+            case Disarmed(why=why):
+                log.info("disarmed (%s) at t=%.1f s (sim), battery %.1f%%", why, f.time_s, 100 * f.battery_fraction)
+                self._send_streamed(M.MAVLINK_MSG_ID_EXTENDED_SYS_STATE, tm.extended_sys_state(f))
+                if self.ardupilot:
+                    self._text(M.MAV_SEVERITY_INFO, "Disarming motors")
+            case BatteryLow(text=text):
+                log.warning("%s", text)
+                self._text(M.MAV_SEVERITY_CRITICAL, text)
+            case BatterySwapped(text=text):
+                log.info("%s at t=%.1f s (sim): battery %.1f%%", text, f.time_s, 100 * f.battery_fraction)
+                self._text(M.MAV_SEVERITY_INFO, "Battery swapped: full")
+                self._send_to(tm.battery_status(f, 0.0), None)
+            case GpsFix():
+                if self.ardupilot:
+                    self._text(M.MAV_SEVERITY_INFO, "GPS 1: detected u-blox")
+            case OriginSet():
+                log.info("estimator origin set at t=%.1f s since boot", f.since_boot_s)
+                if self.ardupilot:
+                    self._text(M.MAV_SEVERITY_INFO, "EKF3 IMU0 origin set")
+                    self._text(M.MAV_SEVERITY_INFO, f"Field Elevation Set: {self.config.origin.alt_m:.0f}m")
+            case UsingGps():
+                log.info("position valid at t=%.1f s since boot", f.since_boot_s)
+                if self.ardupilot:
+                    self._text(M.MAV_SEVERITY_INFO, "EKF3 IMU0 is using GPS")
+                    self._text(M.MAV_SEVERITY_INFO, "EKF3 IMU1 is using GPS")
+            case HomeSet():
+                self.store.home_known()
+                if self.ardupilot:
+                    # Sent once, unasked, to every link (seen on SITL at origin and at arming).
+                    for msg_id in (M.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN, M.MAVLINK_MSG_ID_HOME_POSITION):
+                        message = self._message_for(msg_id)
+                        if message is not None:
+                            self._send_to(message, None)
+            case _:
+                log.error("unhandled flight event %r", event)
+
+    def _mission_current(self, message: Any) -> None:
+        """MISSION_CURRENT at an event: PX4 sends it to every link; for ArduPilot an extra
+        report to the peers that stream it (rates here are wall-clock, see tick)."""
+        if self.ardupilot:
+            self._send_streamed(M.MAVLINK_MSG_ID_MISSION_CURRENT, message)
+        else:
+            self._send_to(message, None)
 
     # --- input -----------------------------------------------------------------------------
     def handle(self, received: Received) -> None:
@@ -252,39 +388,66 @@ class Vehicle:
         if received.new_peer:
             # Greet a new peer at once: MAVSDK then sees the vehicle in milliseconds.
             log.info("new peer %s (system %d)", peer, msg.get_srcSystem())
+            self._peer_streams(peer)
             self._send_to(tm.heartbeat(self.flight), peer)
         target = getattr(msg, "target_system", None)
         if target not in (None, 0, self.config.system_id):
             return
-        if self.store.handle(msg, peer):
-            return
+        if not self.store.handle(msg, peer):
+            self._handle_other(msg, peer)
+        self._report_all(self.flight.drain())
+
+    def _handle_other(self, msg: Any, peer: Hashable) -> None:
         kind = msg.get_type()
         if kind in ("COMMAND_LONG", "COMMAND_INT"):
             self._command(msg, peer)
         elif kind == "SET_MODE":
             mode = mode_from_custom(self.config.flavour, msg.custom_mode)
             if mode is not None:
-                self.flight.set_mode(mode)
+                refusal = self.flight.set_mode(mode)
+                if refusal is not None and self.ardupilot:
+                    name = ARDUPILOT_NAMES.get(int(msg.custom_mode), mode.value)
+                    self._refusal_texts(refusal, f"Mode change to {name} failed: ", M.MAV_SEVERITY_WARNING)
         elif kind == "TIMESYNC" and msg.tc1 == 0:
-            self._send_to(mavlink.MAVLink_timesync_message(time.monotonic_ns(), msg.ts1), peer)
+            self._send_to(M.MAVLink_timesync_message(time.monotonic_ns(), msg.ts1), peer)
+        elif kind == "REQUEST_DATA_STREAM":
+            self._peer_streams(peer).request_data_stream(int(msg.req_stream_id), float(msg.req_message_rate),
+                                                         bool(msg.start_stop))
         elif kind == "PARAM_REQUEST_LIST":
-            # No parameters are simulated; say so rather than leave the requester waiting.
-            self._send_to(mavlink.MAVLink_param_value_message(b"SYSID_THISMAV", float(self.config.system_id),
-                                                              M.MAV_PARAM_TYPE_INT32, 1, 0), peer)
+            for message in self.params.all():
+                self._send_to(message, peer)
+        elif kind == "PARAM_REQUEST_READ":
+            name = msg.param_id.decode("ascii", "replace") if isinstance(msg.param_id, bytes) else str(msg.param_id)
+            answer = self.params.read(name.rstrip("\x00"), int(msg.param_index))
+            if answer is not None:  # an unknown name gets no answer, as on ArduPilot
+                self._send_to(answer, peer)
+        elif kind == "PARAM_SET":
+            name = msg.param_id.decode("ascii", "replace") if isinstance(msg.param_id, bytes) else str(msg.param_id)
+            index = self.params.index_of(name.rstrip("\x00"))
+            if index is not None:  # read-only: the value kept is the answer
+                self._send_to(self.params.message(index), None)
+
+    def _refusal_texts(self, refusal: Refusal, prefix: str, severity: int) -> None:
+        for note in refusal.notes:
+            self._text(M.MAV_SEVERITY_CRITICAL, note)
+        for reason in refusal.reasons:
+            self._text(severity, prefix + reason)
 
     def _command(self, msg: Any, peer: Hashable) -> None:
-        outcome = self.commands.execute(msg)
+        outcome = self.commands.execute(msg, peer)
         if outcome.result != M.MAV_RESULT_ACCEPTED:
             log.info("command %d refused (%d): %s", msg.command, outcome.result, outcome.reason)
         else:
             log.info("command %d accepted; mode %s, armed %s", msg.command,
                      mode_name(self.config.flavour, self.flight.mode), self.flight.armed)
-        self._send_to(mavlink.MAVLink_command_ack_message(
+        for before in outcome.before:
+            self._send_to(before, peer)
+        self._send_to(M.MAVLink_command_ack_message(
             msg.command, outcome.result, 0, 0, msg.get_srcSystem(), msg.get_srcComponent()), peer)
         for follow_up in outcome.follow_up:
             self._send_to(follow_up, peer)
-        if outcome.result == M.MAV_RESULT_ACCEPTED:
-            self._send_to(tm.heartbeat(self.flight), None)
+        for severity, text in outcome.texts:
+            self._text(severity, text)
 
     # --- hooks ------------------------------------------------------------------------------
     def _send_to(self, message: Any, peer: Hashable | None) -> None:
@@ -303,62 +466,70 @@ class Vehicle:
             M.MAVLINK_MSG_ID_MISSION_CURRENT: lambda: tm.mission_current(f),
             M.MAVLINK_MSG_ID_GPS_RAW_INT: lambda: tm.gps_raw_int(f),
             M.MAVLINK_MSG_ID_HOME_POSITION: lambda: tm.home_position(f),
+            M.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN: lambda: tm.gps_global_origin(f),
             M.MAVLINK_MSG_ID_AUTOPILOT_VERSION: lambda: tm.autopilot_version(f, self.config.system_id),
+            M.MAVLINK_MSG_ID_VFR_HUD: lambda: tm.vfr_hud(f, 0 if f.landed else 50),
+            M.MAVLINK_MSG_ID_SYSTEM_TIME: lambda: tm.system_time(f, time.time()),
         }
+        if self.ardupilot:
+            builders[EKF_STATUS_REPORT_ID] = lambda: tm.ekf_status_report(f)
         builder = builders.get(msg_id)
         return builder() if builder else None
 
-    def _set_interval(self, msg_id: int, interval_us: float) -> bool:
-        if msg_id not in DEFAULT_INTERVALS_S:
-            return False
-        if interval_us < 0:
-            self.intervals[msg_id] = 0.0
-        elif interval_us == 0:
-            self.intervals[msg_id] = DEFAULT_INTERVALS_S[msg_id]
-        else:
-            self.intervals[msg_id] = max(MIN_INTERVAL_S, interval_us / 1e6)
-        self._due.pop(msg_id, None)
-        return True
-
-    def _on_commit(self, items: list[MissionItem]) -> list[MissionItem]:
+    def _on_accepted(self, items: list[MissionItem]) -> None:
         log.info("mission of %d items accepted (digest %s)", len(items), mission_digest(items, self.config.flavour))
-        if self.config.flavour == "ardupilot" and items:
-            # ArduPilot keeps home in item 0 whatever was uploaded there (a download
-            # returns home): the pitfall the flavour exists to reproduce.
-            items[0] = self._home_item(items[0])
-        self.flight.set_mission(items)
-        self._send_to(tm.mission_current(self.flight), None)
-        return items
 
-    def _home_item(self, uploaded: MissionItem) -> MissionItem:
+    def _home_item(self) -> MissionItem:
+        """ArduPilot's item 0 as read back: home in MAV_FRAME_GLOBAL (zeros before home)."""
+        if not self.flight.home_set:
+            return MissionItem(seq=0, frame=M.MAV_FRAME_GLOBAL, command=M.MAV_CMD_NAV_WAYPOINT)
         lat, lon, alt = local_to_global(self.config.origin, *self.flight.home)
-        return MissionItem(
-            seq=0, frame=M.MAV_FRAME_GLOBAL, command=M.MAV_CMD_NAV_WAYPOINT, current=uploaded.current,
-            x=int(round(lat * 1e7)), y=int(round(lon * 1e7)), z=f32(alt),
-        )
+        return MissionItem(seq=0, frame=M.MAV_FRAME_GLOBAL, command=M.MAV_CMD_NAV_WAYPOINT,
+                           x=int(round(lat * 1e7)), y=int(round(lon * 1e7)), z=f32(alt))
 
-    def _on_set_current(self, seq: int) -> bool:
+    def _current_flag(self, seq: int) -> int:
+        if self.ardupilot:
+            # MissionItemProtocol_Waypoints::get_item compares the item's command id with
+            # the current index (sic), so the flag is 1 only by coincidence; kept as is.
+            items = self.store.items
+            return int(0 <= seq < len(items) and items[seq].command == self.flight.current)
+        return int(seq == self.flight.current)
+
+    def _can_clear(self) -> bool:
+        return self.flight.state is not MissionState.RUNNING
+
+    def _on_set_current(self, seq: int, peer: Hashable) -> bool:
         ok = self.flight.set_current(seq)
-        if ok:
-            self._send_to(tm.mission_current(self.flight), None)
+        log.info("MISSION_SET_CURRENT %d %s: current %d, mission %s", seq, "accepted" if ok else "refused",
+                 self.flight.current, self.flight.state.value)
+        if ok and self.ardupilot:
+            # GCS_MAVLINK::handle_mission_set_current echoes the requested seq to the sender.
+            self._send_to(tm.mission_current(self.flight, seq), peer)
         return ok
 
-    def _check_mission(self, items: list[MissionItem]) -> tuple[int, str] | None:
-        """The geofence: the scenario's area grown by ``fence_margin_m``, altitude limit."""
+    def _item_problem(self, item: MissionItem) -> Problem | None:
+        problem = ardupilot_problem(item) if self.ardupilot else px4_problem(item)
+        if problem is not None:
+            return problem
+        if self.ardupilot and item.seq == 0:
+            return None  # item 0 is home: never flown
+        return self._fence_problem(item)
+
+    def _fence_problem(self, item: MissionItem) -> Problem | None:
+        """The stub's geofence: the scenario's area grown by ``fence_margin_m``, and the
+        altitude limit (a stand-in for the autopilot's fence, refused per item)."""
         side = self.config.scenario.area_side_m
         margin = self.config.fence_margin_m
-        first = 1 if self.config.flavour == "ardupilot" else 0
-        for item in items[first:]:
-            positional = item.command in NAV_POSITION_COMMANDS or item.command == M.MAV_CMD_NAV_LOITER_TIME
-            if not positional or item.frame not in GLOBAL_FRAMES:
-                continue
-            if item.command == M.MAV_CMD_NAV_LAND and item.x == 0 and item.y == 0:
-                continue  # land where it is
-            x, y, z = item_local(item, self.config.origin)
-            if not -margin <= x <= side + margin:
-                return M.MAV_MISSION_INVALID_PARAM5_X, f"item {item.seq}: x {x:.0f} m outside the geofence"
-            if not -margin <= y <= side + margin:
-                return M.MAV_MISSION_INVALID_PARAM6_Y, f"item {item.seq}: y {y:.0f} m outside the geofence"
-            if not 0.0 <= z <= self.config.max_altitude_m:
-                return M.MAV_MISSION_INVALID_PARAM7, f"item {item.seq}: altitude {z:.0f} m out of limits"
+        positional = item.command in NAV_POSITION_COMMANDS or item.command == M.MAV_CMD_NAV_LOITER_TIME
+        if not positional or item.frame not in GLOBAL_FRAMES:
+            return None
+        if item.command == M.MAV_CMD_NAV_LAND and item.x == 0 and item.y == 0:
+            return None  # land where it is
+        x, y, z = item_local(item, self.config.origin)
+        if not -margin <= x <= side + margin:
+            return M.MAV_MISSION_INVALID_PARAM5_X, f"item {item.seq}: x {x:.0f} m outside the geofence"
+        if not -margin <= y <= side + margin:
+            return M.MAV_MISSION_INVALID_PARAM6_Y, f"item {item.seq}: y {y:.0f} m outside the geofence"
+        if not 0.0 <= z <= self.config.max_altitude_m:
+            return M.MAV_MISSION_INVALID_PARAM7, f"item {item.seq}: altitude {z:.0f} m out of limits"
         return None

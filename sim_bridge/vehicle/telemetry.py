@@ -9,7 +9,8 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from protocol.geodesy import local_to_global
 
-from .flight import Flight
+from .estimator import EKF_FLAGS_GPS, EKF_FLAGS_NO_GPS, Stage
+from .flight import Flight, MissionState
 from .modes import AUTOPILOT, Mode, custom_mode
 
 # A 4S lithium pack: 16.8 V full, 14.0 V at the end of its useful charge.
@@ -22,6 +23,14 @@ _SENSORS = (
     | mavlink.MAV_SYS_STATUS_SENSOR_3D_MAG | mavlink.MAV_SYS_STATUS_SENSOR_ABSOLUTE_PRESSURE
     | mavlink.MAV_SYS_STATUS_SENSOR_GPS | mavlink.MAV_SYS_STATUS_SENSOR_BATTERY
 )
+# ArduCopter SITL's SYS_STATUS on the ground (V4.7.0-dev): present 0x5371fc2f, enabled
+# 0x5361fc2f, health 0x4771fc2f. The geofence (0x100000) is present and healthy but not
+# enabled (FENCE_ENABLE 0): a ground station that finds it present and unhealthy reports a
+# breach (MAVProxy's "fence breach"). The pre-arm bit (0x10000000) is healthy only when the
+# checks pass, the GPS bit only with a fix.
+AP_PRESENT, AP_ENABLED, AP_HEALTH = 0x5371FC2F, 0x5361FC2F, 0x4771FC2F
+_PREARM = mavlink.MAV_SYS_STATUS_PREARM_CHECK
+_GPS = mavlink.MAV_SYS_STATUS_SENSOR_GPS
 _AUTO_BITS = (
     mavlink.MAV_MODE_FLAG_AUTO_ENABLED | mavlink.MAV_MODE_FLAG_GUIDED_ENABLED
     | mavlink.MAV_MODE_FLAG_STABILIZE_ENABLED
@@ -43,7 +52,11 @@ def heartbeat(flight: Flight) -> Any:
     base = mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | _BASE_BITS.get(flight.mode, _AUTO_BITS)
     if flight.armed:
         base |= mavlink.MAV_MODE_FLAG_SAFETY_ARMED
-    state = mavlink.MAV_STATE_ACTIVE if flight.armed else mavlink.MAV_STATE_STANDBY
+    if flight.ardupilot:
+        # GCS_MAVLINK_Copter::vehicle_system_status: STANDBY while landed, armed or not.
+        state = mavlink.MAV_STATE_STANDBY if flight.landed else mavlink.MAV_STATE_ACTIVE
+    else:
+        state = mavlink.MAV_STATE_ACTIVE if flight.armed else mavlink.MAV_STATE_STANDBY
     if flight.failsafe and not flight.landed:
         state = mavlink.MAV_STATE_CRITICAL
     return mavlink.MAVLink_heartbeat_message(
@@ -79,7 +92,13 @@ def heading_cdeg(flight: Flight) -> int:
     return int(round(math.degrees(math.atan2(vx, vy)) % 360.0 * 100)) % 36000
 
 
-def global_position_int(flight: Flight) -> Any:
+def global_position_int(flight: Flight) -> Any | None:
+    """ArduPilot: lat/lon/alt 0 until the GPS has a fix, then the GPS position (SITL reports
+    it before the EKF has an origin); PX4 publishes no global position until it is valid."""
+    if flight.stage < Stage.GPS or (not flight.ardupilot and not flight.position_ok):
+        if not flight.ardupilot:
+            return None
+        return mavlink.MAVLink_global_position_int_message(time_boot_ms(flight), 0, 0, 0, 0, 0, 0, 0, 65535)
     lat, lon, alt = _global(flight)
     vx, vy, vz = flight.vel
     # NED velocities in cm/s: north = local y, east = local x, down = -z.
@@ -89,7 +108,10 @@ def global_position_int(flight: Flight) -> Any:
     )
 
 
-def local_position_ned(flight: Flight) -> Any:
+def local_position_ned(flight: Flight) -> Any | None:
+    """Relative to the estimator's origin: none before it has one."""
+    if flight.stage < (Stage.ORIGIN if flight.ardupilot else Stage.NAVIGATING):
+        return None
     x, y, z = flight.pos
     vx, vy, vz = flight.vel
     return mavlink.MAVLink_local_position_ned_message(time_boot_ms(flight), y, x, -z, vy, vx, -vz)
@@ -104,12 +126,45 @@ def attitude(flight: Flight) -> Any:
 
 
 def gps_raw_int(flight: Flight) -> Any:
+    """No fix (lat/lon 0, no satellites) until the GPS stage, then a 3-D fix."""
+    if flight.stage < Stage.GPS:
+        return mavlink.MAVLink_gps_raw_int_message(
+            int(flight.since_boot_s * 1e6), mavlink.GPS_FIX_TYPE_NO_FIX, 0, 0, 0, 65535, 65535, 0, 65535, 0)
     lat, lon, alt = _global(flight)
     speed = math.hypot(flight.vel[0], flight.vel[1])
     return mavlink.MAVLink_gps_raw_int_message(
         int(flight.since_boot_s * 1e6), mavlink.GPS_FIX_TYPE_3D_FIX, lat, lon, int(round(alt * 1000)), 80, 120,
         int(round(speed * 100)), 65535, 14,
     )
+
+
+def vfr_hud(flight: Flight, throttle_pct: int) -> Any:
+    _, _, alt = _global(flight)
+    speed = math.hypot(flight.vel[0], flight.vel[1])
+    hdg = heading_cdeg(flight)
+    return mavlink.MAVLink_vfr_hud_message(speed, speed, 0 if hdg == 65535 else hdg // 100, throttle_pct,
+                                           alt, flight.vel[2])
+
+
+def system_time(flight: Flight, unix_time_s: float) -> Any:
+    return mavlink.MAVLink_system_time_message(int(unix_time_s * 1e6), time_boot_ms(flight))
+
+
+def ekf_status_report(flight: Flight) -> Any:
+    """ArduPilot's EKF flags, as SITL reports them before and after ``is using GPS``."""
+    from pymavlink.dialects.v20 import ardupilotmega  # imported on first use: a large module
+
+    flags = EKF_FLAGS_GPS if flight.position_ok else EKF_FLAGS_NO_GPS
+    return ardupilotmega.MAVLink_ekf_status_report_message(flags, 0.02, 0.03, 0.01, 0.02, 0.0, 0.0)
+
+
+def gps_global_origin(flight: Flight) -> Any | None:
+    if not flight.home_set:
+        return None
+    o = flight.origin
+    return mavlink.MAVLink_gps_global_origin_message(
+        int(round(o.lat_deg * 1e7)), int(round(o.lon_deg * 1e7)), int(round(o.alt_m * 1000)),
+        int(flight.since_boot_s * 1e6))
 
 
 def _voltage_v(flight: Flight) -> float:
@@ -122,8 +177,15 @@ def _current_a(flight: Flight, power_w: float) -> float:
 
 def sys_status(flight: Flight, power_w: float) -> Any:
     volts = _voltage_v(flight)
+    if flight.ardupilot:
+        present, enabled, health = AP_PRESENT, AP_ENABLED, AP_HEALTH
+        health = (health | _PREARM) if flight.position_ok and not flight.failsafe else (health & ~_PREARM)
+    else:
+        present = enabled = health = _SENSORS
+    if flight.stage < Stage.GPS:
+        health &= ~_GPS
     return mavlink.MAVLink_sys_status_message(
-        _SENSORS, _SENSORS, _SENSORS, 100, int(volts * 1000), int(_current_a(flight, power_w) * 100),
+        present, enabled, health, 100, int(volts * 1000), int(_current_a(flight, power_w) * 100),
         int(round(flight.battery_fraction * 100)), 0, 0, 0, 0, 0, 0,
     )
 
@@ -152,30 +214,42 @@ def extended_sys_state(flight: Flight) -> Any:
 
 
 def mission_state(flight: Flight) -> int:
-    if not flight.mission:
+    if not flight.mission_present:
         return mavlink.MISSION_STATE_NO_MISSION
-    if flight.mission_done:
+    if flight.state is MissionState.COMPLETE:
         return mavlink.MISSION_STATE_COMPLETE
-    if not flight.started:
+    if flight.state is MissionState.RUNNING:
+        if flight.paused:
+            return mavlink.MISSION_STATE_PAUSED
+        return mavlink.MISSION_STATE_ACTIVE if flight.mode is Mode.AUTO else mavlink.MISSION_STATE_PAUSED
+    if flight.ardupilot or not flight.started:
         return mavlink.MISSION_STATE_NOT_STARTED
-    return mavlink.MISSION_STATE_ACTIVE if flight.mode is Mode.AUTO else mavlink.MISSION_STATE_PAUSED
+    return mavlink.MISSION_STATE_PAUSED
 
 
 def mission_current(flight: Flight, seq: int | None = None, state: int | None = None) -> Any:
     """MISSION_CURRENT now, or as it was when an event of this step happened (``seq`` and
     ``state``): at a high speed-up one step can pass several items, and each report must
-    say what was current then, or a ground station sees progress jump back and forth."""
-    # After the last item a vehicle keeps reporting the last one (MAVSDK reads "finished"
-    # from MISSION_ITEM_REACHED of the last item, not from seq running past the end).
-    last = max(len(flight.mission) - 1, 0)
-    seq = min(flight.current if seq is None else seq, last)
-    mode = 1 if flight.mode is Mode.AUTO else 2
+    say what was current then, or a ground station sees progress jump back and forth.
+
+    ArduPilot (GCS_MAVLINK::send_mission_current): ``total`` leaves home out (items - 1),
+    ``seq`` is the navigation index (0 when none is loaded, e.g. after disarming);
+    ``mission_mode`` 1 in AUTO. PX4: ``total`` is the item count, UINT16_MAX with none."""
+    seq = flight.current if seq is None else seq
+    mode = 1 if flight.mode is Mode.AUTO else (0 if flight.ardupilot else 2)
     state = mission_state(flight) if state is None else state
-    total = len(flight.mission) if flight.mission else 0xFFFF  # UINT16_MAX: no mission (MAVLink)
+    if flight.ardupilot:
+        total = max(len(flight.mission) - 1, 0)
+    else:
+        total = len(flight.mission) if flight.mission else 0xFFFF  # UINT16_MAX: no mission (MAVLink)
+        seq = min(seq, max(len(flight.mission) - 1, 0))
     return mavlink.MAVLink_mission_current_message(seq, total, state, mode)
 
 
-def home_position(flight: Flight) -> Any:
+def home_position(flight: Flight) -> Any | None:
+    """None until home is set (neither autopilot sends one before)."""
+    if not flight.home_set:
+        return None
     x, y, z = flight.home
     lat, lon, alt = local_to_global(flight.origin, x, y, z)
     return mavlink.MAVLink_home_position_message(
@@ -186,4 +260,3 @@ def home_position(flight: Flight) -> Any:
 
 def statustext(severity: int, text: str) -> Any:
     return mavlink.MAVLink_statustext_message(severity, text.encode("ascii", "replace")[:50])
-

@@ -12,8 +12,24 @@ from pymavlink import mavutil  # noqa: E402
 
 from protocol.mission import MissionItem  # noqa: E402
 from protocol.signing import Signer  # noqa: E402
+from sim_bridge.vehicle.stored_items import ardupilot_stored  # noqa: E402
 
 M = mavutil.mavlink
+TELEMETRY = (
+    M.MAVLINK_MSG_ID_GLOBAL_POSITION_INT, M.MAVLINK_MSG_ID_LOCAL_POSITION_NED, M.MAVLINK_MSG_ID_SYS_STATUS,
+    M.MAVLINK_MSG_ID_BATTERY_STATUS, M.MAVLINK_MSG_ID_EXTENDED_SYS_STATE, M.MAVLINK_MSG_ID_MISSION_CURRENT,
+)
+"""What a test usually asks an ArduPilot-flavour vehicle to stream (it streams nothing unasked)."""
+
+
+def as_stored(items: Sequence[MissionItem], flavour: str) -> list[MissionItem]:
+    """What the vehicle reads back after an upload of ``items``: ArduPilot's storage
+    (frames, whole-second holds, no NaN) with home in item 0; PX4 keeps what was sent."""
+    if flavour != "ardupilot":
+        return list(items)
+    home = items[0]
+    return [MissionItem(seq=0, frame=M.MAV_FRAME_GLOBAL, command=M.MAV_CMD_NAV_WAYPOINT, x=home.x, y=home.y,
+                        z=home.z)] + [ardupilot_stored(item) for item in items[1:]]
 
 
 class GcsError(RuntimeError):
@@ -65,6 +81,21 @@ class GroundStation:
                 return hb
         raise GcsError("no heartbeat from the vehicle")
 
+    def ask(self, msg_ids: Sequence[int] = TELEMETRY, interval_s: float = 0.1) -> None:
+        """MAV_CMD_SET_MESSAGE_INTERVAL for each message (an ArduPilot link streams nothing
+        until asked)."""
+        for msg_id in msg_ids:
+            result = self.command(M.MAV_CMD_SET_MESSAGE_INTERVAL, msg_id, interval_s * 1e6)
+            if result != M.MAV_RESULT_ACCEPTED:
+                raise GcsError(f"SET_MESSAGE_INTERVAL {msg_id}: result {result}")
+
+    def start_mission(self, flavour: str = "ardupilot") -> int:
+        """AUTO, then MAV_CMD_MISSION_START (ArduPilot's AUTO waits for it on the ground)."""
+        result = self.set_mode(3) if flavour == "ardupilot" else self.set_mode(4, 4)
+        if result != M.MAV_RESULT_ACCEPTED:
+            return result
+        return self.command(M.MAV_CMD_MISSION_START, 0, 0)
+
     # --- mission protocol ---------------------------------------------------------------------
     def upload(self, items: Sequence[MissionItem]) -> int:
         """Upload ``items``; returns the MISSION_ACK result. Retries on silence."""
@@ -85,6 +116,10 @@ class GroundStation:
             if msg.get_type() == "MISSION_ACK":
                 if last_sent is None and msg.type == M.MAV_MISSION_ACCEPTED and count:
                     continue  # a stale ACK of an earlier operation
+                if msg.type == M.MAV_MISSION_INVALID_SEQUENCE and last_sent is not None:
+                    # ArduPilot's answer to an item sent twice (our repeat crossed its
+                    # request): the upload goes on (MissionItemProtocol::handle_mission_item).
+                    continue
                 return int(msg.type)
             if not 0 <= msg.seq < count:
                 raise GcsError(f"vehicle requested item {msg.seq} of {count}")

@@ -11,10 +11,21 @@ from planner_service.model.energy import flight_energy_j
 from protocol.geodesy import GeoOrigin
 from protocol.mission import HoverPoint, encode_path, item_local
 from sim_bridge.vehicle.errors import VehicleError
+from sim_bridge.vehicle.events import BatteryLow, BatterySwapped, Disarmed, Landed, Reached
 from sim_bridge.vehicle.flight import Flight
 from sim_bridge.vehicle.modes import Mode
 
 ORIGIN = GeoOrigin()
+
+
+def start(flight: Flight) -> None:
+    """Arm, AUTO and (ArduPilot, whose AUTO waits on the ground for it) MISSION_START."""
+    assert flight.arm() is None and flight.set_mode(Mode.AUTO) is None
+    assert flight.mission_start() is None
+
+
+def kinds(events: list) -> list[type]:
+    return [type(e) for e in events]
 
 
 def fly(flight: Flight, dt: float = 0.7, limit_s: float = 20_000.0) -> list:
@@ -32,9 +43,9 @@ def test_a_mission_costs_what_the_model_says(name: str, flavour: str) -> None:
     p = pack(scenario)
     points = [HoverPoint(0.0, 0.0, 100.0, 0.0), HoverPoint(300.0, 400.0, 100.0, 20.0)]
     flight.set_mission(encode_path(points, ORIGIN, flavour))
-    assert flight.arm() is None and flight.set_mode(Mode.AUTO) is None
+    start(flight)
     events = fly(flight)
-    reached = [e.seq for e in events if e.kind == "reached"]
+    reached = [e.seq for e in events if isinstance(e, Reached)]
     first = 1 if flavour == "ardupilot" else 0
     assert reached == list(range(first, len(flight.mission)))
     assert flight.landed and not flight.armed and flight.pos == [0.0, 0.0, 0.0]
@@ -57,8 +68,7 @@ def test_step_size_does_not_change_the_result() -> None:
     for dt in (0.05, 3.0, 500.0):
         flight = Flight(preset("field"), ORIGIN, "px4")
         flight.set_mission(encode_path([HoverPoint(250.0, 250.0, 80.0, 33.3)], ORIGIN, "px4"))
-        flight.arm()
-        flight.set_mode(Mode.AUTO)
+        start(flight)
         fly(flight, dt)
         results.append((flight.energy_j, flight.time_s if dt < 1 else None))
     assert results[0][0] == pytest.approx(results[1][0], rel=1e-9)
@@ -69,11 +79,9 @@ def test_battery_threshold_returns_home_and_lands() -> None:
     scenario = preset("field").replace(battery_j=60_000.0)
     flight = Flight(scenario, ORIGIN, "ardupilot")
     flight.set_mission(encode_path([HoverPoint(400.0, 300.0, 50.0, 3000.0)], ORIGIN, "ardupilot"))
-    flight.arm()
-    flight.set_mode(Mode.AUTO)
-    events = fly(flight)
-    kinds = [e.kind for e in events]
-    assert "battery_low" in kinds and kinds.index("battery_low") < kinds.index("landed")
+    start(flight)
+    events = kinds(fly(flight))
+    assert BatteryLow in events and events.index(BatteryLow) < events.index(Landed)
     assert flight.mode is Mode.RTL and flight.landed and flight.pos == [0.0, 0.0, 0.0]
     floor = scenario.battery_threshold * scenario.battery_j
     # It turned back at the threshold; the flight home costs what the model says.
@@ -87,10 +95,10 @@ def test_battery_threshold_returns_home_and_lands() -> None:
 
 def test_commands() -> None:
     flight = Flight(preset("field"), ORIGIN, "ardupilot")
-    assert flight.takeoff(10.0) == "not armed"
-    assert flight.set_mode(Mode.AUTO) == "no mission to fly"
+    assert flight.takeoff(10.0).reasons == ("not armed",)
     flight.arm()
-    assert flight.takeoff(10.0) == "takeoff needs GUIDED mode"
+    flight.drain()
+    assert flight.takeoff(10.0).reasons == ("takeoff needs GUIDED mode",)
     flight.set_mode(Mode.GUIDED)
     assert flight.takeoff(10.0) is None
     flight.step(5.0)
@@ -98,7 +106,7 @@ def test_commands() -> None:
     assert flight.disarm() is not None
     flight.set_mode(Mode.LAND)
     events = flight.step(5.0)
-    assert [e.kind for e in events] == ["landed", "disarmed"]
+    assert kinds(events) == [Landed, Disarmed] and events[1].why == "landed"
     assert math.isclose(flight.pos[2], 0.0)
 
 
@@ -106,22 +114,21 @@ def test_battery_swap_after_landing_and_disarming() -> None:
     scenario = preset("field").replace(battery_j=60_000.0)
     flight = Flight(scenario, ORIGIN, "px4", recharge_s=120.0)
     flight.set_mission(encode_path([HoverPoint(400.0, 300.0, 50.0, 3000.0)], ORIGIN, "px4"))
-    flight.arm()
-    flight.set_mode(Mode.AUTO)
+    start(flight)
     events = fly(flight)  # the failsafe brings it home below the threshold
-    assert "battery_low" in [e.kind for e in events] and flight.landed and not flight.armed
+    assert BatteryLow in kinds(events) and flight.landed and not flight.armed
     drained = flight.energy_j
     assert flight.arm() is not None and flight.failsafe
     # no swap before 120 s on the ground, disarmed; the swap at 120 s, to exactly full
     assert flight.step(119.0) == [] and flight.energy_j == drained
     events = flight.step(1.5)
-    assert [e.kind for e in events] == ["battery_swapped"]
+    assert kinds(events) == [BatterySwapped]
     assert flight.energy_j == scenario.battery_j and flight.swaps == 1 and not flight.failsafe
     assert flight.step(500.0) == [] and flight.swaps == 1  # a full battery is not swapped again
     # and it flies the next sortie
     flight.set_mission(encode_path([HoverPoint(100.0, 100.0, 50.0, 10.0)], ORIGIN, "px4"))
-    assert flight.arm() is None and flight.set_mode(Mode.AUTO) is None
-    assert "landed" in [e.kind for e in fly(flight)]
+    start(flight)
+    assert Landed in kinds(fly(flight))
     assert flight.energy_j < scenario.battery_j
 
 
@@ -131,10 +138,12 @@ def test_arming_restarts_the_swap_wait_and_none_never_swaps() -> None:
     flight.energy_j = 50_000.0  # a used battery on the ground
     flight.step(50.0)
     assert flight.arm() is None and flight.disarm() is None  # armed on the ground: the wait restarts
+    flight.drain()
     assert flight.step(50.0) == [] and flight.energy_j == 50_000.0
-    assert [e.kind for e in flight.step(10.0)] == ["battery_swapped"]
+    assert kinds(flight.step(10.0)) == [BatterySwapped]
     never = Flight(scenario, ORIGIN, "ardupilot")
     never.energy_j = 50_000.0
+    never.drain()  # the estimator's start-up events (a position from the start here)
     assert never.step(1e6) == [] and never.energy_j == 50_000.0
     with pytest.raises(VehicleError, match="recharge_s"):
         Flight(scenario, ORIGIN, "ardupilot", recharge_s=-1.0)

@@ -10,7 +10,7 @@ import time
 import pytest
 
 from planner_service.service.processes import free_port
-from gcs import M, GroundStation
+from gcs import M, GroundStation, as_stored
 from protocol.geodesy import GeoOrigin
 from protocol.mission import HoverPoint, encode_path, same_items
 from sim_bridge.proxy import Impairment, LossyProxy, ProxyError
@@ -18,7 +18,7 @@ from sim_bridge.proxy import Impairment, LossyProxy, ProxyError
 
 @pytest.mark.timeout(60)
 def test_upload_through_20_percent_loss_each_way(vehicle, spawn) -> None:
-    _, vehicle_port = vehicle("--item-timeout", "0.25", "--retries", "20")
+    _, vehicle_port = vehicle("--item-timeout", "0.25", "--retries", "20", "--gps-delay-s", "0")
     proxy_port = free_port(socket.SOCK_DGRAM)
     proxy = spawn(["lossy-proxy", "--listen", f"127.0.0.1:{proxy_port}", "--forward", f"127.0.0.1:{vehicle_port}",
                    "--drop", "0.2", "--dup", "0.05", "--delay-ms", "30", "--seed", "11"], "lossy proxy")
@@ -30,7 +30,7 @@ def test_upload_through_20_percent_loss_each_way(vehicle, spawn) -> None:
         started = time.monotonic()
         assert gcs.upload(items) == M.MAV_MISSION_ACCEPTED
         elapsed = time.monotonic() - started
-        assert same_items(gcs.download(), items)
+        assert same_items(gcs.download(), as_stored(items, "ardupilot"))
     finally:
         gcs.close()
     assert proxy.stop() == 0

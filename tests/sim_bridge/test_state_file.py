@@ -14,6 +14,7 @@ from planner_service.model import preset
 from protocol.geodesy import GeoOrigin, global_to_local
 from protocol.mission import HoverPoint, encode_path
 from sim_bridge.vehicle.errors import VehicleError
+from sim_bridge.vehicle.events import Reached
 from sim_bridge.vehicle.flight import Flight
 from sim_bridge.vehicle.modes import Mode
 from sim_bridge.vehicle.state_file import load_state, parse_state, save_state
@@ -25,7 +26,7 @@ def airborne_flight(flavour: str = "ardupilot") -> Flight:
     """A flight on its way to a far point, 60 simulated seconds after starting."""
     flight = Flight(preset("field"), ORIGIN, flavour)
     flight.set_mission(encode_path([HoverPoint(400.0, 300.0, 50.0, 30.0)], ORIGIN, flavour))
-    assert flight.arm() is None and flight.set_mode(Mode.AUTO) is None
+    assert flight.arm() is None and flight.set_mode(Mode.AUTO) is None and flight.mission_start() is None
     for _ in range(60):
         flight.step(1.0)
     assert not flight.landed and flight.mode is Mode.AUTO
@@ -50,12 +51,13 @@ def test_resume_in_the_air_holds_where_it_was_with_its_mission_lost(flavour: str
     assert after.since_boot_s == pytest.approx(10.0)
     # A new mission and AUTO: it flies again, from the mission's first item.
     after.set_mission(encode_path([HoverPoint(100.0, 100.0, 50.0, 0.0)], ORIGIN, flavour))
+    after.drain()
     assert after.set_mode(Mode.AUTO) is None
     events = []
     while after.armed and after.time_s < 2000:
         events += after.step(1.0)
     assert after.landed and after.pos == [0.0, 0.0, 0.0]
-    assert [e.seq for e in events if e.kind == "reached"] == list(range(after.first_item, len(after.mission)))
+    assert [e.seq for e in events if isinstance(e, Reached)] == list(range(after.first_item, len(after.mission)))
 
 
 def test_resume_on_the_ground_is_disarmed() -> None:
@@ -99,6 +101,7 @@ def test_a_stub_started_on_a_saved_flight_comes_back_holding_in_the_air(vehicle,
     gcs = GroundStation(f"udpout:127.0.0.1:{port}")
     try:
         hb = gcs.wait_vehicle()
+        gcs.ask([M.MAVLINK_MSG_ID_GLOBAL_POSITION_INT, M.MAVLINK_MSG_ID_EXTENDED_SYS_STATE])
         assert hb.custom_mode == 5 and hb.base_mode & M.MAV_MODE_FLAG_SAFETY_ARMED  # LOITER, armed
         pos = gcs.recv(["GLOBAL_POSITION_INT"], 2.0)
         assert pos is not None and pos.time_boot_ms < 10_000  # a fresh boot's clock
@@ -106,7 +109,8 @@ def test_a_stub_started_on_a_saved_flight_comes_back_holding_in_the_air(vehicle,
         assert (x, y) == pytest.approx((before.pos[0], before.pos[1]), abs=0.05)
         state = gcs.recv(["EXTENDED_SYS_STATE"], 2.0)
         assert state is not None and state.landed_state == M.MAV_LANDED_STATE_IN_AIR
-        assert gcs.download() == []  # the mission was lost
+        held = gcs.download()
+        assert [(i.seq, i.frame) for i in held] == [(0, M.MAV_FRAME_GLOBAL)]  # the mission was lost: home alone
         # The state file keeps being written: the flight time goes on from where it was.
         time.sleep(0.5)
         assert load_state(path).time_s >= before.time_s

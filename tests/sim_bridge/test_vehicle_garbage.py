@@ -15,7 +15,7 @@ from typing import Any
 import pytest
 from mavlink_garbage import chunks, random_frames, read_only_frames
 
-from gcs import M, GroundStation
+from gcs import M, GroundStation, as_stored
 from planner_service.service.processes import free_port
 from protocol.geodesy import GeoOrigin
 from protocol.mission import HoverPoint, MissionItem, encode_path, same_items
@@ -53,9 +53,10 @@ def quiet(sock: socket.socket, seconds: float) -> bool:
 
 @pytest.mark.timeout(60)
 def test_udp_garbage_changes_nothing(vehicle, gcs_factory) -> None:
-    process, port = vehicle()
+    process, port = vehicle("--gps-delay-s", "0")
     gcs = gcs_factory(f"udpout:127.0.0.1:{port}")
     gcs.wait_vehicle()
+    gcs.ask()
     assert gcs.upload(mission()) == M.MAV_MISSION_ACCEPTED
     before = snapshot(gcs)
     sent = 0
@@ -78,16 +79,17 @@ def test_udp_garbage_changes_nothing(vehicle, gcs_factory) -> None:
     assert after[0] == before[0] and same_items(after[1], before[1])
     assert process.proc.poll() is None and "Traceback" not in process.log()
     assert gcs.upload(mission(shift_m=25.0)) == M.MAV_MISSION_ACCEPTED
-    assert same_items(gcs.download()[1:], mission(shift_m=25.0)[1:])  # item 0: ArduPilot's home
+    assert same_items(gcs.download()[1:], as_stored(mission(shift_m=25.0), "ardupilot")[1:])
     assert sent > SPOILED
 
 
 @pytest.mark.timeout(60)
 def test_tcp_garbage_changes_nothing_and_the_stream_recovers(spawn, gcs_factory) -> None:
     port = free_port()
-    process = spawn(["vehicle", "--mavlink", f"tcpin:127.0.0.1:{port}"], "listening")
+    process = spawn(["vehicle", "--mavlink", f"tcpin:127.0.0.1:{port}", "--gps-delay-s", "0"], "listening")
     gcs = gcs_factory(f"tcp:127.0.0.1:{port}")
     gcs.wait_vehicle()
+    gcs.ask()
     items = mission()
     assert gcs.upload(items) == M.MAV_MISSION_ACCEPTED
     before = snapshot(gcs)
@@ -117,7 +119,7 @@ def test_tcp_garbage_changes_nothing_and_the_stream_recovers(spawn, gcs_factory)
     assert process.proc.poll() is None and "Traceback" not in process.log()
     changed = mission(shift_m=25.0)
     assert gcs.upload(changed) == M.MAV_MISSION_ACCEPTED
-    assert same_items(gcs.download()[1:], changed[1:])  # item 0: ArduPilot's home
+    assert same_items(gcs.download()[1:], as_stored(changed, "ardupilot")[1:])
 
 
 @pytest.mark.timeout(30)

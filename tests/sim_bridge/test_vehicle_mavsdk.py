@@ -21,8 +21,9 @@ from mavsdk.asyncio.plugins.mission_raw import MissionRawAsync
 from mavsdk.plugins.mission import MissionError, MissionItem, MissionPlan, MissionResult
 from mavsdk.plugins.mission_raw import MissionItem as RawItem
 
+from gcs import as_stored
 from protocol.geodesy import GeoOrigin, local_to_global
-from protocol.mission import HoverPoint, encode_path
+from protocol.mission import HoverPoint, MissionItem as Item, encode_path
 
 ORIGIN = GeoOrigin()
 log = logging.getLogger("mavsdk")
@@ -70,32 +71,43 @@ async def follow_to_the_end(progress_stream: Any, total: int) -> list[int]:
     return seen
 
 
-def raw_items(flavour: str) -> list[RawItem]:
+def path(flavour: str) -> list[Item]:
     points = [HoverPoint(40.0 + 55.0 * i, 60.0 + 40.0 * i, 50.0, 3.0) for i in range(6)]
+    return encode_path(points, ORIGIN, flavour)  # type: ignore[arg-type]
+
+
+def raw_items(items: list[Item]) -> list[RawItem]:
     return [
         RawItem(seq=i.seq, frame=i.frame, command=i.command, current=i.current, autocontinue=i.autocontinue,
                 param1=i.param1, param2=i.param2, param3=i.param3, param4=i.param4, x=i.x, y=i.y, z=i.z,
                 mission_type=i.mission_type)
-        for i in encode_path(points, ORIGIN, flavour)  # type: ignore[arg-type]
+        for i in items
     ]
 
 
 @pytest.mark.timeout(60)
 @pytest.mark.parametrize("flavour", ["ardupilot", "px4"])
 def test_mission_raw_upload_download_fly(vehicle, flavour: str) -> None:
-    _, port = vehicle("--flavour", flavour, "--speedup", "300")
+    _, port = vehicle("--flavour", flavour, "--speedup", "300", "--gps-delay-s", "0")
 
     async def scenario() -> None:
         sdk, system = await connect(port)
         try:
             raw = MissionRawAsync(system)
-            items = raw_items(flavour)
+            items = raw_items(path(flavour))
             await raw.upload_mission(items)
             back = await raw.download_mission()
             assert len(back) == len(items)
-            for sent, got in zip(items, back):
+            # Read back as the autopilot stores it (ArduPilot: frames, whole seconds, home).
+            for sent, got in zip(raw_items(as_stored(path(flavour), flavour)), back):
                 assert same_fields(sent, got), f"{sent} != {got}"
-            await ActionAsync(system).arm()
+            action = ActionAsync(system)
+            await action.arm()
+            if flavour == "ardupilot":
+                # ArduCopter's AUTO does not leave the ground without MISSION_START (or
+                # throttle), which MAVSDK's start_mission does not send: take off first,
+                # as ArduPilot users of MAVSDK do.
+                await action.takeoff()
             await raw.start_mission()
             seen = await follow_to_the_end(raw.subscribe_mission_progress(), len(items))
             assert seen[-1] == len(items)
@@ -123,7 +135,7 @@ def mission_plan() -> MissionPlan:
 
 @pytest.mark.timeout(60)
 def test_mission_plugin_px4_upload_download_fly(vehicle) -> None:
-    _, port = vehicle("--flavour", "px4", "--speedup", "300")
+    _, port = vehicle("--flavour", "px4", "--speedup", "300", "--gps-delay-s", "0")
 
     async def scenario() -> None:
         sdk, system = await connect(port)
@@ -154,7 +166,7 @@ def test_mission_plugin_ardupilot_loses_item_0_to_home(vehicle) -> None:
     where ArduPilot keeps home. The stub, like ArduPilot, accepts the upload and replaces
     item 0 with home; the plugin then cannot read home's absolute-altitude frame back.
     Hence the service uses mission_raw with a home placeholder for ArduPilot."""
-    _, port = vehicle("--flavour", "ardupilot", "--speedup", "300")
+    _, port = vehicle("--flavour", "ardupilot", "--speedup", "300", "--gps-delay-s", "0")
 
     async def scenario() -> None:
         sdk, system = await connect(port)

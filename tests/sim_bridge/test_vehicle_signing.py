@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 from test_vehicle_pymavlink import ten_items
 
-from gcs import M, GcsError, GroundStation
+from gcs import M, GcsError, GroundStation, as_stored
 from protocol.mission import same_items
 from protocol.signing import Signer, TimestampStore, load_key, write_key
 
@@ -63,15 +63,16 @@ def signing_line(log: str) -> str:
 
 @pytest.mark.timeout(60)
 def test_the_right_key_uploads_downloads_arms_and_flies(vehicle, stations, key_path: Path) -> None:
-    process, port = vehicle("--signing-key", str(key_path), "--speedup", "300")
+    process, port = vehicle("--signing-key", str(key_path), "--speedup", "300", "--gps-delay-s", "0")
     gcs = stations(port, Signer(load_key(key_path)))
     hb = gcs.wait_vehicle()
     assert hb.get_signed()
     items = ten_items()
     assert gcs.upload(items) == M.MAV_MISSION_ACCEPTED
-    assert same_items(gcs.download(), items)
+    assert same_items(gcs.download(), as_stored(items, "ardupilot"))
     assert gcs.arm() == M.MAV_RESULT_ACCEPTED
     assert gcs.set_mode(ARDUPILOT_AUTO) == M.MAV_RESULT_ACCEPTED
+    assert gcs.command(M.MAV_CMD_MISSION_START, 0, 0) == M.MAV_RESULT_ACCEPTED
     reached = gcs.recv(["MISSION_ITEM_REACHED"], 20.0)
     assert reached is not None and reached.get_signed()
     process.stop()
@@ -81,7 +82,7 @@ def test_the_right_key_uploads_downloads_arms_and_flies(vehicle, stations, key_p
 
 @pytest.mark.timeout(60)
 def test_unsigned_and_wrongly_signed_messages_change_nothing(vehicle, stations, key_path: Path) -> None:
-    process, port = vehicle("--signing-key", str(key_path))
+    process, port = vehicle("--signing-key", str(key_path), "--gps-delay-s", "0")
     gcs = stations(port, Signer(load_key(key_path)))
     gcs.wait_vehicle()
     mission = ten_items()
@@ -109,7 +110,7 @@ def test_unsigned_and_wrongly_signed_messages_change_nothing(vehicle, stations, 
 
     after = latest_heartbeat(gcs)
     assert not armed(after) and after.custom_mode == before.custom_mode
-    assert same_items(gcs.download(), mission), "the held mission must be unchanged"
+    assert same_items(gcs.download(), as_stored(mission, "ardupilot")), "the held mission must be unchanged"
     # The same requests, signed with the key, do take effect (so the checks above can fail),
     # and the forged far-future timestamp did not lock the real station out.
     gcs.conn.mav.set_mode_send(1, M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, ARDUPILOT_GUIDED)
