@@ -39,8 +39,8 @@ from .config import ServiceConfig
 from .errors import JournalError, LinkError, PlanningError
 from .intake import Accepted, Intake, fairness_rule
 from .journal import Journal, RequestRow
-from .link import (Connected, Landed, LinkEvent, LinkSettings, Lost, ModeChanged, PositionChanged, Restarted, Restored,
-                   StatusText, TelemetryMissing, VehicleLink, open_link)
+from .link import (Connected, Landed, LinkEvent, LinkSettings, Lost, ModeChanged, Restarted, Restored, VehicleLink,
+                   open_link)
 from .link.base import RETURNING_MODES
 from .operator import read_command, reply_for
 from .places import plan_places, user_places
@@ -483,15 +483,9 @@ class Service:
                 self._feed(ins.ModeChanged(mode, commanded))
             case Landed():
                 self._feed(ins.Landed())
-            case StatusText(text=text):
-                log.info("autopilot: %s", text)  # escaped by the link
-            case TelemetryMissing(missing=missing):
-                if missing:
-                    log.warning("the autopilot does not send %s (asked for)", ", ".join(missing))
-            case PositionChanged(ok=ok, waiting_for=waiting):
-                log.info("the autopilot has a position" if ok else "position: waiting for %s", waiting)
             case _:
-                pass  # mission progress: holds are judged from the vehicle's position
+                pass  # the link logs texts, missing telemetry and the position's state; mission
+                # progress is not used: holds are judged from the vehicle's own position
 
     def _event(self, event: str, **fields: Any) -> None:
         self.zio.publish("events", encode(Event(event=event, time_s=self.wall(), **fields)))  # type: ignore[arg-type]

@@ -287,3 +287,15 @@ def test_operator_hold_releases_authority() -> None:
     run, _ = fly_to_first_point(world)
     s, out, ok, reply = run.logic.operator(run.s, ins.OperatorCommand("hold"), run.v, run.now)
     assert ok and only(out, fx.Command)[0].kind == "hold" and s.authority.state == "none"
+
+
+def test_a_backlog_grown_since_the_plan_lengthens_the_hold_it_is_bound_to() -> None:
+    world = FakeWorld()
+    run, _ = fly_to_first_point(world)
+    world.ask("a", 120.0, 200.0, 20, 5)  # twice the tasks the plan saw, before the vehicle arrives
+    (plan,) = only(run.tick(seq=2, xyz=(120.0, 200.0, 100.0), boot_s=20.0), fx.Plan)
+    b = run.s.binding
+    assert (b.request_id, b.tasks, b.planned) == (5, 20, False)
+    assert b.needed_s > 60.0, "the planned 60 s hold cannot carry 20 tasks"
+    (up,) = only(run.feed(ins.Planned(plan.basis, path(point(9, 400.0, 300.0, "b", 2)))), fx.Upload)
+    assert up.items[2].param1 >= b.needed_s + 1.0 and up.mission.point_at(2).hold_s >= b.needed_s

@@ -33,6 +33,7 @@ import numpy as np
 
 from protocol import Area, GeoOrigin, HoverPoint, MissionItem, encode_path, replacement_items, same_mission, validate_mission
 from protocol.errors import MissionError
+from protocol.mission import MAX_HOLD_S, encoded_hold_s
 
 from ...model import Scenario, pack
 from ...model.fairness import is_eligible
@@ -401,12 +402,8 @@ class SortieLogic:
             s = replace(s, decided_at=basis.keep_through)
         held = s.held
         airborne = v.airborne
-        if not path.points:
-            if not airborne and not s.must_upload:
-                return s  # nothing to fly yet
-            if held is not None and basis.keep_through is not None and not held.points_after(basis.keep_through) \
-                    and held.rtl_seq == basis.keep_through + 1:
-                return s  # the mission held already returns next
+        if not path.points and not airborne and not s.must_upload:
+            return s  # nothing to fly yet
         # Each hold is planned one reporting gap longer than the upload needs: a service is
         # recorded from the reports of the vehicle's position, which see a hold at most one
         # gap short of what it was.
@@ -425,6 +422,7 @@ class SortieLogic:
                                              self.rules.flavour)  # type: ignore[arg-type]
                 if basis.at_point is not None:  # holding there: that item stays the one flown
                     items = marked_current(items, basis.keep_through)
+                    held, items = self._hold_for_binding(s, held, items, basis.keep_through, margin)
                 mission = HeldMission.replacement(plan_id, items, held, basis.keep_through, path.points)
                 current = None
                 if held is not None and len(items) == len(held.items) and same_mission(items, held.items,
@@ -436,6 +434,21 @@ class SortieLogic:
             return self._failed(replace(s, plan_id=s.plan_id + 1), f"plan {s.plan_id + 1} not flown: {err}", now, out)
         out.append(fx.Upload(plan_id, tuple(items), mission, path, current, basis.keep_through))
         return replace(s, busy="upload", plan_id=plan_id)
+
+    def _hold_for_binding(self, s: Sortie, held: HeldMission, items: list[MissionItem], seq: int,
+                          margin: float) -> tuple[HeldMission, list[MissionItem]]:
+        """The hold at ``seq`` as long as the request bound there needs (it was sized on the
+        request the plan saw; the user's backlog may have grown since). The replacement
+        restarts that hold anyway (ArduPilot's change detector, PX4's current mark), and the
+        service ends it once the request is served: the item's hold is the ceiling."""
+        b, point = s.binding, held.point_at(seq)
+        if b is None or b.seq != seq or b.request_id is None or point is None or b.needed_s + margin <= point.hold_s:
+            return held, items
+        hold = min(b.needed_s + margin, MAX_HOLD_S)
+        longer = replace(point, hold_s=hold)
+        held = replace(held, points=tuple((q, longer if q == seq else p) for q, p in held.points))
+        items = [replace(i, param1=encoded_hold_s(hold, self.rules.flavour)) if i.seq == seq else i for i in items]  # type: ignore[arg-type]
+        return held, items
 
     def _uploaded(self, s: Sortie, up: fx.Upload, gen: int, v: ins.Vehicle, out: list[fx.Effect]) -> Sortie:
         keep = up.keep_through
