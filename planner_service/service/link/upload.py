@@ -76,6 +76,10 @@ class MissionUpload:
         if kind == "MISSION_ACK":
             if self.last_sent is None and msg.type == mavlink.MAV_MISSION_ACCEPTED:
                 return None  # a stale ACK of an earlier operation
+            if msg.type == mavlink.MAV_MISSION_INVALID_SEQUENCE:
+                # A repeated or reordered item: ArduPilot answers it so and goes on waiting
+                # for the item it asked for (MissionItemProtocol.cpp); so does this upload.
+                return None
             self.done = UploadDone(msg.type == mavlink.MAV_MISSION_ACCEPTED, result_name(msg.type), self.sent)
             return self.done
         if kind in ("MISSION_REQUEST_INT", "MISSION_REQUEST"):

@@ -475,6 +475,10 @@ class SortieLogic:
         if unknown:  # the vehicle may hold it: find out before anything else
             s = self._doubt(replace(s, unconfirmed=up.mission), f"the outcome of plan {up.plan_id}'s upload is unknown",
                             out)
+        elif self.rules.flavour == "ardupilot" and s.held is not None:
+            # ArduPilot writes an upload's items as they arrive: a failed one may leave part of
+            # it in the mission held (PX4 switches over only when the upload is complete).
+            s = self._doubt(s, f"plan {up.plan_id}'s upload failed part-way", out)
         return self._failed(s, f"plan {up.plan_id} not flown: {error}", now, out)
 
     def _failed(self, s: Sortie, why: str, now: float, out: list[fx.Effect]) -> Sortie:
