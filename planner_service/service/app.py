@@ -333,7 +333,7 @@ class Service:
     async def _upload(self, up: fx.Upload) -> ins.Input:
         t0 = self.mono()
         try:
-            await self.link.upload(list(up.items), current_seq=up.current_seq)
+            await self.link.upload(list(up.items), current_seq=up.current_seq, restart_current=up.restart_current)
         except LinkError as err:
             return ins.UploadFailed(up, err.result, err.outcome_unknown)
         self._upload_times_s = [*self._upload_times_s, self.mono() - t0][-UPLOAD_HISTORY:]

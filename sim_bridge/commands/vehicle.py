@@ -70,6 +70,10 @@ def configure(parser: argparse.ArgumentParser) -> None:
                         help="save the flight (position, battery, armed, mode, time, home) here a few times a "
                              "second and, if the file exists at start, resume from it as after a reboot: in the "
                              "air it holds position, its mission lost; time_boot_ms restarts from 0")
+    parser.add_argument("--track", default=None, metavar="PATH",
+                        help="write the vehicle's own flight to PATH (CSV: simulated time_s, x_m, y_m, z_m east/"
+                             "north/up of the origin, the mission item flown, the mode, armed), one line a tick, "
+                             "appended across restarts: what it really flew, as an autopilot's flight log")
     parser.add_argument("--recharge-s", type=non_negative_float, default=None, metavar="SECONDS",
                         help="battery swap: SECONDS of simulated time after landing and disarming, the battery "
                              "is full again (default: never)")
@@ -102,7 +106,7 @@ def run(args: argparse.Namespace) -> int:
             max_retries=args.retries, fence_margin_m=args.fence_margin,
             max_mission_items=args.max_mission_items,
             signing_key_file=args.signing_key, signing_timestamp_file=args.signing_timestamp_file,
-            state_file=args.state_file, recharge_s=args.recharge_s, gps_delay_s=args.gps_delay_s,
+            state_file=args.state_file, track_file=args.track, recharge_s=args.recharge_s, gps_delay_s=args.gps_delay_s,
             disarm_delay_s=args.disarm_delay_s,
         )
         vehicle = Vehicle(config)

@@ -37,6 +37,7 @@ from .mission_store import MissionStore, StoreHooks
 from .modes import ARDUPILOT_NAMES, mode_from_custom, mode_name
 from .params import ParamTable, vehicle_params
 from .state_file import SAVE_INTERVAL_S, load_state, save_state
+from .track import Track
 from .stored_items import Problem, ardupilot_problem, ardupilot_stored, px4_problem
 from .streams import EKF_STATUS_REPORT_ID, PeerStreams
 
@@ -80,6 +81,8 @@ class VehicleConfig:
     signing_timestamp_file: str | None = None
     """Where the signing timestamp is kept; default beside the key (KEY.vehicle-timestamp)."""
     state_file: str | None = None
+    track_file: str | None = None
+    """Append the flight, one CSV line a tick, to this file (``track.py``)."""
     """Save the flight here a few times a second and resume from it at start (a restart
     in the air comes back holding position, its mission lost)."""
     recharge_s: float | None = None
@@ -146,6 +149,7 @@ class Vehicle:
         self._last_tick = clock()
         self._power_w = 0.0
         self._state_path = Path(config.state_file) if config.state_file else None
+        self.track = Track(Path(config.track_file)) if config.track_file else None
         self._saved_at = -float("inf")
         if self._state_path is not None:
             snap = load_state(self._state_path)
@@ -190,6 +194,8 @@ class Vehicle:
         finally:
             self.link.close()
             self._safely(self._save_state, True)
+            if self.track is not None:
+                self._safely(self.track.close)
             if self.signer is not None:
                 log.info("signing: %s", self.signer.stats.summary())
                 try:
@@ -224,6 +230,8 @@ class Vehicle:
             # and end between two periodic reports.
             self._send_streamed(M.MAVLINK_MSG_ID_EXTENDED_SYS_STATE, tm.extended_sys_state(self.flight))
         self._report_all(events)
+        if self.track is not None:
+            self.track.write(self.flight, now)
         self.store.tick()
         if self.signer is not None and now >= self._signing_due:
             self._signing_due = now + SIGNING_TICK_S

@@ -2,8 +2,8 @@
 repeats test_sortie.py's checks and adds): the journal against the vehicle stub's own log.
 
 The vehicle logs every mission it commits with its digest (``protocol.mission_digest``) and
-every item it reaches; from those and the journal's accepted missions the visits the
-vehicle really made are known, user by user, whatever the service saw of them."""
+writes its own flight to a track file; from those and the journal the missions it really
+held and the holds it really flew are known, whatever the service saw of them."""
 
 from __future__ import annotations
 
@@ -17,15 +17,23 @@ from pathlib import Path
 from planner_service.model import Scenario
 from planner_service.service.sortie import item_from_dict
 from planner_service.service.report import fairness_violations
-from protocol import Area, Event, GeoOrigin, mission_digest, validate_mission
+from protocol import Area, GeoOrigin, mission_digest, validate_mission
 from protocol.mission import NAV_RTL
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "sim_bridge"))
 from gcs import GroundStation  # noqa: E402  (the vehicle tests' small ground station)
 from stack import Stack  # noqa: E402
 
+from tests.support.truth import false_services, recorded_services, stub_track  # noqa: E402
+
+HOLD_RADIUS_M = 5.0
+"""The service's ``safety.hold_radius_m`` (its default)."""
+TOLERANCE_S = 1.0 + 4.0
+"""A hold is judged from position reports: one second (ArduPilot's whole seconds) and one
+reporting gap (the stub streams at about 10 Hz of wall time: 4 s apart at x40, the fastest
+these sorties fly)."""
+
 COMMIT = re.compile(r"mission of \d+ items accepted \(digest ([0-9a-f]{8})\)")
-REACHED = re.compile(r"mission item (\d+) reached")
 
 
 @dataclass
@@ -36,33 +44,19 @@ class Sortie:
     """Digests of the missions the vehicle committed, in order."""
     accepted: list[str]
     """Digests of the journal's accepted missions, in order."""
-    visits: list[str]
-    """The user of every planned point the vehicle completed, in order."""
     services: list[tuple[str, int, float]]
     """(user, tasks, battery_j) of every service in the journal, in order."""
 
 
 def read_sortie(stack: Stack, vehicle_logs: list[str], flavour: str) -> Sortie:
     rows = stack.rows("SELECT items, points FROM missions WHERE result = 'accepted' ORDER BY mission_id")
-    points_of: dict[str, list[dict]] = {}
     accepted = []
     for items_json, points_json in rows:
         digest = mission_digest([item_from_dict(i) for i in json.loads(items_json)], flavour)  # type: ignore[arg-type]
         accepted.append(digest)
-        points_of[digest] = json.loads(points_json)
-    first = 2 if flavour == "ardupilot" else 1  # after home (ArduPilot) and the takeoff item
-    commits, visits = [], []
-    points: list[dict] = []
-    for line in "\n".join(vehicle_logs).splitlines():
-        if m := COMMIT.search(line):
-            commits.append(m.group(1))
-            points = points_of.get(m.group(1), [])
-        elif m := REACHED.search(line):
-            i = int(m.group(1)) - first
-            if 0 <= i < len(points):
-                visits.append(points[i]["user_id"])
+    commits = [m.group(1) for m in COMMIT.finditer("\n".join(vehicle_logs))]
     services = [(u, t, b) for u, t, b in stack.rows("SELECT user_id, tasks, battery_j FROM services ORDER BY service_id")]
-    return Sortie(commits, accepted, visits, services)
+    return Sortie(commits, accepted, services)
 
 
 def check_sortie(stack: Stack, scenario: Scenario, flavour: str, vehicle_logs: list[str],
@@ -70,8 +64,9 @@ def check_sortie(stack: Stack, scenario: Scenario, flavour: str, vehicle_logs: l
     """Every check of test_sortie.py, and the journal against what the vehicle did:
     - every request closed (served, replaced, not_served with a reason);
     - fairness (3)/(9c) held in the journal, and no user served beyond the limit;
-    - every service recorded was a visit the vehicle made, and every visit is a service
-      unless the service said why not (a ``waypoint_reached`` event);
+    - every service recorded is borne out by the vehicle's own flight log (``--track``): it
+      stayed within the hold radius of the point for the hold the tasks recorded need
+      (``tests/support/truth.py``);
     - the energy reserve held (no failsafe on the vehicle nor the service, landed above
       the threshold);
     - every upload in the journal accepted or failed with its result; the vehicle
@@ -88,17 +83,13 @@ def check_sortie(stack: Stack, scenario: Scenario, flavour: str, vehicle_logs: l
     sortie = read_sortie(stack, vehicle_logs, flavour)
     services = sortie.services
     assert len(services) >= 3, services
+    # Truth: every service recorded is borne out by the vehicle's own flight log.
+    false = false_services(recorded_services(stack.journal_path), stub_track(stack.track), scenario,
+                           HOLD_RADIUS_M, TOLERANCE_S)
+    assert not false, "services the vehicle did not fly as recorded:\n" + "\n".join(false)
     assert fairness_violations(scenario, [(u, t) for u, t, _ in services]) == 0
     assert max(Counter(u for u, _, _ in services).values()) <= scenario.max_services_per_user
     assert all(b >= scenario.energy_floor_j for _, _, b in services)
-    visits, served = Counter(sortie.visits), Counter(u for u, _, _ in services)
-    assert not served - visits, f"services the vehicle never flew: {served - visits}"
-    unexplained = visits - served
-    explained = Counter(e.user_id for e in list(stack.events) if isinstance(e, Event) and e.event == "waypoint_reached")
-    assert not unexplained - explained, f"visits recorded nowhere: {unexplained - explained}; visits {sortie.visits}"
-    # Visits are not services: a user whose newer request leaves it ineligible by the time the
-    # vehicle arrives (a repeat needs more tasks) is visited without being served, and said so
-    # above. The fairness rule is about services, checked on the journal and the visits both.
 
     joined = "\n".join(vehicle_logs)
     assert ": returning" not in joined, "the vehicle's battery failsafe fired"

@@ -27,17 +27,21 @@ class Stack:
         self.zenoh_port = free_port()
         self.endpoint = f"tcp/127.0.0.1:{self.zenoh_port}"
         self.journal_path = tmp / "journal.sqlite"
+        self.track = tmp / "track.csv"
+        """The vehicle's own flight (``sim_bridge vehicle --track``): what it really flew."""
         self.events: list[Event] = []
         self.client: PlannerClient | None = None
         self._lock = threading.Lock()
 
     def vehicle(self, *extra: str) -> Child:
+        """The vehicle stub, its own flight logged to ``track`` (appended across restarts)."""
         if "--gps-delay-s" not in extra:
             # Like ArduCopter the stub has no position for its first 40 simulated seconds
             # (40 s of wall time at --speedup 1); tests that are not about that start-up
             # give it a position after 2 s.
             extra = ("--gps-delay-s", "2", *extra)
-        child = Child("sim_bridge", ["vehicle", "--mavlink", f"udpin:127.0.0.1:{self.mav_port}", *extra],
+        child = Child("sim_bridge", ["vehicle", "--mavlink", f"udpin:127.0.0.1:{self.mav_port}",
+                                     "--track", str(self.track), *extra],
                       self.tmp / f"vehicle-{len(self.children)}.log")
         self.children.append(child)
         child.wait_ready("listening")

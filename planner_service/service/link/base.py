@@ -73,11 +73,15 @@ class VehicleLink(abc.ABC):
         the telemetry it needs on every (re)connection."""
 
     @abc.abstractmethod
-    async def upload(self, items: Sequence[MissionItem], *, current_seq: int | None = None) -> None:
+    async def upload(self, items: Sequence[MissionItem], *, current_seq: int | None = None,
+                     restart_current: bool = False) -> None:
         """Upload a whole mission with the protocol's retries. When this returns the
         autopilot holds it (``generation`` has grown) and, with ``current_seq``, flies that
         item (confirmed from its MISSION_CURRENT; set with MAV_CMD_DO_SET_MISSION_CURRENT,
-        or MISSION_SET_CURRENT where refused, when it reported another). When it raises
+        or MISSION_SET_CURRENT where refused, when it reported another; with
+        ``restart_current`` also when it flies that index already, so that the index's new
+        content is flown: ArduPilot restarts no return, takeoff or land item on an upload,
+        and a new point put where the return was would never be flown). When it raises
         ``LinkError`` the autopilot kept its old mission, unless the error's
         ``outcome_unknown`` says that could not be found out, or the error is about the
         current item (``operation`` "set_current()"): then the new mission is held but the

@@ -511,7 +511,8 @@ class PymavlinkLink(VehicleLink):
         if not self._connected.is_set() or self.state.lost:
             raise LinkError(operation, f"NO_LINK: the autopilot is not connected{self.signing_hint()}")
 
-    async def upload(self, items: Sequence[MissionItem], *, current_seq: int | None = None) -> None:
+    async def upload(self, items: Sequence[MissionItem], *, current_seq: int | None = None,
+                     restart_current: bool = False) -> None:
         if current_seq is not None and not 0 <= current_seq < len(items):
             raise LinkError("upload_mission()", f"current_seq {current_seq} is not an item of the {len(items)}")
         async with self._mission_lock:
@@ -522,7 +523,7 @@ class PymavlinkLink(VehicleLink):
                 self._commit_possible = False
                 self._sort_reports(None)  # left over: the upload failed, the vehicle kept its mission
             if current_seq is not None:
-                await self._ensure_current(current_seq, wait_for_report=True)
+                await self._ensure_current(current_seq, wait_for_report=True, restart=restart_current)
 
     async def _upload(self, items: Sequence[MissionItem]) -> None:
         done = await self._run(MissionUpload(items, self._send, self._target, self.settings.retries))
@@ -569,13 +570,16 @@ class PymavlinkLink(VehicleLink):
             except TimeoutError:
                 pass
 
-    async def _ensure_current(self, seq: int, *, wait_for_report: bool) -> None:
+    async def _ensure_current(self, seq: int, *, wait_for_report: bool, restart: bool = False) -> None:
         """Make the vehicle fly ``seq``: nothing when its MISSION_CURRENT already says so (a
         command would restart the item), else MAV_CMD_DO_SET_MISSION_CURRENT, or the older
         MISSION_SET_CURRENT message where the command is refused; confirmed from
         MISSION_CURRENT."""
         wait_s = CURRENT_WAIT_S if wait_for_report else 0.0
         seen = await self._wait_current(wait_s)
+        if seen == seq and restart:
+            await self._restart_current(seq)
+            return
         if seen == seq:
             return
         sent_at = time.monotonic()
@@ -594,6 +598,16 @@ class PymavlinkLink(VehicleLink):
                 log.info("mission: current item set to %d", seq)
                 return
         raise LinkError("set_current()", f"the vehicle reports item {seen}, not {seq}{await self._refusal_texts(sent_at)}")
+
+    async def _restart_current(self, seq: int) -> None:
+        """Start item ``seq`` again although the vehicle already flies it: the new content of
+        that index is flown (ArduPilot restarts no return-to-launch, takeoff or land item on
+        an upload). MISSION_CURRENT cannot confirm it (the index stays): the ACK does."""
+        result = await self._command_result(M.MAV_CMD_DO_SET_MISSION_CURRENT, seq, 0,
+                                            retries=max(self.settings.retries // 3, 2))
+        if result != "MAV_RESULT_ACCEPTED":
+            raise LinkError("set_current()", f"restarting item {seq}: {result}")
+        log.info("mission: item %d started again", seq)
 
     async def download(self) -> list[MissionItem]:
         async with self._mission_lock:

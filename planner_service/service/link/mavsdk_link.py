@@ -301,7 +301,8 @@ class MavsdkLink(VehicleLink):
             raise LinkError(operation, "NO_LINK: the autopilot is not connected")
 
     # --- operations ---------------------------------------------------------------------------
-    async def upload(self, items: Sequence[MissionItem], *, current_seq: int | None = None) -> None:
+    async def upload(self, items: Sequence[MissionItem], *, current_seq: int | None = None,
+                     restart_current: bool = False) -> None:
         if current_seq is not None and not 0 <= current_seq < len(items):
             raise LinkError("upload_mission()", f"current_seq {current_seq} is not an item of the {len(items)}")
         raw = [raw_item(i) for i in items]
@@ -325,7 +326,7 @@ class MavsdkLink(VehicleLink):
             self._expect_total, self._current = len(raw), None
             self.state.set_progress(0, len(raw))
             if current_seq is not None:
-                await self._ensure_current(current_seq, wait_for_report=True)
+                await self._ensure_current(current_seq, wait_for_report=True, restart=restart_current)
 
     async def set_current(self, seq: int) -> None:
         async with self._upload_lock:
@@ -347,10 +348,16 @@ class MavsdkLink(VehicleLink):
             except TimeoutError:
                 pass
 
-    async def _ensure_current(self, seq: int, *, wait_for_report: bool) -> None:
+    async def _ensure_current(self, seq: int, *, wait_for_report: bool, restart: bool = False) -> None:
         """As the pymavlink backend: nothing when MISSION_CURRENT already says ``seq``, else
         MAV_CMD_DO_SET_MISSION_CURRENT, or MAVSDK's MISSION_SET_CURRENT where refused."""
         seen = await self._wait_current(CURRENT_WAIT_S if wait_for_report else 0.0)
+        if seen == seq and restart:
+            # the index stays: the command's ACK confirms the restart (see the pymavlink backend)
+            result = await self._command_result(M.MAV_CMD_DO_SET_MISSION_CURRENT, seq, 0)
+            if result != "MAV_RESULT_ACCEPTED":
+                raise LinkError("set_current()", f"restarting item {seq}: {result}")
+            return
         if seen == seq:
             return
         sent_at = time.monotonic()

@@ -53,7 +53,8 @@ def stream_plan(flavour: str) -> tuple[StreamSpec, ...]:
                  else StreamSpec("EKF_STATUS_REPORT", M.MAVLINK_MSG_ID_EKF_STATUS_REPORT, 1.0,
                                  M.MAV_DATA_STREAM_EXTRA3))
     return (
-        StreamSpec("GLOBAL_POSITION_INT", M.MAVLINK_MSG_ID_GLOBAL_POSITION_INT, 0.25, M.MAV_DATA_STREAM_POSITION),
+        # 10 Hz: holds are judged from these reports (a gap is the tolerance of a hold's length)
+        StreamSpec("GLOBAL_POSITION_INT", M.MAVLINK_MSG_ID_GLOBAL_POSITION_INT, 0.1, M.MAV_DATA_STREAM_POSITION),
         StreamSpec("SYS_STATUS", M.MAVLINK_MSG_ID_SYS_STATUS, 1.0, M.MAV_DATA_STREAM_EXTENDED_STATUS),
         StreamSpec("BATTERY_STATUS", M.MAVLINK_MSG_ID_BATTERY_STATUS, 1.0, M.MAV_DATA_STREAM_EXTRA3),
         StreamSpec("EXTENDED_SYS_STATE", M.MAVLINK_MSG_ID_EXTENDED_SYS_STATE, 0.5),

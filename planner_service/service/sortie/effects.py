@@ -45,6 +45,9 @@ class Upload:
     """The item the vehicle must fly after the upload (set when it differs); None: the
     autopilot's own (an index it keeps)."""
     keep_through: int | None
+    restart_current: bool = False
+    """Start ``current_seq`` again even if the vehicle flies it (its content changed, and the
+    autopilot restarts no return-to-launch item by itself)."""
 
 
 @dataclass(frozen=True)

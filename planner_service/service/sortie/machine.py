@@ -424,7 +424,9 @@ class SortieLogic:
                     items = marked_current(items, basis.keep_through)
                     held, items = self._hold_for_binding(s, held, items, basis.keep_through, margin)
                 mission = HeldMission.replacement(plan_id, items, held, basis.keep_through, path.points)
-                current = None
+                # Replacing the item flown (the return to launch, on the way home): start it
+                # again, or ArduPilot flies on home; a hold at the item kept goes on.
+                current = None if basis.at_point is not None else basis.keep_through + 1
                 if held is not None and len(items) == len(held.items) and same_mission(items, held.items,
                                                                                       self.rules.flavour):  # type: ignore[arg-type]
                     return s  # the vehicle flies this already
@@ -432,7 +434,8 @@ class SortieLogic:
                              max_items=self.rules.max_mission_items)
         except (PlanningError, MissionError) as err:
             return self._failed(replace(s, plan_id=s.plan_id + 1), f"plan {s.plan_id + 1} not flown: {err}", now, out)
-        out.append(fx.Upload(plan_id, tuple(items), mission, path, current, basis.keep_through))
+        out.append(fx.Upload(plan_id, tuple(items), mission, path, current, basis.keep_through,
+                             restart_current=current is not None and basis.keep_through is not None))
         return replace(s, busy="upload", plan_id=plan_id)
 
     def _hold_for_binding(self, s: Sortie, held: HeldMission, items: list[MissionItem], seq: int,

@@ -1,0 +1,45 @@
+"""The checker that holds the journal against the vehicle's own log must be able to fail:
+a service longer than the stay, at a point never visited, or a second service on one stay."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from planner_service.model import pack, preset
+from planner_service.service.planning import hold_time_s
+from tests.support.truth import Fix, Recorded, false_services, stays
+
+SCENARIO = preset("field")
+P = (120.0, 200.0, 100.0)
+USER = (130.0, 190.0, 0.0)
+
+
+def track() -> list[Fix]:
+    """Flies in, holds at P from t=10 to t=40 (1 s fixes), flies off."""
+    out = [Fix(float(t), (120.0 - 10 * (10 - t), 200.0, 100.0)) for t in range(0, 10)]
+    out += [Fix(float(t), (120.4, 199.7, 100.0)) for t in range(10, 41)]
+    out += [Fix(float(t), (120.0 + 10 * (t - 40), 200.0, 100.0)) for t in range(41, 60)]
+    return out
+
+
+def tasks_for(seconds: float) -> int:
+    """The most tasks an upload of ``seconds`` carries from P."""
+    per_task = hold_time_s(pack(SCENARIO), np.array(P), np.array(USER), SCENARIO.bits_per_task)
+    return int(seconds // per_task)
+
+
+def test_stays_at_a_point() -> None:
+    assert stays(track(), P, 5.0) == [(10.0, 40.0)]
+    assert stays(track(), (400.0, 400.0, 100.0), 5.0) == []
+
+
+def test_what_the_log_bears_out_and_what_it_does_not() -> None:
+    ok = Recorded(1, "a", tasks_for(29.0), P, USER)
+    assert false_services([ok], track(), SCENARIO, 5.0, 1.0) == []
+    too_long = Recorded(1, "a", tasks_for(29.0) + 3, P, USER)
+    assert len(false_services([too_long], track(), SCENARIO, 5.0, 1.0)) == 1
+    never = Recorded(2, "b", 1, (400.0, 400.0, 100.0), USER)
+    (why,) = false_services([ok, never], track(), SCENARIO, 5.0, 1.0)
+    assert "never came" in why
+    twice = [ok, Recorded(3, "a", 1, P, USER)]
+    assert len(false_services(twice, track(), SCENARIO, 5.0, 1.0)) == 1, "one stay, one service"

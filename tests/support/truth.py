@@ -1,0 +1,102 @@
+"""What the vehicle really flew against what the service recorded: a service counts only if
+the vehicle's own position log (the stub's ``--track``, SITL's dataflash POS) shows it
+within ``radius_m`` of the service's hovering point for as long as the upload recorded
+needs, less a stated tolerance (the service judges holds from position reports a reporting
+gap apart, and ArduPilot holds whole seconds).
+
+``false_services`` returns a line for each service the log does not bear out; an empty
+list is the pass. Services are matched in order to the vehicle's stays at their points, one
+stay per service, each after the one before."""
+
+from __future__ import annotations
+
+import math
+import sqlite3
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Iterable, Sequence
+
+import numpy as np
+
+from planner_service.model import Scenario, pack
+from planner_service.service.planning import hold_time_s
+
+
+@dataclass(frozen=True)
+class Fix:
+    """The vehicle's position at a time of its own clock (seconds), local metres."""
+
+    time_s: float
+    xyz: tuple[float, float, float]
+
+
+@dataclass(frozen=True)
+class Recorded:
+    """A service as the journal holds it, with where its user was."""
+
+    service_id: int
+    user_id: str
+    tasks: int
+    point: tuple[float, float, float]
+    user: tuple[float, float, float]
+
+
+def stays(track: Sequence[Fix], point: tuple[float, float, float], radius_m: float) -> list[tuple[float, float]]:
+    """The (start, end) vehicle times of each stretch the track stays within ``radius_m``
+    of ``point`` (consecutive fixes inside)."""
+    out: list[tuple[float, float]] = []
+    start: float | None = None
+    last = 0.0
+    for fix in track:
+        inside = math.dist(fix.xyz, point) <= radius_m
+        if inside and start is None:
+            start = fix.time_s
+        if not inside and start is not None:
+            out.append((start, last))
+            start = None
+        last = fix.time_s
+    if start is not None:
+        out.append((start, last))
+    return out
+
+
+def false_services(services: Iterable[Recorded], track: Sequence[Fix], scenario: Scenario, radius_m: float,
+                   tolerance_s: float) -> list[str]:
+    """The services the track does not bear out, each in words."""
+    p = pack(scenario)
+    problems = []
+    after = -math.inf
+    for s in services:
+        needed = hold_time_s(p, np.array(s.point), np.array(s.user), s.tasks * scenario.bits_per_task)
+        found = [(a, b) for a, b in stays(track, s.point, radius_m) if a >= after]
+        long_enough = [(a, b) for a, b in found if b - a >= needed - tolerance_s]
+        if not long_enough:
+            best = max((b - a for a, b in found), default=0.0)
+            problems.append(f"service {s.service_id} ({s.user_id}, {s.tasks} tasks at {tuple(round(v) for v in s.point)}) "
+                            f"needs {needed:.1f} s within {radius_m} m; the vehicle stayed at most {best:.1f} s there "
+                            f"{'after the last service' if found else '(never came)'}")
+            continue
+        after = long_enough[0][1]
+    return problems
+
+
+def recorded_services(journal: Path, sortie: int | None = None) -> list[Recorded]:
+    """The services of a journal (read-only, beside a running service), with the positions
+    of the requests they served."""
+    db = sqlite3.connect(f"file:{journal}?mode=ro", uri=True)
+    try:
+        where = "WHERE s.sortie = ?" if sortie is not None else ""
+        rows = db.execute(
+            "SELECT s.service_id, s.user_id, s.tasks, s.x_m, s.y_m, s.z_m, r.x_m, r.y_m, r.z_m FROM services s "
+            f"JOIN requests r ON r.request_id = s.request_id {where} ORDER BY s.service_id",
+            (sortie,) if sortie is not None else ()).fetchall()
+    finally:
+        db.close()
+    return [Recorded(int(r[0]), r[1], int(r[2]), (r[3], r[4], r[5]), (r[6], r[7], r[8])) for r in rows]
+
+
+def stub_track(path: Path) -> list[Fix]:
+    """The stub's ``--track`` file as fixes (airborne or not)."""
+    from sim_bridge.vehicle.track import read_track
+
+    return [Fix(p.time_s, p.xyz) for p in read_track(path)]
