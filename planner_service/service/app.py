@@ -98,7 +98,8 @@ class Service:
         self._busy_logged = (time.monotonic(), 0)
         budget = config.planner.budget_ms
         self.planner = Planner(self.scenario, MctsConfig(iterations=config.planner.iterations or None, budget_ms=budget),
-                               config.planner.seed, max_points(config.mavlink.max_mission_items, self.flavour))
+                               config.planner.seed, max_points(config.mavlink.max_mission_items, self.flavour),
+                               config.planner.algo)
         self.zio = ZenohIO(config.zenoh, self.keys)
         m = config.mavlink
         self.link = open_link(m.backend, LinkSettings(m.url, m.flavour, m.item_timeout_s, m.retries, m.link_timeout_s,
@@ -213,14 +214,8 @@ class Service:
         log.info("stopped: journal flushed")
 
     async def _warm_up(self) -> None:
-        """Load the compiled kernels before the first request needs them."""
-        from .journal import UserRow
-
-        fix = VehicleFix(0.0, 0.0, 0.0, self.scenario.battery_j, False)
-        warm = assemble(self.scenario, [UserRow("warm-up", 100.0, 100.0, 0.0, 0)], [], [], fix, -1)
-        warm.state.tasks[0] = 10
-        probe = Planner(self.scenario, MctsConfig(iterations=50), 0)
-        await asyncio.get_running_loop().run_in_executor(self.executor, probe.decide, warm)
+        """Compile every kernel the planner uses before the first request needs them."""
+        await asyncio.get_running_loop().run_in_executor(self.executor, self.planner.warm_up)
 
     async def _connect_loop(self) -> None:
         while True:
