@@ -48,7 +48,8 @@ from ..model.channel import distance_sq_m2
 from ..model.fairness import is_eligible
 from ..model.interval import NO_USER, budget_ok, hop_energy_j, return_energy_j, service_cost, user_outcome
 from ..model.reward import reward_of, task_reward
-from ..model.user_tree import UserTree, empty_tree, fill_tree, refit_tree, tree_nearest, tree_nearest_list
+from ..model.user_tree import (UserTree, empty_tree, fill_tree, pack_leaves, packed_nearest_list, refit_tree,
+                               tree_nearest, tree_window_choice)
 from ..model.world import Scene, World, advance
 
 
@@ -75,7 +76,8 @@ class FutureIndex(NamedTuple):
     between points, ``home`` (K,) flight home. The root: ``root_q`` (K,), ``root_user``
     (K,), ``root_allowed`` (1,). ``tree``: the root's tree (its boxes are refitted at a fresh
     step). ``served0`` (I,):
-    the root's service counts; ``clock`` (1,): scratch for a row's interval.
+    the root's service counts; ``clock`` (1,): scratch for a row's interval; ``packed``
+    (I, 4): scratch of a row's users in leaf order (``user_tree.pack_leaves``).
     """
 
     moves: np.ndarray
@@ -102,6 +104,7 @@ class FutureIndex(NamedTuple):
     tree: UserTree
     served0: np.ndarray
     clock: np.ndarray
+    packed: np.ndarray
 
 
 @jit_borrow
@@ -154,15 +157,16 @@ def _fill_row(scene: Scene, idx: FutureIndex, root: World, s: int) -> None:
     traj = World(root.uav_xyz, root.hover, users, tasks, served, root.battery_j, idx.clock,
                  root.energy_used_j, root.reward_sum)
     advance(scene, traj, idx.moves[s, h - 1], idx.news[s, h - 1])
-    t = UserTree(idx.tree.order, idx.tree.span, idx.box[s, h], idx.tree.stack)
+    t = UserTree(idx.tree.order, idx.tree.span, idx.box[s, h], idx.tree.stack, idx.tree.bounds)
     refit_tree(users, t)
+    pack_leaves(p, users, tasks, served, t, idx.packed)
     size = idx.near_user.shape[3]
     for k in range(hp.shape[0]):
         near_user = idx.near_user[s, h, k]
         near_d2 = idx.near_d2[s, h, k]
         for j in range(size):
             idx.near_cost[s, h, k, j] = math.nan
-        count, cover = tree_nearest_list(p, hp[k], users, tasks, served, t, near_user, near_d2)
+        count, cover = packed_nearest_list(hp[k], t, idx.packed, near_user, near_d2)
         idx.near_count[s, h, k] = count
         idx.near_cover[s, h, k] = cover
         if count == 0:
@@ -183,8 +187,8 @@ def _fill_row(scene: Scene, idx: FutureIndex, root: World, s: int) -> None:
                     chosen = j
             user = near_user[chosen]
             idx.window[s, h, k] = inside
-        else:
-            user, reach_sq = tree_nearest(p, hp[k], users, tasks, served, t)
+        else:  # a crowd within the window: choose among it through the tree
+            user = tree_window_choice(p, hp[k], users, tasks, served, t, reach_sq)
             chosen = -1
             idx.window[s, h, k] = -1
         bits, e_h, e_c = service_cost(p, hp[k], users[user], tasks[user])
@@ -270,7 +274,8 @@ def evaluate_future(scene: Scene, idx: FutureIndex, root: World, s: int, h: int,
                 cost = idx.near_cost[s, h, k, j]
             else:
                 user, _ = tree_nearest(p, hp[k], w.users, w.tasks, w.served,
-                                       UserTree(idx.tree.order, idx.tree.span, idx.box[s, h], idx.tree.stack))
+                                       UserTree(idx.tree.order, idx.tree.span, idx.box[s, h], idx.tree.stack,
+                                                idx.tree.bounds))
                 if user == NO_USER:
                     continue
                 cost = math.nan
@@ -364,7 +369,7 @@ def index_of(scene: Scene, root: World, moves: np.ndarray, news: np.ndarray, tab
         near_cover=np.empty((*rows, k)), hop=tables.hop, home=tables.home,
         root_q=values.q, root_user=values.user, root_allowed=values.allowed,
         tree=values.tree._replace(box=values.tree.box.copy()),
-        served0=root.served.copy(), clock=np.zeros(1, dtype=np.int64),
+        served0=root.served.copy(), clock=np.zeros(1, dtype=np.int64), packed=np.empty((i, 4)),
     )
 
 

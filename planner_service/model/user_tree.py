@@ -43,13 +43,15 @@ log2(I / LEAF), so this holds far more users than any sortie has."""
 class UserTree(NamedTuple):
     """A k-d tree of I users in N nodes: ``order`` (I,) int64, the users by leaf; ``span``
     (N, 2) int64, the range of ``order`` each node holds; ``box`` (N, 6) the bounding box of
-    each node's users (x lo, x hi, y lo, y hi, z lo, z hi); ``stack`` (STACK,) int64 scratch
-    of the traversals."""
+    each node's users (x lo, x hi, y lo, y hi, z lo, z hi); ``stack`` (STACK,) int64 and
+    ``bounds`` (STACK // 3,) scratch of the traversals (pending nodes and their boxes'
+    lower bounds)."""
 
     order: np.ndarray
     span: np.ndarray
     box: np.ndarray
     stack: np.ndarray
+    bounds: np.ndarray
 
 
 @jit_borrow
@@ -67,7 +69,7 @@ def empty_tree(num_users: int) -> UserTree:
     """Room for the tree of ``num_users`` users (filled by ``fill_tree``)."""
     nodes = tree_size(num_users)
     return UserTree(np.zeros(num_users, dtype=np.int64), np.zeros((nodes, 2), dtype=np.int64), np.zeros((nodes, 6)),
-                    np.zeros(STACK, dtype=np.int64))
+                    np.zeros(STACK, dtype=np.int64), np.zeros(STACK // 3))
 
 
 @jit_borrow
@@ -179,18 +181,35 @@ def _box_sq(box: np.ndarray, node: int, hx: float, hy: float, hz: float) -> floa
 
 
 @jit_borrow
-def _push_children(t: UserTree, top: int, node: int, lo: int, hi: int, hx: float, hy: float, hz: float) -> int:
-    """Push both children of ``node``, the farther first so that the nearer pops next."""
-    stack = t.stack
+def _push(t: UserTree, top: int, node: int, lo: int, hi: int, lower: float) -> int:
+    """Put ``node`` (users ``order[lo:hi]``, no nearer than ``lower``) on the stack."""
+    t.stack[top] = node
+    t.stack[top + 1] = lo
+    t.stack[top + 2] = hi
+    t.bounds[top // 3] = lower
+    return top + 3
+
+
+@jit_borrow
+def _push_children(t: UserTree, top: int, node: int, lo: int, hi: int, hx: float, hy: float, hz: float,
+                   bound: float) -> int:
+    """Push the children of ``node`` within ``bound``, the farther first so that the nearer
+    pops next."""
     mid = (lo + hi) // 2  # as fill_tree split it
     left, right = 2 * node + 1, 2 * node + 2
-    if _box_sq(t.box, left, hx, hy, hz) <= _box_sq(t.box, right, hx, hy, hz):
-        stack[top], stack[top + 1], stack[top + 2] = right, mid, hi
-        stack[top + 3], stack[top + 4], stack[top + 5] = left, lo, mid
+    lower_left = _box_sq(t.box, left, hx, hy, hz)
+    lower_right = _box_sq(t.box, right, hx, hy, hz)
+    if lower_left <= lower_right:
+        if lower_right <= bound:
+            top = _push(t, top, right, mid, hi, lower_right)
+        if lower_left <= bound:
+            top = _push(t, top, left, lo, mid, lower_left)
     else:
-        stack[top], stack[top + 1], stack[top + 2] = left, lo, mid
-        stack[top + 3], stack[top + 4], stack[top + 5] = right, mid, hi
-    return top + 6
+        if lower_left <= bound:
+            top = _push(t, top, left, lo, mid, lower_left)
+        if lower_right <= bound:
+            top = _push(t, top, right, mid, hi, lower_right)
+    return top
 
 
 @jit_borrow
@@ -204,15 +223,14 @@ def _walk(p: np.ndarray, hover_xyz: np.ndarray, users: np.ndarray, tasks: np.nda
     chosen = NO_USER
     if users.shape[0] == 0:
         return bound, chosen
-    stack[0], stack[1], stack[2] = 0, 0, users.shape[0]
-    top = 3
+    top = _push(t, 0, 0, 0, users.shape[0], _box_sq(t.box, 0, hx, hy, hz))
     while top > 0:
         top -= 3
-        node, lo, hi = stack[top], stack[top + 1], stack[top + 2]
-        if _box_sq(t.box, node, hx, hy, hz) > bound:
+        if t.bounds[top // 3] > bound:  # the bound tightened since it was pushed
             continue
+        node, lo, hi = stack[top], stack[top + 1], stack[top + 2]
         if hi - lo > LEAF:
-            top = _push_children(t, top, node, lo, hi, hx, hy, hz)
+            top = _push_children(t, top, node, lo, hi, hx, hy, hz, bound)
             continue
         for m in range(lo, hi):
             i = order[m]
@@ -233,6 +251,15 @@ def _walk(p: np.ndarray, hover_xyz: np.ndarray, users: np.ndarray, tasks: np.nda
 
 
 @jit_borrow
+def tree_window_choice(p: np.ndarray, hover_xyz: np.ndarray, users: np.ndarray, tasks: np.ndarray, served: np.ndarray,
+                       t: UserTree, reach_sq: float) -> int:
+    """The user ``interval.nearest_eligible`` chooses among the eligible users within the
+    squared reach ``reach_sq`` of its tie window, the nearest distance being known."""
+    _, chosen = _walk(p, hover_xyz, users, tasks, served, t, reach_sq, True)
+    return chosen
+
+
+@jit_borrow
 def tree_nearest(p: np.ndarray, hover_xyz: np.ndarray, users: np.ndarray, tasks: np.ndarray, served: np.ndarray,
                  t: UserTree) -> tuple[int, float]:
     """The user ``interval.nearest_eligible`` serves from ``hover_xyz`` (``NO_USER`` if
@@ -243,8 +270,7 @@ def tree_nearest(p: np.ndarray, hover_xyz: np.ndarray, users: np.ndarray, tasks:
         return NO_USER, math.inf
     reach = math.sqrt(nearest_sq) + p[P.TIE_M]
     reach_sq = reach * reach
-    _, chosen = _walk(p, hover_xyz, users, tasks, served, t, reach_sq, True)
-    return chosen, reach_sq
+    return tree_window_choice(p, hover_xyz, users, tasks, served, t, reach_sq), reach_sq
 
 
 @jit_borrow
@@ -261,15 +287,14 @@ def tree_nearest_list(p: np.ndarray, hover_xyz: np.ndarray, users: np.ndarray, t
     bound = math.inf  # the M-th distance once the list is full
     if users.shape[0] == 0:
         return 0, bound
-    stack[0], stack[1], stack[2] = 0, 0, users.shape[0]
-    top = 3
+    top = _push(t, 0, 0, 0, users.shape[0], _box_sq(t.box, 0, hx, hy, hz))
     while top > 0:
         top -= 3
-        node, lo, hi = stack[top], stack[top + 1], stack[top + 2]
-        if _box_sq(t.box, node, hx, hy, hz) > bound:
+        if t.bounds[top // 3] > bound:  # the bound tightened since it was pushed
             continue
+        node, lo, hi = stack[top], stack[top + 1], stack[top + 2]
         if hi - lo > LEAF:
-            top = _push_children(t, top, node, lo, hi, hx, hy, hz)
+            top = _push_children(t, top, node, lo, hi, hx, hy, hz, bound)
             continue
         for m in range(lo, hi):
             i = order[m]
@@ -296,5 +321,65 @@ def tree_nearest_list(p: np.ndarray, hover_xyz: np.ndarray, users: np.ndarray, t
     return count, bound
 
 
-__all__ = ["LEAF", "UserTree", "empty_tree", "fill_tree", "refit_tree", "tree_nearest", "tree_nearest_list",
-           "tree_size"]
+@jit_borrow
+def pack_leaves(p: np.ndarray, users: np.ndarray, tasks: np.ndarray, served: np.ndarray, t: UserTree,
+                packed: np.ndarray) -> None:
+    """``packed`` (I, 4): the users in the tree's leaf order, their x, y, z and 1 if
+    eligible (3) else 0, so that ``packed_nearest_list`` reads memory in sequence."""
+    order = t.order
+    for m in range(order.shape[0]):
+        i = order[m]
+        packed[m, 0] = users[i, 0]
+        packed[m, 1] = users[i, 1]
+        packed[m, 2] = users[i, 2]
+        packed[m, 3] = 1.0 if is_eligible(p, tasks[i], served[i]) else 0.0
+
+
+@jit_borrow
+def packed_nearest_list(hover_xyz: np.ndarray, t: UserTree, packed: np.ndarray, out_user: np.ndarray,
+                        out_d2: np.ndarray) -> tuple[int, float]:
+    """``tree_nearest_list`` on the users ``pack_leaves`` laid out (the same answer)."""
+    size = out_user.shape[0]
+    hx, hy, hz = hover_xyz[0], hover_xyz[1], hover_xyz[2]
+    order, stack = t.order, t.stack
+    count = 0
+    bound = math.inf  # the M-th distance once the list is full
+    if order.shape[0] == 0:
+        return 0, bound
+    top = _push(t, 0, 0, 0, order.shape[0], _box_sq(t.box, 0, hx, hy, hz))
+    while top > 0:
+        top -= 3
+        if t.bounds[top // 3] > bound:  # the bound tightened since it was pushed
+            continue
+        node, lo, hi = stack[top], stack[top + 1], stack[top + 2]
+        if hi - lo > LEAF:
+            top = _push_children(t, top, node, lo, hi, hx, hy, hz, bound)
+            continue
+        for m in range(lo, hi):
+            if packed[m, 3] == 0.0:
+                continue
+            dx = hx - packed[m, 0]  # distance_sq_m2(hover_xyz, users[i]), term for term
+            dy = hy - packed[m, 1]
+            dz = hz - packed[m, 2]
+            d = dx * dx + dy * dy + dz * dz
+            if d > bound:
+                continue
+            i = order[m]
+            if count == size and d == bound and i > out_user[size - 1]:
+                continue
+            j = count if count < size else size - 1
+            while j > 0 and (out_d2[j - 1] > d or (out_d2[j - 1] == d and out_user[j - 1] > i)):
+                out_d2[j] = out_d2[j - 1]
+                out_user[j] = out_user[j - 1]
+                j -= 1
+            out_d2[j] = d
+            out_user[j] = i
+            if count < size:
+                count += 1
+            if count == size:
+                bound = out_d2[size - 1]
+    return count, bound
+
+
+__all__ = ["LEAF", "UserTree", "empty_tree", "fill_tree", "pack_leaves", "packed_nearest_list", "refit_tree",
+           "tree_nearest", "tree_nearest_list", "tree_size", "tree_window_choice"]
