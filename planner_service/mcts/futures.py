@@ -48,8 +48,8 @@ from ..model.channel import distance_sq_m2
 from ..model.fairness import is_eligible
 from ..model.interval import NO_USER, budget_ok, hop_energy_j, return_energy_j, service_cost, user_outcome
 from ..model.reward import reward_of, task_reward
-from ..model.user_tree import (UserTree, empty_tree, fill_tree, pack_leaves, packed_nearest_list, refit_tree,
-                               tree_nearest, tree_window_choice)
+from ..model.user_tree import (UserTree, empty_tree, fill_tree, refit_tree, tree_nearest, tree_nearest_list,
+                               tree_window_choice)
 from ..model.world import Scene, World, advance
 
 
@@ -76,8 +76,7 @@ class FutureIndex(NamedTuple):
     between points, ``home`` (K,) flight home. The root: ``root_q`` (K,), ``root_user``
     (K,), ``root_allowed`` (1,). ``tree``: the root's tree (its boxes are refitted at a fresh
     step). ``served0`` (I,):
-    the root's service counts; ``clock`` (1,): scratch for a row's interval; ``packed``
-    (I, 4): scratch of a row's users in leaf order (``user_tree.pack_leaves``).
+    the root's service counts; ``clock`` (1,): scratch for a row's interval.
     """
 
     moves: np.ndarray
@@ -104,7 +103,6 @@ class FutureIndex(NamedTuple):
     tree: UserTree
     served0: np.ndarray
     clock: np.ndarray
-    packed: np.ndarray
 
 
 @jit_borrow
@@ -159,14 +157,13 @@ def _fill_row(scene: Scene, idx: FutureIndex, root: World, s: int) -> None:
     advance(scene, traj, idx.moves[s, h - 1], idx.news[s, h - 1])
     t = UserTree(idx.tree.order, idx.tree.span, idx.box[s, h], idx.tree.stack, idx.tree.bounds)
     refit_tree(users, t)
-    pack_leaves(p, users, tasks, served, t, idx.packed)
     size = idx.near_user.shape[3]
     for k in range(hp.shape[0]):
         near_user = idx.near_user[s, h, k]
         near_d2 = idx.near_d2[s, h, k]
         for j in range(size):
             idx.near_cost[s, h, k, j] = math.nan
-        count, cover = packed_nearest_list(hp[k], t, idx.packed, near_user, near_d2)
+        count, cover = tree_nearest_list(p, hp[k], users, tasks, served, t, near_user, near_d2)
         idx.near_count[s, h, k] = count
         idx.near_cover[s, h, k] = cover
         if count == 0:
@@ -369,7 +366,7 @@ def index_of(scene: Scene, root: World, moves: np.ndarray, news: np.ndarray, tab
         near_cover=np.empty((*rows, k)), hop=tables.hop, home=tables.home,
         root_q=values.q, root_user=values.user, root_allowed=values.allowed,
         tree=values.tree._replace(box=values.tree.box.copy()),
-        served0=root.served.copy(), clock=np.zeros(1, dtype=np.int64), packed=np.empty((i, 4)),
+        served0=root.served.copy(), clock=np.zeros(1, dtype=np.int64),
     )
 
 
