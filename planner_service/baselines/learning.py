@@ -1,7 +1,7 @@
 """What the two learners share: the TD target, the epsilon schedule, masked greedy
 choice, and the training copies of the sortie.
 
-"Training episodes" sit on the same axis as MCTS iterations (READING-NOTES.md): a learner
+"Training episodes" sit on the same axis as MCTS iterations (the paper puts both on one axis): a learner
 given N trains on N episodes in ``begin`` and then flies the real sortie greedily.
 """
 

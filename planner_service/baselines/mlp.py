@@ -1,6 +1,7 @@
 """A small multilayer perceptron and Adam, on numpy, for the DQN baseline.
 
-DESIGN.md keeps torch off the flight side, so the Q-network is written out by hand:
+torch from the registry pulls gigabytes of CUDA packages the flight side should not carry, so
+the Q-network is written out by hand:
 ReLU hidden layers, a linear output of one value per action, the squared TD error on the
 taken action, and its gradient by backpropagation. Shapes: inputs (B, D), outputs (B, A).
 """

@@ -16,8 +16,12 @@ from ..mcts import MctsConfig, MctsPlanner
 from ..model import HAVE_NUMBA, Scenario, paper
 from .decisions import Timing, decision_states, time_decisions
 
-SIZES = ((20, 10), (40, 100), (200, 1000))
-"""(K hovering points, I users): the paper's scenario, then larger ones to show growth."""
+SIZES = ((20, 10), (40, 100), (200, 1000), (400, 5000))
+"""(K hovering points, I users): the paper's scenario, then larger ones to show growth, up to
+a fleet-sized one (a town's users)."""
+DECISIONS = {(20, 10): 50, (40, 100): 50, (200, 1000): 20, (400, 5000): 10}
+"""Decisions timed at each size unless ``decisions`` is given (the large ones take seconds
+each to set up: the greedy sorties that give their states)."""
 
 
 def scenario_of(k: int, i: int) -> Scenario:
@@ -45,8 +49,10 @@ def reference_timing(scenario: Scenario, hover_points, states, config: MctsConfi
     return Timing(data["seconds"], data["actions"], data["iterations"])
 
 
-def run_bench(decisions: int, iterations: int, reference_decisions: int, sizes=SIZES, progress=None) -> dict[str, Any]:
-    """Latency of ``mcts`` decisions at each size, and the reference at the paper's size."""
+def run_bench(decisions: int | None, iterations: int, reference_decisions: int, sizes=SIZES,
+              progress=None) -> dict[str, Any]:
+    """Latency of ``mcts`` decisions at each size (``decisions`` each, or ``DECISIONS``),
+    and the reference at the paper's size."""
     config = replace(MctsConfig(), iterations=iterations)
     results: dict[str, Any] = {
         "numba": HAVE_NUMBA,
@@ -56,7 +62,7 @@ def run_bench(decisions: int, iterations: int, reference_decisions: int, sizes=S
     }
     for k, i in sizes:
         scenario = scenario_of(k, i)
-        count = decisions
+        count = decisions or DECISIONS.get((k, i), 20)
         hover_points, states = decision_states(scenario, count)
         seeds = list(range(1000, 1000 + count))
         if progress:

@@ -13,7 +13,8 @@ HELP = "performance figures: decision latency, playouts/s, speed-up over a plain
 
 def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--json", action="store_true", help="print the figures as JSON")
-    parser.add_argument("--decisions", type=int, default=50, help="decisions timed at each size (default: 50; at K=200, I=1000 a decision takes about 2 s)")
+    parser.add_argument("--decisions", type=int, default=None,
+                        help="decisions timed at each size (default: 50 at K=20 and K=40, 20 at K=200, 10 at K=400)")
     parser.add_argument("--iterations", type=int, default=1000, help="MCTS iterations per decision (default: 1000)")
     parser.add_argument("--reference-decisions", type=int, default=5, help="decisions timed with the pure-Python reference (default: 5; 0 skips it)")
     parser.add_argument("--quick", action="store_true", help="only the paper's size")
@@ -37,7 +38,7 @@ def run(args: argparse.Namespace) -> int:
         return _run_link(args)
     from ..bench.run import SIZES, format_table, run_bench
 
-    if args.decisions < 1 or args.iterations < 1 or args.reference_decisions < 0:
+    if (args.decisions is not None and args.decisions < 1) or args.iterations < 1 or args.reference_decisions < 0:
         print("error: --decisions and --iterations must be at least 1", file=sys.stderr)
         return 2
     sizes = SIZES[:1] if args.quick else SIZES

@@ -62,6 +62,9 @@ class Experiment:
     positions, for a trajectory plot."""
     timing_repeats: int = 1
     """Fly each MCTS sortie this many times and keep the fastest (for wall-time claims)."""
+    summary: Callable[[Results], dict] | None = None
+    """Extra numbers for the JSON summary (``paired``), when the claims' intervals are not
+    all a reader needs."""
 
     def draw(self, res: Results, out: Path) -> list[Path]:
         try:
@@ -142,6 +145,10 @@ def three_d(base: Scenario) -> Scenario:
 
 def _three_d(base: Scenario, quick: bool) -> list[Setting]:
     return [Setting("3-D", three_d(base))]
+
+
+def _task_models(base: Scenario, quick: bool) -> list[Setting]:
+    return [Setting(f"{m} tasks", base.replace(task_model=m)) for m in ("redraw", "backlog")]
 
 
 # --- claims -----------------------------------------------------------------------------
@@ -345,6 +352,57 @@ def _no_claims(r: Results) -> list[Claim]:
     return []
 
 
+def _lookahead_gain(r: Results, label: str, n: int, metric: str, other: str = "greedy") -> dict[int, float]:
+    """Per seed: ``mcts`` at n iterations minus ``other`` in one setting."""
+    ours, theirs = r.values(label, OUR_MCTS, n, metric), r.values(label, other, None, metric)
+    return {seed: ours[seed] - theirs[seed] for seed in ours if seed in theirs}
+
+
+def _task_model_claims(r: Results) -> list[Claim]:
+    redraw, backlog = r.labels
+    claims = []
+    for metric in ("average_reward", "throughput_tasks_per_interval"):
+        m = SHORT.get(metric, metric)
+        beats = []
+        for label in (redraw, backlog):
+            beats += [positive(_where(label, r.top), f"{m}(mcts) - {m}({o})",
+                               r.paired(r.key(label, OUR_MCTS, r.top), r.key(label, o, None), metric))
+                      for o in ("greedy", "random")]
+        more = positive(_where("backlog - redraw", r.top), f"[{m}(mcts) - {m}(greedy)] backlog - the same, redraw",
+                        r.per_seed(lambda s: _lookahead_gain(r, backlog, r.top, metric)[s]
+                                   - _lookahead_gain(r, redraw, r.top, metric)[s]))
+        claims += [
+            Claim(f"tm-mcts-best-{m}", "ours", f"mcts above greedy and random in {m}, under either task model",
+                  tuple(beats)),
+            Claim(f"tm-lookahead-pays-more-{m}", "ours",
+                  f"look-ahead pays more when tasks wait (backlog) than when they are redrawn: the {m} gain of "
+                  "mcts over greedy is larger under backlog", (more,)),
+        ]
+    return claims
+
+
+def paired_summary(r: Results) -> dict:
+    """Medians, means and paired differences (mcts at the largest n, against greedy and
+    random) per setting: the table of docs/PLANNER.md."""
+    out: dict = {}
+    for label in r.labels:
+        rows: dict = {}
+        for metric in ("average_reward", "throughput_tasks_per_interval"):
+            m = SHORT.get(metric, metric)
+            for algo in (OUR_MCTS, "greedy", "random"):
+                vals = list(r.values(label, algo, None if algo in STATIC else r.top, metric).values())
+                rows.setdefault(algo, {})[m] = {"median": float(np.median(vals)), **r.point(
+                    label, algo, None if algo in STATIC else r.top, metric).as_dict()}
+            for other in ("greedy", "random"):
+                diff = list(_lookahead_gain(r, label, r.top, metric, other).values())
+                iv = r.paired(r.key(label, OUR_MCTS, r.top), r.key(label, other, None), metric)
+                rows.setdefault(f"mcts - {other}", {})[m] = {
+                    "median": float(np.median(diff)), **iv.as_dict(),
+                    "wins": int(sum(d > 0 for d in diff)), "losses": int(sum(d < 0 for d in diff))}
+        out[label] = rows
+    return out
+
+
 EXPERIMENTS: dict[str, Experiment] = {e.name: e for e in (
     Experiment("reward-vs-episodes", "Average reward vs training episodes, 20 and 10 m/s", "Fig. 3",
                "average_reward", _speeds, _reward_claims, "plot_curves"),
@@ -363,6 +421,8 @@ EXPERIMENTS: dict[str, Experiment] = {e.name: e for e in (
                "average_reward", _three_d, _three_d_claims, "plot_three_d", paths=True),
     Experiment("timesaving", "TS-MCTS vs MCTS: search wall time and throughput", "Section III-C, Conclusions",
                "wall_s", _as_given, _timesaving_claims, "plot_timesaving", timing_repeats=TIMING_REPEATS),
+    Experiment("task-model", "Tasks redrawn every interval (the paper) or waiting until served (backlog)", "ours",
+               "average_reward", _task_models, _task_model_claims, "plot_curves", summary=paired_summary),
 )}
 
 
@@ -374,4 +434,4 @@ def experiment(name: str) -> Experiment:
 
 
 __all__ = ["EXPERIMENTS", "Experiment", "FULL_EPISODES", "FULL_SEEDS", "QUICK_EPISODES", "QUICK_SEEDS",
-           "RunConfig", "experiment", "iterations_saved", "three_d"]
+           "RunConfig", "experiment", "iterations_saved", "paired_summary", "three_d"]

@@ -68,6 +68,8 @@ def write_experiment(e: Experiment, cfg: RunConfig, res: Results, out: Path, run
         "files": [p.name for p in (*figures, csv_path)] + [f"{e.name}.json"],
         "run": run,
     }
+    if e.summary is not None:
+        summary["paired"] = e.summary(res)
     json_path = write_json(summary, out / f"{e.name}.json")
     return [*figures, csv_path, json_path]
 

@@ -6,36 +6,52 @@ the chance (users' moves, future task draws), so a node's value is an average ov
 rather than a single draw. The futures are drawn once per decision, and the n-th visit of
 each root child plays future n mod S: the candidate actions are then compared on the same
 futures (common random numbers), which removes most of the noise from their difference. With S = 0 every
-iteration draws a fresh future instead. Each node backs up the return from its own step
-onward (the mean, or the sum, of q from the step that enters it to the end of the sortie).
+iteration draws a fresh future instead. Each node backs up the objective of
+``objective.py`` (by default the sortie's average reward).
+
+Each step is the world's own ``serve`` and ``advance`` (``model.world``); the rewards of
+all actions at a step come from the futures' index (``futures.py``), equal to the plain
+evaluation's to the last bit.
 """
 
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 
-from ..model._jit import jit
+from ..model._jit import jit, jit_borrow
 from ..model import params as P
-from ..model.interval import apply_chance, draw_chance, evaluate_actions, remaining_intervals, take_interval
-from .tree import ROOT_INDEX, UNVISITED
+from ..model.interval import remaining_intervals
+from ..model.mobility import draw_int
+from ..model.world import Scene, World, advance, clone, copy_into, draw_chance, serve
+from .futures import FutureIndex, evaluate_step
+from .objective import node_return
+from .tree import ROOT_INDEX, UNVISITED, TreeArrays
 
 ROLLOUT_RANDOM = 0
 """Playout policy: uniform among allowed hovering points (the paper's)."""
 ROLLOUT_EPSILON_GREEDY = 1
 """Playout policy: the largest immediate q, or with probability epsilon a uniform draw."""
 
-RETURN_MEAN = 0
-"""A node's return: the mean of q from its own step to the end (the paper's R)."""
-RETURN_SUM = 1
-"""A node's return: the sum of q from its own step to the end."""
-RETURN_SORTIE = 2
-"""Every node's return: the whole sortie's average q, the past intervals included (the
-reported average reward). The sortie's length is then part of what is optimised."""
+
+class SearchSettings(NamedTuple):
+    """How a search runs: UCT constant ``c`` (10), the ``rollout`` policy and its
+    ``epsilon``, the objective's ``return_kind`` (``objective.py``) with the sum and count
+    of q over the intervals flown before the root (``past_sum``, ``past_count``), and the
+    levels the tree may grow below the root (``max_depth``)."""
+
+    c: float
+    rollout: int
+    epsilon: float
+    return_kind: int
+    past_sum: float
+    past_count: int
+    max_depth: int
 
 
-@jit
+@jit_borrow
 def _untried_best(children: np.ndarray, visits: np.ndarray, node: int, qvals: np.ndarray) -> int:
     """The allowed action not yet tried that has the largest immediate q; -1 if none.
 
@@ -53,7 +69,7 @@ def _untried_best(children: np.ndarray, visits: np.ndarray, node: int, qvals: np
     return best
 
 
-@jit
+@jit_borrow
 def _uct_child(
     children: np.ndarray, node: int, qvals: np.ndarray, visits: np.ndarray, value_sum: np.ndarray, c: float
 ) -> int:
@@ -90,7 +106,7 @@ def _uct_child(
 @jit
 def random_allowed(qvals: np.ndarray, allowed: int, rng: np.random.Generator) -> int:
     """A uniform draw among the ``allowed`` actions (those with a finite q)."""
-    pick = rng.integers(0, allowed)
+    pick = draw_int(rng, 0, allowed)
     for a in range(qvals.shape[0]):
         if qvals[a] > -math.inf:
             if pick == 0:
@@ -108,94 +124,47 @@ def rollout_action(qvals: np.ndarray, allowed: int, policy: int, epsilon: float,
 
 
 @jit
-def node_return(
-    kind: int, own_sum: float, own_steps: int, whole_sum: float, whole_steps: int, past_sum: float, past_count: int
-) -> float:
-    """What a node backs up: its own steps' mean or sum, or the whole sortie's average
-    (``past_*``: the intervals flown before the root; ``whole_*``: this iteration's)."""
-    if kind == RETURN_SUM:
-        return own_sum
-    if kind == RETURN_SORTIE:
-        count = past_count + whole_steps
-        return (past_sum + whole_sum) / count if count > 0 else 0.0
-    return own_sum / own_steps if own_steps > 0 else 0.0
+def search(scene: Scene, tree: TreeArrays, num_nodes: int, root: World, settings: SearchSettings,
+           index: FutureIndex, iterations: int, rng: np.random.Generator) -> int:
+    """Run ``iterations`` iterations from ``root`` (not changed); returns the new node count.
 
-
-@jit
-def _reset(uav, users, tasks, served, uav0, users0, tasks0, served0) -> None:  # noqa: ANN001
-    """Copy the root state's arrays into an iteration's, in place."""
-    uav[:] = uav0
-    users[:] = users0
-    tasks[:] = tasks0
-    served[:] = served0
-
-
-@jit
-def search(
-    p: np.ndarray,
-    hover_points: np.ndarray,
-    parent: np.ndarray,
-    action: np.ndarray,
-    children: np.ndarray,
-    visits: np.ndarray,
-    value_sum: np.ndarray,
-    num_nodes: int,
-    uav0: np.ndarray,
-    hover0: int,
-    users0: np.ndarray,
-    tasks0: np.ndarray,
-    served0: np.ndarray,
-    battery0: float,
-    interval0: int,
-    task_table: np.ndarray,
-    iterations: int,
-    c: float,
-    rollout: int,
-    epsilon: float,
-    return_kind: int,
-    past_sum: float,
-    past_count: int,
-    future_moves: np.ndarray,
-    future_tasks: np.ndarray,
-    max_depth: int,
-    rng: np.random.Generator,
-) -> int:
-    """Run ``iterations`` iterations from the root state; returns the new node count.
-
-    ``future_moves`` (S, H, I, 3) and ``future_tasks`` (S, H, I): the S futures of the
-    decision (``draw_futures``); the n-th visit of a root child plays future n mod S. With
-    S = 0 each step draws from ``rng``. The tree grows at most ``max_depth`` levels below
-    the root; past them the playout policy decides. The tree arrays must have room for ``iterations``
-    more nodes (one expansion per iteration at most). The root state is not changed."""
-    users = users0.copy()
-    tasks = tasks0.copy()
-    served = served0.copy()
-    uav = uav0.copy()
-    qvals = np.empty(hover_points.shape[0])
-    horizon = 1 + remaining_intervals(p, users0.shape[0], interval0)
+    ``index`` holds the S futures of the decision (S may be 0: each step then draws its
+    chance from ``rng``); the n-th visit of a root child plays future n mod S. The tree
+    grows at most ``settings.max_depth`` levels below the root; past them the playout policy
+    decides. The tree arrays must have room for ``iterations`` more nodes (one expansion
+    per iteration at most)."""
+    p = scene.p
+    parent, action, children, visits, value_sum = tree
+    w = clone(root)
+    num_actions = scene.hover_points.shape[0]
+    qvals = np.empty(num_actions)
+    users_at = np.empty(num_actions, dtype=np.int64)
+    horizon = 1 + remaining_intervals(p, root.users.shape[0], root.interval[0])
     rewards = np.empty(horizon)
     suffix = np.empty(horizon + 1)
     path = np.empty(horizon + 1, dtype=np.int64)
+    touched = np.empty(horizon, dtype=np.int64)
+    flag = np.zeros(root.users.shape[0], dtype=np.bool_)
     limit = int(p[P.MAX_INTERVALS])
-    num_futures = future_moves.shape[0]
-    moves = np.empty_like(users0)
-    new_tasks = np.empty_like(tasks0)
+    num_futures = index.moves.shape[0]
+    moves = np.empty_like(root.users)
+    news = np.empty_like(root.tasks)
+    steps = 0
     for _ in range(iterations):
         future = -1
-        _reset(uav, users, tasks, served, uav0, users0, tasks0, served0)
-        hover = hover0
-        battery = battery0
-        t = interval0
+        for j in range(steps):  # forget the last iteration's served users
+            flag[touched[j]] = False
+        copy_into(w, root)
         node = ROOT_INDEX
         path[0] = ROOT_INDEX
         depth = 1
         steps = 0
         in_tree = True
-        while limit <= 0 or t < limit:
-            allowed = evaluate_actions(p, hover_points, hover, uav, users, tasks, served, battery, qvals)
+        while limit <= 0 or w.interval[0] < limit:
+            allowed = evaluate_step(scene, index, root, w, future, steps, touched, flag, qvals, users_at)
             if allowed == 0:
                 break
-            if in_tree and depth > max_depth:
+            if in_tree and depth > settings.max_depth:
                 in_tree = False
             if in_tree:
                 a = _untried_best(children, visits, node, qvals)
@@ -212,7 +181,7 @@ def search(
                         children[node, a] = child
                     in_tree = False
                 else:
-                    child = _uct_child(children, node, qvals, visits, value_sum, c)
+                    child = _uct_child(children, node, qvals, visits, value_sum, settings.c)
                     a = action[child]
                 if depth == 1 and num_futures > 0:
                     future = int(visits[child] + 0.5) % num_futures
@@ -220,85 +189,70 @@ def search(
                 path[depth] = node
                 depth += 1
             else:
-                a = rollout_action(qvals, allowed, rollout, epsilon, rng)
-            outcome = take_interval(p, hover_points, a, uav, users, tasks, served)
-            battery -= outcome[2] + outcome[3] + outcome[4]
-            hover = a
-            t += 1
-            rewards[steps] = outcome[5]
+                a = rollout_action(qvals, allowed, settings.rollout, settings.epsilon, rng)
+            out = serve(scene, w, a, users_at[a])
+            touched[steps] = out.user
+            flag[out.user] = True
+            rewards[steps] = out.reward
             if future >= 0:
-                apply_chance(p, users, tasks, t, task_table, future_moves[future, steps], future_tasks[future, steps])
+                advance(scene, w, index.moves[future, steps], index.news[future, steps])
             else:
-                draw_chance(p, moves, new_tasks, rng)
-                apply_chance(p, users, tasks, t, task_table, moves, new_tasks)
+                draw_chance(p, moves, news, rng)
+                advance(scene, w, moves, news)
             steps += 1
         suffix[steps] = 0.0
         for k in range(steps - 1, -1, -1):
             suffix[k] = suffix[k + 1] + rewards[k]
         for j in range(depth):
             first = j - 1 if j > 0 else 0  # node path[j] is entered by step j - 1
-            ret = node_return(return_kind, suffix[first], steps - first, suffix[0], steps, past_sum, past_count)
+            ret = node_return(settings.return_kind, suffix[first], steps - first, suffix[0], steps,
+                              settings.past_sum, settings.past_count)
             visits[path[j]] += 1.0
             value_sum[path[j]] += ret
     return num_nodes
 
 
+@jit
+def draw_futures(p: np.ndarray, moves: np.ndarray, news: np.ndarray, rng: np.random.Generator) -> None:
+    """Fill S futures of H steps of chance: ``moves`` (S, H, I, 3), ``news`` (S, H, I),
+    each step drawn as the environment draws it."""
+    for s in range(moves.shape[0]):
+        for h in range(moves.shape[1]):
+            draw_chance(p, moves[s, h], news[s, h], rng)
+
 
 @jit
-def draw_futures(p: np.ndarray, future_moves: np.ndarray, future_tasks: np.ndarray, rng: np.random.Generator) -> None:
-    """Fill S futures of H steps of chance: ``future_moves`` (S, H, I, 3), ``future_tasks``
-    (S, H, I), each step drawn as the environment draws it."""
-    for s in range(future_moves.shape[0]):
-        for h in range(future_moves.shape[1]):
-            draw_chance(p, future_moves[s, h], future_tasks[s, h], rng)
-
-
-@jit
-def paired_rollouts(
-    p: np.ndarray,
-    hover_points: np.ndarray,
-    actions: np.ndarray,
-    uav0: np.ndarray,
-    hover0: int,
-    users0: np.ndarray,
-    tasks0: np.ndarray,
-    served0: np.ndarray,
-    battery0: float,
-    interval0: int,
-    task_table: np.ndarray,
-    return_kind: int,
-    past_sum: float,
-    past_count: int,
-    future_moves: np.ndarray,
-    future_tasks: np.ndarray,
-    out: np.ndarray,
-) -> None:
-    """Each of ``actions`` (A,) first, then the greedy policy, on each of the S futures:
-    ``out`` (S, A) receives the returns (of the first step's node, as ``search`` backs up)."""
-    users = users0.copy()
-    tasks = tasks0.copy()
-    served = served0.copy()
-    uav = uav0.copy()
-    qvals = np.empty(hover_points.shape[0])
+def paired_rollouts(scene: Scene, root: World, actions: np.ndarray, settings: SearchSettings, index: FutureIndex,
+                    out: np.ndarray) -> None:
+    """Each of ``actions`` (A,) first, then the greedy policy, on each of the index's S
+    futures: ``out`` (S, A) receives the returns (of the first step's node, as ``search``
+    backs up)."""
+    p = scene.p
+    w = clone(root)
+    num_actions = scene.hover_points.shape[0]
+    qvals = np.empty(num_actions)
+    users_at = np.empty(num_actions, dtype=np.int64)
+    touched = np.empty(1 + remaining_intervals(p, root.users.shape[0], root.interval[0]), dtype=np.int64)
+    flag = np.zeros(root.users.shape[0], dtype=np.bool_)
     limit = int(p[P.MAX_INTERVALS])
-    for s in range(future_moves.shape[0]):
+    steps = 0
+    for s in range(index.moves.shape[0]):
         for k in range(actions.shape[0]):
-            _reset(uav, users, tasks, served, uav0, users0, tasks0, served0)
-            hover = hover0
-            battery = battery0
-            t = interval0
+            for j in range(steps):
+                flag[touched[j]] = False
+            copy_into(w, root)
             total = 0.0
             steps = 0
-            while limit <= 0 or t < limit:
-                allowed = evaluate_actions(p, hover_points, hover, uav, users, tasks, served, battery, qvals)
+            while limit <= 0 or w.interval[0] < limit:
+                allowed = evaluate_step(scene, index, root, w, s, steps, touched, flag, qvals, users_at)
                 if allowed == 0:
                     break
                 a = actions[k] if steps == 0 else int(np.argmax(qvals))
-                outcome = take_interval(p, hover_points, a, uav, users, tasks, served)
-                battery -= outcome[2] + outcome[3] + outcome[4]
-                hover = a
-                t += 1
-                total += outcome[5]
-                apply_chance(p, users, tasks, t, task_table, future_moves[s, steps], future_tasks[s, steps])
+                step_out = serve(scene, w, a, users_at[a])
+                touched[steps] = step_out.user
+                flag[step_out.user] = True
+                total += step_out.reward
+                advance(scene, w, index.moves[s, steps], index.news[s, steps])
                 steps += 1
-            out[s, k] = node_return(return_kind, total, steps, total, steps, past_sum, past_count)
+            out[s, k] = node_return(settings.return_kind, total, steps, total, steps, settings.past_sum,
+                                    settings.past_count)

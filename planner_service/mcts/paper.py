@@ -29,11 +29,13 @@ import numpy as np
 
 from ..model import Scenario, SortieState, pack
 from ..model import params as P
-from ..model._jit import jit
-from ..model.interval import advance_chance, evaluate_actions, take_interval
+from ..model._jit import jit, jit_borrow
+from ..model.mobility import draw_int
+from ..model.world import Scene, World, clone, copy_into, draw_chance, evaluate, scene_of, step
 from ..policy import Decision
+from .objective import RETURN_MEAN, node_return
 from .open_loop import random_allowed
-from .tree import ROOT_INDEX, UNVISITED, Tree
+from .tree import ROOT_INDEX, UNVISITED, Tree, TreeArrays
 
 
 @jit
@@ -44,7 +46,7 @@ def _random_untried(children: np.ndarray, node: int, qvals: np.ndarray, rng: np.
             count += 1
     if count == 0:
         return -1
-    pick = rng.integers(0, count)
+    pick = draw_int(rng, 0, count)
     for a in range(qvals.shape[0]):
         if qvals[a] > -math.inf and children[node, a] == UNVISITED:
             if pick == 0:
@@ -53,7 +55,7 @@ def _random_untried(children: np.ndarray, node: int, qvals: np.ndarray, rng: np.
     return -1
 
 
-@jit
+@jit_borrow
 def uct_best(children: np.ndarray, node: int, qvals: np.ndarray, visits: np.ndarray, value_sum: np.ndarray, c: float) -> int:
     """argmax over allowed children of Q/N + c sqrt(2 ln N(node) / N(child)) (10)."""
     best = UNVISITED
@@ -69,47 +71,44 @@ def uct_best(children: np.ndarray, node: int, qvals: np.ndarray, visits: np.ndar
     return best
 
 
+def node_states(capacity: int, num_users: int) -> World:
+    """Room for the states of ``capacity`` nodes: a ``World`` whose arrays have a leading
+    node axis (N, ...)."""
+    return World(np.zeros((capacity, 3)), np.full(capacity, -1, dtype=np.int64), np.zeros((capacity, num_users, 3)),
+                 np.zeros((capacity, num_users), dtype=np.int64), np.zeros((capacity, num_users), dtype=np.int64),
+                 np.zeros(capacity), np.zeros(capacity, dtype=np.int64), np.zeros(capacity), np.zeros(capacity))
+
+
 @jit
-def search_closed_loop(
-    p: np.ndarray,
-    hover_points: np.ndarray,
-    parent: np.ndarray,
-    action: np.ndarray,
-    children: np.ndarray,
-    visits: np.ndarray,
-    value_sum: np.ndarray,
-    node_uav: np.ndarray,
-    node_hover: np.ndarray,
-    node_users: np.ndarray,
-    node_tasks: np.ndarray,
-    node_served: np.ndarray,
-    node_battery: np.ndarray,
-    node_interval: np.ndarray,
-    node_q: np.ndarray,
-    task_table: np.ndarray,
-    iterations: int,
-    c: float,
-    rng: np.random.Generator,
-) -> int:
+def node_world(nodes: World, n: int) -> World:
+    """The state held by node ``n`` (views into ``nodes``)."""
+    return World(nodes.uav_xyz[n], nodes.hover[n:n + 1], nodes.users[n], nodes.tasks[n], nodes.served[n],
+                 nodes.battery_j[n:n + 1], nodes.interval[n:n + 1], nodes.energy_used_j[n:n + 1],
+                 nodes.reward_sum[n:n + 1])
+
+
+@jit
+def search_closed_loop(scene: Scene, tree: TreeArrays, nodes: World, node_q: np.ndarray, iterations: int, c: float,
+                       rng: np.random.Generator) -> int:
     """Algorithm 1's inner loop, ``iterations`` times from the root (node 0, whose state
-    arrays hold the observed state). Node states are (N, ...) arrays; returns the node count."""
+    ``nodes`` holds the observed state). ``nodes``: every node's state (``node_states``),
+    ``node_q`` (N,): the reward of the step into each node. Returns the node count."""
+    p = scene.p
+    parent, action, children, visits, value_sum = tree
     limit = int(p[P.MAX_INTERVALS])
-    qvals = np.empty(hover_points.shape[0])
-    users = node_users[0].copy()
-    tasks = node_tasks[0].copy()
-    served = node_served[0].copy()
-    uav = node_uav[0].copy()
+    qvals = np.empty(scene.hover_points.shape[0])
+    w = clone(node_world(nodes, ROOT_INDEX))
+    moves = np.empty_like(w.users)
+    news = np.empty_like(w.tasks)
     num_nodes = 1
     for _ in range(iterations):
         node = ROOT_INDEX
         leaf = -1
         while True:
             allowed = 0
-            if limit <= 0 or node_interval[node] < limit:
-                allowed = evaluate_actions(
-                    p, hover_points, node_hover[node], node_uav[node], node_users[node],
-                    node_tasks[node], node_served[node], node_battery[node], qvals,
-                )
+            state = node_world(nodes, node)
+            if limit <= 0 or state.interval[0] < limit:
+                allowed = evaluate(scene, state, qvals)
             if allowed == 0:
                 break  # a terminal node: nothing to expand or play out
             a = _random_untried(children, node, qvals, rng)
@@ -124,21 +123,10 @@ def search_closed_loop(
             children[node, a] = child
             visits[child] = 0.0
             value_sum[child] = 0.0
-            users[:] = node_users[node]
-            tasks[:] = node_tasks[node]
-            served[:] = node_served[node]
-            uav[:] = node_uav[node]
-            outcome = take_interval(p, hover_points, a, uav, users, tasks, served)
-            t = node_interval[node] + 1
-            advance_chance(p, users, tasks, t, task_table, rng)  # drawn once, frozen in the node
-            node_uav[child] = uav
-            node_hover[child] = a
-            node_users[child] = users
-            node_tasks[child] = tasks
-            node_served[child] = served
-            node_battery[child] = node_battery[node] - (outcome[2] + outcome[3] + outcome[4])
-            node_interval[child] = t
-            node_q[child] = outcome[5]
+            copy_into(w, state)
+            draw_chance(p, moves, news, rng)  # drawn once, frozen in the node
+            node_q[child] = step(scene, w, a, moves, news).reward
+            copy_into(node_world(nodes, child), w)
             leaf = child
             break
         if leaf < 0:
@@ -147,8 +135,7 @@ def search_closed_loop(
             leaf = node
             ret = node_q[node]  # a terminal leaf: its own step is all there is
         else:
-            ret = _random_playout(p, hover_points, leaf, node_hover, node_battery, node_interval,
-                                  node_q, uav, users, tasks, served, task_table, limit, qvals, rng)
+            ret = _random_playout(scene, w, node_q[leaf], limit, qvals, moves, news, rng)
         n = leaf
         while n != -1:  # lines 25-28: the same R into the new node and every ancestor
             visits[n] += 1.0
@@ -158,29 +145,22 @@ def search_closed_loop(
 
 
 @jit
-def _random_playout(p, hover_points, leaf, node_hover, node_battery, node_interval, node_q,
-                    uav, users, tasks, served, task_table, limit, qvals, rng) -> float:
-    """Lines 18-24: uniform random actions from the new node's state until none is allowed;
-    R = mean of q over the new node's step and the playout's steps. ``uav``, ``users``,
-    ``tasks``, ``served`` hold the new node's state and are used up."""
-    total = node_q[leaf]
+def _random_playout(scene: Scene, w: World, first_q: float, limit: int, qvals: np.ndarray, moves: np.ndarray,
+                    news: np.ndarray, rng: np.random.Generator) -> float:
+    """Lines 18-24: uniform random actions from the new node's state ``w`` (used up) until
+    none is allowed; R = mean of q over the new node's step (``first_q``) and the
+    playout's steps."""
+    total = first_q
     count = 1
-    hover = node_hover[leaf]
-    battery = node_battery[leaf]
-    t = node_interval[leaf]
-    while limit <= 0 or t < limit:
-        allowed = evaluate_actions(p, hover_points, hover, uav, users, tasks, served, battery, qvals)
+    while limit <= 0 or w.interval[0] < limit:
+        allowed = evaluate(scene, w, qvals)
         if allowed == 0:
             break
         a = random_allowed(qvals, allowed, rng)
-        outcome = take_interval(p, hover_points, a, uav, users, tasks, served)
-        battery -= outcome[2] + outcome[3] + outcome[4]
-        hover = a
-        t += 1
-        advance_chance(p, users, tasks, t, task_table, rng)
-        total += outcome[5]
+        draw_chance(scene.p, moves, news, rng)
+        total += step(scene, w, a, moves, news).reward
         count += 1
-    return total / count
+    return node_return(RETURN_MEAN, total, count, total, count, 0.0, 0)
 
 
 class PaperMctsPlanner:
@@ -212,25 +192,13 @@ class PaperMctsPlanner:
         cap = n + 1
         k, i = len(self.hover_points), len(state.users)
         tree = Tree.empty(k, cap)
-        node_uav = np.zeros((cap, 3))
-        node_hover = np.full(cap, -1, dtype=np.int64)
-        node_users = np.zeros((cap, i, 3))
-        node_tasks = np.zeros((cap, i), dtype=np.int64)
-        node_served = np.zeros((cap, i), dtype=np.int64)
-        node_battery = np.zeros(cap)
-        node_interval = np.zeros(cap, dtype=np.int64)
+        scene = scene_of(self.params, self.hover_points, state.task_table)
+        nodes = node_states(cap, i)
         node_q = np.zeros(cap)
-        node_uav[0], node_hover[0], node_users[0] = state.uav_xyz, state.hover_index, state.users
-        node_tasks[0], node_served[0] = state.tasks, state.served
-        node_battery[0], node_interval[0] = state.battery_j, state.interval
-        tree.num_nodes = search_closed_loop(
-            self.params, self.hover_points, tree.parent, tree.action, tree.children, tree.visits,
-            tree.value_sum, node_uav, node_hover, node_users, node_tasks, node_served, node_battery,
-            node_interval, node_q, state.task_table, n, self.scenario.uct_c, self.rng,
-        )
+        copy_into(node_world(nodes, ROOT_INDEX), state.world())
+        tree.num_nodes = search_closed_loop(scene, tree.arrays(), nodes, node_q, n, self.scenario.uct_c, self.rng)
         q = np.empty(k)
-        evaluate_actions(self.params, self.hover_points, state.hover_index, state.uav_xyz, state.users,
-                         state.tasks, state.served, state.battery_j, q)
+        evaluate(scene, state.world(), q)
         if not np.isfinite(q).any():
             raise ValueError("no hovering point is allowed in this state: the sortie is over")
         child = uct_best(tree.children, ROOT_INDEX, q, tree.visits, tree.value_sum, self.scenario.uct_c)  # line 31

@@ -24,18 +24,12 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from ..model import Scenario, SortieState, pack
-from ..model.interval import evaluate_actions, remaining_intervals
+from ..model.interval import remaining_intervals
+from ..model.world import Scene, World, scene_of
 from ..policy import Decision
-from .open_loop import (
-    RETURN_MEAN,
-    RETURN_SORTIE,
-    RETURN_SUM,
-    ROLLOUT_EPSILON_GREEDY,
-    ROLLOUT_RANDOM,
-    draw_futures,
-    paired_rollouts,
-    search,
-)
+from .futures import FutureIndex, RootValues, index_of, point_tables_of, root_values_of
+from .objective import RETURN_MEAN, RETURN_SORTIE, RETURN_SUM
+from .open_loop import ROLLOUT_EPSILON_GREEDY, ROLLOUT_RANDOM, SearchSettings, draw_futures, paired_rollouts, search
 from .tree import ROOT_INDEX, UNVISITED, Tree
 
 ROLLOUTS = {"random": ROLLOUT_RANDOM, "epsilon-greedy": ROLLOUT_EPSILON_GREEDY}
@@ -57,8 +51,9 @@ class MctsConfig:
     rollout_epsilon: float = 0.1
     """Probability of a uniform step in an epsilon-greedy playout."""
     return_kind: str = "sortie"
-    """A node's return: ``sortie`` (the whole sortie's average q, past intervals included:
-    the reported average reward), ``mean`` of q from the node's step on, or their ``sum``."""
+    """What a node backs up (``objective.py``): ``sortie``, the objective of ``mcts`` (the
+    whole sortie's average q, past intervals included: the reported average reward);
+    ``mean`` of q from the node's step on, or their ``sum``, for comparison."""
     reuse_tree: bool = True
     """Keep the chosen child's subtree for the next decision."""
     reuse_decay: float = 0.3
@@ -112,6 +107,7 @@ class MctsPlanner:
         self.hover_points = np.ascontiguousarray(hover_points, dtype=np.float64)
         self.config = config
         self.rng = rng
+        self.tables = point_tables_of(self.params, self.hover_points)
         self.tree = self._new_tree()
         self._expect: tuple[int, int] | None = None  # (interval, hover index) after our move
 
@@ -126,13 +122,17 @@ class MctsPlanner:
     def plan(self, state: SortieState) -> Decision:
         """The next hovering point for ``state`` and the line expected after it."""
         start = time.perf_counter()
-        allowed = self._allowed(state)
+        scene = scene_of(self.params, self.hover_points, state.task_table)
+        root = state.world()
+        values = root_values_of(scene, root, self.tables)
+        allowed = np.isfinite(values.q)
         if not allowed.any():
             raise ValueError("no hovering point is allowed in this state: the sortie is over")
         self._reuse_or_reset(state)
-        greedy = int(np.argmax(self._qvals(state)))
-        done = self._search(state, start)
-        child = self._choose(state, greedy, allowed)
+        greedy = int(np.argmax(values.q))
+        settings = self._settings(state)
+        done = self._search(scene, root, values, settings, start)
+        child = self._choose(scene, root, values, settings, greedy, allowed)
         if child == UNVISITED:  # budget too small for one iteration: the greedy choice
             action, line = greedy, ()
         else:
@@ -149,6 +149,11 @@ class MctsPlanner:
             extra={"root_visits": float(self.tree.visits[ROOT_INDEX]), "nodes": self.tree.num_nodes},
         )
 
+    def _settings(self, state: SortieState) -> SearchSettings:
+        cfg = self.config
+        return SearchSettings(float(cfg.c), ROLLOUTS[cfg.rollout], float(cfg.rollout_epsilon), RETURNS[cfg.return_kind],
+                              float(state.reward_sum), int(state.interval), int(cfg.max_depth))
+
     def _reuse_or_reset(self, state: SortieState) -> None:
         if self._expect is not None and self._expect == (state.interval, state.hover_index):
             self.tree = self.tree.subtree(self._chosen, self.config.reuse_decay)
@@ -156,7 +161,8 @@ class MctsPlanner:
             self.tree = self._new_tree()
         self._expect = None
 
-    def _choose(self, state: SortieState, greedy: int, allowed: np.ndarray) -> int:
+    def _choose(self, scene: Scene, root: World, values: RootValues, settings: SearchSettings, greedy: int,
+                allowed: np.ndarray) -> int:
         """The most visited allowed root child, unless it fails to beat the greedy choice
         on fresh paired futures (``confidence_z``): then the greedy child."""
         best = self.tree.best_child(ROOT_INDEX, allowed)
@@ -165,36 +171,22 @@ class MctsPlanner:
             return best
         if self.config.confidence_z <= 0:
             return best
-        returns = self._paired_returns(state, np.array([self.tree.action[best], greedy]))
+        index = self._index(scene, root, values, self.config.confirm_futures)
+        returns = np.empty((index.moves.shape[0], 2))
+        paired_rollouts(scene, root, np.array([self.tree.action[best], greedy]), settings, index, returns)
         return best if paired_t(returns[:, 0] - returns[:, 1]) >= self.config.confidence_z else int(greedy_child)
 
-    def _paired_returns(self, state: SortieState, actions: np.ndarray) -> np.ndarray:
-        moves, tasks = self._futures(state, self.config.confirm_futures)
-        out = np.empty((len(moves), len(actions)))
-        paired_rollouts(
-            self.params, self.hover_points, actions, state.uav_xyz, state.hover_index, state.users,
-            state.tasks, state.served, state.battery_j, state.interval, state.task_table,
-            RETURNS[self.config.return_kind], state.reward_sum, state.interval, moves, tasks, out,
-        )
-        return out
-
-    def _search(self, state: SortieState, start: float) -> int:
+    def _search(self, scene: Scene, root: World, values: RootValues, settings: SearchSettings, start: float) -> int:
         cfg = self.config
         deadline = None if cfg.budget_ms is None else start + cfg.budget_ms / 1e3
         target = cfg.iterations if cfg.iterations is not None else math.inf
-        moves, tasks = self._futures(state, cfg.futures)
+        index = self._index(scene, root, values, cfg.futures)
         done = 0
         while done < target:
             batch = int(min(target - done, cfg.chunk if deadline is not None else target - done))
             self.tree.reserve(batch)
-            t = self.tree
-            t.num_nodes = search(
-                self.params, self.hover_points, t.parent, t.action, t.children, t.visits, t.value_sum,
-                t.num_nodes, state.uav_xyz, state.hover_index, state.users, state.tasks, state.served,
-                state.battery_j, state.interval, state.task_table, batch, cfg.c, ROLLOUTS[cfg.rollout],
-                cfg.rollout_epsilon, RETURNS[cfg.return_kind], state.reward_sum, state.interval, moves,
-                tasks, cfg.max_depth, self.rng,
-            )
+            self.tree.num_nodes = search(scene, self.tree.arrays(), self.tree.num_nodes, root, settings, index,
+                                         batch, self.rng)
             done += batch
             if deadline is not None:
                 now = time.perf_counter()
@@ -204,26 +196,16 @@ class MctsPlanner:
                     break
         return done
 
-    def _futures(self, state: SortieState, count: int) -> tuple[np.ndarray, np.ndarray]:
-        """``count`` sampled futures from ``state``: (S, H, I, 3) moves and (S, H, I) tasks."""
-        num_users = len(state.users)
-        horizon = remaining_intervals(self.params, num_users, state.interval)
+    def _index(self, scene: Scene, root: World, values: RootValues, count: int) -> FutureIndex:
+        """``count`` futures sampled from the root (drawn now from the planner's generator)
+        and their index: (S, H, I, 3) moves and (S, H, I) task draws."""
+        num_users = len(root.users)
+        horizon = remaining_intervals(self.params, num_users, int(root.interval[0]))
         count = count if horizon > 0 else 0
         moves = np.empty((count, horizon, num_users, 3))
-        tasks = np.empty((count, horizon, num_users), dtype=np.int64)
-        draw_futures(self.params, moves, tasks, self.rng)
-        return moves, tasks
-
-    def _qvals(self, state: SortieState) -> np.ndarray:
-        q = np.empty(len(self.hover_points))
-        evaluate_actions(
-            self.params, self.hover_points, state.hover_index, state.uav_xyz, state.users,
-            state.tasks, state.served, state.battery_j, q,
-        )
-        return q
-
-    def _allowed(self, state: SortieState) -> np.ndarray:
-        return np.isfinite(self._qvals(state))
+        news = np.empty((count, horizon, num_users), dtype=np.int64)
+        draw_futures(self.params, moves, news, self.rng)
+        return index_of(scene, root, moves, news, self.tables, values)
 
     def describe(self) -> dict:
         return asdict(self.config)

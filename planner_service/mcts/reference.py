@@ -15,9 +15,11 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..model import Scenario, SortieState, pack
-from ..model.interval import apply_chance, draw_chance, evaluate_actions, remaining_intervals, take_interval
+from ..model.interval import remaining_intervals
+from ..model.world import World, clone, draw_chance, evaluate, scene_of, step
 from ..policy import Decision
-from .planner import MctsConfig, paired_t
+from .objective import node_return
+from .planner import RETURNS, MctsConfig, paired_t
 
 
 @dataclass(eq=False)
@@ -35,24 +37,6 @@ class Node:
         return self.value_sum / self.visits if self.visits > 0 else 0.0
 
 
-@dataclass
-class World:
-    """A copy of the sortie state that an iteration plays forward."""
-
-    uav: np.ndarray
-    hover: int
-    users: np.ndarray
-    tasks: np.ndarray
-    served: np.ndarray
-    battery: float
-    interval: int
-
-    @classmethod
-    def of(cls, s: SortieState) -> "World":
-        return cls(s.uav_xyz.copy(), s.hover_index, s.users.copy(), s.tasks.copy(), s.served.copy(),
-                   s.battery_j, s.interval)
-
-
 class ReferenceMcts:
     """Open-loop MCTS with shared futures, confirmation against greedy, and tree reuse."""
 
@@ -67,13 +51,13 @@ class ReferenceMcts:
         self.root = Node(action=-1)
         self.chosen: Node | None = None
         self.expect: tuple[int, int] | None = None
-        self.table = np.zeros((0, len(hover_points)), dtype=np.int64)
+        self.scene = scene_of(self.p, self.hover_points, np.zeros((0, 0), dtype=np.int64))
 
     # --- the decision ------------------------------------------------------------------
     def plan(self, state: SortieState) -> Decision:
         start = time.perf_counter()
-        self.table = state.task_table
-        q = self.action_values(World.of(state))
+        self.scene = scene_of(self.p, self.hover_points, state.task_table)
+        q = self.action_values(world_of(state))
         allowed = np.isfinite(q)
         if not allowed.any():
             raise ValueError("no hovering point is allowed in this state: the sortie is over")
@@ -112,7 +96,7 @@ class ReferenceMcts:
 
     # --- one iteration -------------------------------------------------------------------
     def iterate(self, state: SortieState, futures: list[tuple[np.ndarray, np.ndarray]]) -> None:
-        world = World.of(state)
+        world = world_of(state)
         node, path, rewards = self.root, [self.root], []
         future = None
         in_tree = True
@@ -141,32 +125,20 @@ class ReferenceMcts:
         self.backup(state, path, rewards)
 
     def step(self, world: World, action: int, future, index: int) -> float:
-        user, bits, e_h, e_c, e_f, q = take_interval(
-            self.p, self.hover_points, action, world.uav, world.users, world.tasks, world.served
-        )
-        world.battery -= e_h + e_c + e_f
-        world.hover = action
-        world.interval += 1
         if future is not None:
-            moves, tasks = future[0][index], future[1][index]
+            moves, news = future[0][index], future[1][index]
         else:
-            moves, tasks = np.empty_like(world.users), np.empty_like(world.tasks)
-            draw_chance(self.p, moves, tasks, self.rng)
-        apply_chance(self.p, world.users, world.tasks, world.interval, self.table, moves, tasks)
-        return q
+            moves, news = np.empty_like(world.users), np.empty_like(world.tasks)
+            draw_chance(self.p, moves, news, self.rng)
+        return step(self.scene, world, action, moves, news).reward
 
     def backup(self, state: SortieState, path: list[Node], rewards: list[float]) -> None:
-        kind = self.config.return_kind
+        kind = RETURNS[self.config.return_kind]
+        whole = sum_from_end(rewards)
         for j, node in enumerate(path):
             first = j - 1 if j > 0 else 0  # node j is entered by step j - 1
             own = rewards[first:]
-            if kind == "sum":
-                ret = sum_from_end(own)
-            elif kind == "sortie":
-                count = state.interval + len(rewards)
-                ret = (state.reward_sum + sum_from_end(rewards)) / count if count else 0.0
-            else:
-                ret = sum_from_end(own) / len(own) if own else 0.0
+            ret = node_return(kind, sum_from_end(own), len(own), whole, len(rewards), state.reward_sum, state.interval)
             node.visits += 1.0
             node.value_sum += ret
 
@@ -198,7 +170,7 @@ class ReferenceMcts:
         return int(allowed[self.rng.integers(0, len(allowed))])
 
     def greedy_continuation(self, state: SortieState, first: int, moves: np.ndarray, tasks: np.ndarray) -> float:
-        world, rewards = World.of(state), []
+        world, rewards = world_of(state), []
         while self.within_length(world):
             q = self.action_values(world)
             if not np.isfinite(q).any():
@@ -206,11 +178,8 @@ class ReferenceMcts:
             action = first if not rewards else int(np.argmax(q))
             rewards.append(self.step(world, action, (moves, tasks), len(rewards)))
         total, steps = sum_in_order(rewards), len(rewards)
-        if self.config.return_kind == "sortie":
-            return (state.reward_sum + total) / max(state.interval + steps, 1)
-        if self.config.return_kind == "sum":
-            return total
-        return total / max(steps, 1)
+        return node_return(RETURNS[self.config.return_kind], total, steps, total, steps, state.reward_sum,
+                           state.interval)
 
     # --- helpers -------------------------------------------------------------------------
     def draw_futures(self, state: SortieState, count: int) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -228,12 +197,11 @@ class ReferenceMcts:
 
     def within_length(self, world: World) -> bool:
         limit = self.scenario.max_intervals
-        return limit <= 0 or world.interval < limit
+        return limit <= 0 or world.interval[0] < limit
 
     def action_values(self, world: World) -> np.ndarray:
         q = np.empty(len(self.hover_points))
-        evaluate_actions(self.p, self.hover_points, world.hover, world.uav, world.users, world.tasks,
-                         world.served, world.battery, q)
+        evaluate(self.scene, world, q)
         return q
 
     @staticmethod
@@ -278,3 +246,8 @@ def sum_in_order(values: list[float]) -> float:
 def sum_from_end(values: list[float]) -> float:
     """Right-to-left sum, as the kernel's suffix sums add."""
     return sum_in_order(values[::-1])
+
+
+def world_of(state: SortieState) -> World:
+    """A copy of the sortie state that an iteration plays forward."""
+    return clone(state.world())

@@ -8,12 +8,23 @@ arrays. Node 0 is the root. Shapes: N = capacity, K = number of actions.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
 ROOT_INDEX = 0
 NO_PARENT = -1
 UNVISITED = -1
+
+
+class TreeArrays(NamedTuple):
+    """A ``Tree``'s arrays as one record for the compiled search (same shapes)."""
+
+    parent: np.ndarray
+    action: np.ndarray
+    children: np.ndarray
+    visits: np.ndarray
+    value_sum: np.ndarray
 
 
 @dataclass
@@ -44,6 +55,10 @@ class Tree:
             num_nodes=1,
         )
         return tree
+
+    def arrays(self) -> TreeArrays:
+        """The arrays as the compiled search takes them."""
+        return TreeArrays(self.parent, self.action, self.children, self.visits, self.value_sum)
 
     @property
     def capacity(self) -> int:

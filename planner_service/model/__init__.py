@@ -9,9 +9,11 @@ from .params import pack
 from .presets import PRESETS, field, paper, paper_3d, preset
 from .scenario import Scenario
 from .state import SortieState
+from .world import NO_MOVES, NO_NEWS, Outcome, Scene, World, draw_chance, scene_of, step
 
 __all__ = [
-    "AT_BASE", "HAVE_NUMBA", "NO_USER", "PRESETS", "Scenario", "ScenarioError", "Snapshot",
-    "SortieEnv", "SortieState", "base_position", "evaluate_actions", "field", "hover_points",
-    "pack", "paper", "paper_3d", "preset", "service_outcome", "user_rows",
+    "AT_BASE", "HAVE_NUMBA", "NO_MOVES", "NO_NEWS", "NO_USER", "Outcome", "PRESETS", "Scenario", "ScenarioError",
+    "Scene", "Snapshot", "SortieEnv", "SortieState", "World", "base_position", "draw_chance", "evaluate_actions",
+    "field", "hover_points", "pack", "paper", "paper_3d", "preset", "scene_of", "service_outcome", "step",
+    "user_rows",
 ]

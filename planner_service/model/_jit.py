@@ -32,6 +32,27 @@ def jit(func: F) -> F:
     return _numba.njit(cache=True, nogil=True)(func)  # type: ignore[return-value]
 
 
+def jit_borrow(func: F) -> F:
+    """``jit`` for a kernel that only borrows arrays: it allocates none and returns none
+    (numbers, or a record of numbers, at most), so it needs no reference counting.
+
+    Numba counts a reference to every array it passes into a compiled function and out
+    again, each member of a record of arrays included (its pass that drops needless counts
+    does not apply to records), and each count is an atomic operation: about 10 ns here,
+    which made a playout step several times slower. Compiled without numba's runtime
+    (``_nrt=False``, the option numba's own benchmarks use) such a kernel counts nothing.
+    Returning an array from it would corrupt the counts: never do that. If numba refuses the
+    option, the kernel is compiled as ``jit`` does, the same results, slower.
+    """
+    if _numba is None:
+        func.py_func = func  # type: ignore[attr-defined]
+        return func
+    try:
+        return _numba.njit(cache=True, nogil=True, _nrt=False)(func)  # type: ignore[return-value]
+    except (KeyError, TypeError, ValueError):  # pragma: no cover - a numba without the option
+        return _numba.njit(cache=True, nogil=True)(func)  # type: ignore[return-value]
+
+
 def py(func: Callable[..., Any]) -> Callable[..., Any]:
     """The uncompiled Python function behind a kernel."""
     return getattr(func, "py_func", func)

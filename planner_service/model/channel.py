@@ -7,10 +7,10 @@ import math
 import numpy as np
 
 from . import params as P
-from ._jit import jit
+from ._jit import jit_borrow
 
 
-@jit
+@jit_borrow
 def distance_sq_m2(a: np.ndarray, b: np.ndarray) -> float:
     """Squared Euclidean distance of two (3,) points."""
     dx = a[0] - b[0]
@@ -19,7 +19,7 @@ def distance_sq_m2(a: np.ndarray, b: np.ndarray) -> float:
     return dx * dx + dy * dy + dz * dz
 
 
-@jit
+@jit_borrow
 def channel_gain(p: np.ndarray, hover_xyz: np.ndarray, user_xyz: np.ndarray) -> float:
     """g = rho_0 / d^2 with d^2 = H^2 + ||D - U||^2 (4)-(5).
 
@@ -31,7 +31,7 @@ def channel_gain(p: np.ndarray, hover_xyz: np.ndarray, user_xyz: np.ndarray) -> 
     return p[P.GAIN_REF] / max(d2, 1.0)  # (5)
 
 
-@jit
+@jit_borrow
 def upload_rate_bps(p: np.ndarray, gain: float) -> float:
     """R = B log2(1 + P_u g / sigma^2); B = 1 is the paper's literal rate."""
     return p[P.BANDWIDTH] * math.log2(1.0 + p[P.UPLOAD_POWER] * gain / p[P.NOISE_W])

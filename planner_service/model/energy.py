@@ -7,22 +7,22 @@ import math
 import numpy as np
 
 from . import params as P
-from ._jit import jit
+from ._jit import jit_borrow
 
 
-@jit
+@jit_borrow
 def hover_energy_j(p: np.ndarray, bits: float, rate_bps: float) -> float:
     """e_h = P_h S / R: hovering while the user uploads ``bits``."""
     return p[P.HOVER_POWER] * bits / rate_bps
 
 
-@jit
+@jit_borrow
 def computation_energy_j(p: np.ndarray, bits: float) -> float:
     """e_c = gamma_c C S f_c^2 (6)."""
     return p[P.CAPACITANCE] * p[P.CYCLES_PER_BIT] * bits * p[P.CPU_HZ] ** 2
 
 
-@jit
+@jit_borrow
 def rotary_wing_power_w(p: np.ndarray, speed_mps: float) -> float:
     """Level-flight power of a rotary-wing UAV (Zeng, Xu, Zhang, IEEE TWC 2019, (12)).
 
@@ -36,7 +36,7 @@ def rotary_wing_power_w(p: np.ndarray, speed_mps: float) -> float:
     return blade + induced + parasite
 
 
-@jit
+@jit_borrow
 def flight_energy_j(p: np.ndarray, distance_m: float) -> float:
     """Energy to fly ``distance_m`` at the scenario's speed; nothing when not moving.
 

@@ -15,12 +15,13 @@ from typing import Any
 import numpy as np
 
 from .errors import ScenarioError
-from .interval import AT_BASE, NO_USER, advance_chance, evaluate_actions, take_interval
+from .interval import AT_BASE, NO_USER, evaluate_actions
 from .mobility import draw_tasks
 from .layouts import base_position, hover_points, user_rows
 from .params import pack
 from .scenario import Scenario
 from .state import SortieState
+from .world import draw_chance, scene_of, step
 
 
 @dataclass(frozen=True)
@@ -104,29 +105,24 @@ class SortieEnv:
             raise ScenarioError("action", f"hovering point {action} is not allowed now")
         hp = self.hover_points[action]
         user_xyz = st.users.tolist()
-        user, bits, e_h, e_c, e_f, q = take_interval(
-            self.params, self.hover_points, int(action), st.uav_xyz, st.users, st.tasks, st.served
-        )
-        energy = e_h + e_c + e_f
+        moves, news = np.empty_like(st.users), np.empty_like(st.tasks)
+        draw_chance(self.params, moves, news, self.rng)
+        world = st.world()
+        out = step(scene_of(self.params, self.hover_points, st.task_table), world, int(action), moves, news)
+        st.absorb(world)
         info = {
-            "interval": st.interval,
+            "interval": st.interval - 1,
             "hover_point": int(action),
             "uav_xyz": hp.tolist(),
-            "user": int(user),
-            "user_xyz": user_xyz[user],
-            "tasks": int(st.tasks[user]),
-            "bits": float(bits),
-            "e_hover_j": float(e_h),
-            "e_comp_j": float(e_c),
-            "e_flight_j": float(e_f),
-            "reward": float(q),
+            "user": int(out.user),
+            "user_xyz": user_xyz[out.user],
+            "tasks": int(out.tasks),
+            "bits": float(out.bits),
+            "e_hover_j": float(out.e_hover_j),
+            "e_comp_j": float(out.e_comp_j),
+            "e_flight_j": float(out.e_flight_j),
+            "reward": float(out.reward),
         }
-        st.battery_j -= energy
-        st.energy_used_j += energy
-        st.reward_sum += q
-        st.hover_index = int(action)
-        st.interval += 1
-        advance_chance(self.params, st.users, st.tasks, st.interval, st.task_table, self.rng)
         info["battery_j"] = float(st.battery_j)
         limit = self.scenario.max_intervals
         truncated = bool(limit and st.interval >= limit)
@@ -134,7 +130,7 @@ class SortieEnv:
         terminated = not next_mask.any()
         info["action_mask"] = next_mask
         self._done = terminated or truncated
-        return self.observation(), float(q), terminated, truncated, info
+        return self.observation(), float(out.reward), terminated, truncated, info
 
     # --- helpers for planners -----------------------------------------------------------
     def action_values(self) -> np.ndarray:

@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 
 from . import params as P
-from ._jit import jit
+from ._jit import jit_borrow
 
 
-@jit
+@jit_borrow
 def is_eligible(p: np.ndarray, tasks: int, served_count: int) -> bool:
     """b_i(t) may be 1: never served, or served once and u_i(t) > beta (3); never past
     the (9c) limit. A user with no task has nothing to offload and is not eligible."""

@@ -1,7 +1,8 @@
 """One interval of service: which user is served, what it costs, what it earns.
 
-These kernels compose the equations of the other modules; the environment, the greedy
-policy, the MCTS playouts and the learners all call them, so the physics exists once.
+These kernels compose the equations of the other modules; ``world.step`` (the one step of
+the world that the environment, the planners' playouts and the service's path prediction
+take) and the evaluation of every action call them, so the physics exists once.
 Array shapes: hover points (K, 3), users (I, 3), tasks and service counts (I,) int64,
 positions (3,) in local metres (x east, y north, z up).
 """
@@ -13,11 +14,10 @@ import math
 import numpy as np
 
 from . import params as P
-from ._jit import jit
+from ._jit import jit, jit_borrow
 from .channel import channel_gain, distance_sq_m2, upload_rate_bps
 from .energy import computation_energy_j, flight_energy_j, hover_energy_j
 from .fairness import is_eligible
-from .mobility import apply_moves, draw_moves, draw_tasks
 from .reward import interval_reward
 
 NO_USER = -1
@@ -26,7 +26,7 @@ AT_BASE = -1
 """Hovering-point sentinel: the UAV is at its base position."""
 
 
-@jit
+@jit_borrow
 def eligible_users(p: np.ndarray, tasks: np.ndarray, served: np.ndarray, out: np.ndarray) -> int:
     """Fill ``out`` (I,) bool with who may be served now (3); returns how many."""
     count = 0
@@ -36,7 +36,7 @@ def eligible_users(p: np.ndarray, tasks: np.ndarray, served: np.ndarray, out: np
     return count
 
 
-@jit
+@jit_borrow
 def nearest_eligible(
     p: np.ndarray, hover_xyz: np.ndarray, users: np.ndarray, tasks: np.ndarray, eligible: np.ndarray,
     distance: np.ndarray,
@@ -70,17 +70,31 @@ def served_user(
     return nearest_eligible(p, hover_xyz, users, tasks, eligible, np.empty(users.shape[0]))
 
 
-@jit
+@jit_borrow
+def service_cost(
+    p: np.ndarray, hover_xyz: np.ndarray, user_xyz: np.ndarray, tasks: int
+) -> tuple[float, float, float]:
+    """What serving a user with ``tasks`` at ``user_xyz`` from ``hover_xyz`` costs, wherever
+    the UAV came from: (bits S = u B_t, e_hover_j, e_comp_j)."""
+    bits = tasks * p[P.BITS_PER_TASK]  # S(t) = u_i(t) B_t
+    rate = upload_rate_bps(p, channel_gain(p, hover_xyz, user_xyz))
+    return bits, hover_energy_j(p, bits, rate), computation_energy_j(p, bits)
+
+
+@jit_borrow
+def hop_energy_j(p: np.ndarray, from_xyz: np.ndarray, to_xyz: np.ndarray) -> float:
+    """Energy of the flight ``from_xyz`` -> ``to_xyz`` (7)-(8)."""
+    return flight_energy_j(p, math.sqrt(distance_sq_m2(from_xyz, to_xyz)))
+
+
+@jit_borrow
 def user_outcome(
     p: np.ndarray, from_xyz: np.ndarray, hover_xyz: np.ndarray, user_xyz: np.ndarray, tasks: int
 ) -> tuple[float, float, float, float, float]:
     """Fly ``from_xyz`` -> ``hover_xyz`` and serve a user with ``tasks`` at ``user_xyz``:
     (bits, e_hover_j, e_comp_j, e_flight_j, q)."""
-    bits = tasks * p[P.BITS_PER_TASK]  # S(t) = u_i(t) B_t
-    rate = upload_rate_bps(p, channel_gain(p, hover_xyz, user_xyz))
-    e_h = hover_energy_j(p, bits, rate)
-    e_c = computation_energy_j(p, bits)
-    e_f = flight_energy_j(p, math.sqrt(distance_sq_m2(from_xyz, hover_xyz)))
+    bits, e_h, e_c = service_cost(p, hover_xyz, user_xyz, tasks)
+    e_f = hop_energy_j(p, from_xyz, hover_xyz)
     q = interval_reward(p, tasks, e_h + e_c + e_f)
     return bits, e_h, e_c, e_f, q
 
@@ -106,21 +120,30 @@ def service_outcome(
     return user, bits, e_h, e_c, e_f, q
 
 
-@jit
+@jit_borrow
 def return_energy_j(p: np.ndarray, hover_xyz: np.ndarray) -> float:
     """Energy to fly from ``hover_xyz`` back to base."""
-    base = np.array((p[P.BASE_X], p[P.BASE_Y], p[P.BASE_Z]))
-    return flight_energy_j(p, math.sqrt(distance_sq_m2(hover_xyz, base)))
+    dx = hover_xyz[0] - p[P.BASE_X]
+    dy = hover_xyz[1] - p[P.BASE_Y]
+    dz = hover_xyz[2] - p[P.BASE_Z]
+    return flight_energy_j(p, math.sqrt(dx * dx + dy * dy + dz * dz))
 
 
-@jit
-def within_budget(p: np.ndarray, battery_j: float, energy_j: float, hover_xyz: np.ndarray) -> bool:
-    """The battery stays at or above theta E_0 after this interval (9b), keeping the way
-    home too when ``reserve_return_energy`` is set."""
+@jit_borrow
+def budget_ok(p: np.ndarray, battery_j: float, energy_j: float, home_j: float) -> bool:
+    """The battery stays at or above theta E_0 after an interval of ``energy_j`` (9b), and
+    also keeps ``home_j`` (the flight home from its point) when ``reserve_return_energy``."""
     left = battery_j - energy_j
     if p[P.RESERVE_RETURN] > 0.5:
-        left -= return_energy_j(p, hover_xyz)
+        left -= home_j
     return left >= p[P.ENERGY_FLOOR]
+
+
+@jit_borrow
+def within_budget(p: np.ndarray, battery_j: float, energy_j: float, hover_xyz: np.ndarray) -> bool:
+    """``budget_ok`` for an interval served from ``hover_xyz``."""
+    home = return_energy_j(p, hover_xyz) if p[P.RESERVE_RETURN] > 0.5 else 0.0
+    return budget_ok(p, battery_j, energy_j, home)
 
 
 @jit
@@ -155,77 +178,7 @@ def evaluate_actions(
     return allowed
 
 
-@jit
-def draw_chance(
-    p: np.ndarray, moves: np.ndarray, new_tasks: np.ndarray, rng: np.random.Generator
-) -> None:
-    """Draw what happens between two intervals: every user's move, then every user's new
-    task count. ``moves`` (I, 3) and ``new_tasks`` (I,) are filled in place."""
-    draw_moves(p, moves, rng)
-    draw_tasks(p, new_tasks, rng)
-
-
-@jit
-def apply_chance(
-    p: np.ndarray,
-    users: np.ndarray,
-    tasks: np.ndarray,
-    next_interval: int,
-    task_table: np.ndarray,
-    moves: np.ndarray,
-    new_tasks: np.ndarray,
-) -> None:
-    """Between intervals: users move (1)-(2) and post new task counts.
-
-    Tasks come from row ``next_interval`` of ``task_table`` (T, I) when it has one (a known
-    schedule), else from ``new_tasks``."""
-    apply_moves(p, users, moves)
-    if next_interval < task_table.shape[0]:
-        for i in range(tasks.shape[0]):
-            tasks[i] = task_table[next_interval, i]
-    else:
-        tasks[:] = new_tasks
-
-
-@jit
-def advance_chance(
-    p: np.ndarray,
-    users: np.ndarray,
-    tasks: np.ndarray,
-    next_interval: int,
-    task_table: np.ndarray,
-    rng: np.random.Generator,
-) -> None:
-    """Draw and apply one step of chance. The draws are made even where a task table
-    overrides them, so a seed fixes the whole future whatever the schedule."""
-    moves = np.empty_like(users)
-    new_tasks = np.empty_like(tasks)
-    draw_chance(p, moves, new_tasks, rng)
-    apply_chance(p, users, tasks, next_interval, task_table, moves, new_tasks)
-
-
-@jit
-def take_interval(
-    p: np.ndarray,
-    hover_points: np.ndarray,
-    action: int,
-    uav_xyz: np.ndarray,
-    users: np.ndarray,
-    tasks: np.ndarray,
-    served: np.ndarray,
-) -> tuple[int, float, float, float, float, float]:
-    """Serve from hovering point ``action``: ``service_outcome``, then count the service
-    and move the UAV (``served`` and ``uav_xyz`` in place). The caller charges the battery
-    with e_hover + e_comp + e_flight and advances the chance."""
-    outcome = service_outcome(p, uav_xyz, hover_points[action], users, tasks, served)
-    user = outcome[0]
-    if user != NO_USER:
-        served[user] += 1
-        uav_xyz[:] = hover_points[action]
-    return outcome
-
-
-@jit
+@jit_borrow
 def remaining_intervals(p: np.ndarray, num_users: int, interval: int) -> int:
     """An upper bound on the intervals left: the length limit, else the fairness limit
     (every interval serves one user, each at most ``max_services`` times)."""

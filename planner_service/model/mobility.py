@@ -1,4 +1,5 @@
-"""Random-waypoint user moves (1)-(2) and the per-interval task draws.
+"""Random-waypoint user moves (1)-(2), the per-interval task draws and the arrivals of the
+backlog task model.
 
 Drawing and applying are separate so a planner can draw many futures up front and apply
 them later (common random numbers); ``move_users`` does both in the environment's order.
@@ -11,7 +12,33 @@ import math
 import numpy as np
 
 from . import params as P
-from ._jit import jit
+from ._jit import HAVE_NUMBA, jit, jit_borrow
+
+try:  # numba's own scalar draw behind Generator.integers, without its one-element array
+    from numba.np.random.random_methods import buffered_bounded_lemire_uint32 as _lemire32
+except ImportError:  # pragma: no cover - no numba, or a numba that moved it
+    _lemire32 = None
+
+if HAVE_NUMBA and _lemire32 is not None:
+
+    @jit
+    def draw_int(rng: np.random.Generator, low: int, high: int) -> int:
+        """``rng.integers(low, high)`` for a span below 2^32, the same number from the same
+        generator state. Compiled, ``integers`` allocates a one-element array at each call
+        (most of its cost); this calls the draw it makes directly (checked against it in
+        ``tests/model/test_equations.py``)."""
+        span = high - 1 - low
+        if span <= 0:
+            return low  # one possible value: integers draws nothing either
+        return low + np.int64(_lemire32(rng.bit_generator, span))
+
+else:  # pragma: no cover - exercised where numba is missing
+
+    def draw_int(rng: np.random.Generator, low: int, high: int) -> int:
+        """``rng.integers(low, high)``."""
+        return int(rng.integers(low, high))
+
+    draw_int.py_func = draw_int  # type: ignore[attr-defined]
 
 
 @jit
@@ -26,7 +53,7 @@ def _step(p: np.ndarray, rng: np.random.Generator) -> float:
         return 0.0
     if p[P.MOVE_INTEGER] > 0.5:
         r = int(reach)
-        return float(rng.integers(-r, r + 1))
+        return float(draw_int(rng, -r, r + 1))
     return rng.uniform(-reach, reach)
 
 
@@ -40,7 +67,7 @@ def draw_moves(p: np.ndarray, moves: np.ndarray, rng: np.random.Generator) -> No
             moves[i, a] = _step(p, rng) if a < axes else 0.0
 
 
-@jit
+@jit_borrow
 def apply_moves(p: np.ndarray, users: np.ndarray, moves: np.ndarray) -> None:
     """x_i(t) = clip(x_i(t-1) + alpha_1, 0, R), the same for y (1)-(2); in the 3-D variant
     z stays within [0, user_max_altitude]. ``users`` (I, 3) is updated in place."""
@@ -66,3 +93,12 @@ def draw_tasks(p: np.ndarray, tasks: np.ndarray, rng: np.random.Generator) -> No
     for i in range(tasks.shape[0]):
         value = math.floor(rng.normal(p[P.TASK_MEAN], p[P.TASK_STD]) + 0.5)
         tasks[i] = int(min(max(value, 0.0), top))
+
+
+@jit
+def draw_arrivals(p: np.ndarray, arrivals: np.ndarray, rng: np.random.Generator) -> None:
+    """New tasks of every user in one interval (``task_model = "backlog"``): Poisson with
+    mean ``task_arrival_mean``; in place."""
+    mean = p[P.ARRIVAL_MEAN]
+    for i in range(arrivals.shape[0]):
+        arrivals[i] = rng.poisson(mean) if mean > 0.0 else 0

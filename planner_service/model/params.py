@@ -55,7 +55,14 @@ BASE_X = 41
 BASE_Y = 42
 BASE_Z = 43
 MAX_INTERVALS = 44
-SIZE = 45
+TASK_MODEL = 45
+ARRIVAL_MEAN = 46
+SIZE = 47
+
+REDRAW = 0.0
+"""``p[TASK_MODEL]`` of the paper's task model: every user's count is redrawn each interval."""
+BACKLOG = 1.0
+"""``p[TASK_MODEL]`` of the backlog model: tasks wait until served, new ones arrive."""
 
 
 def pack(s: Scenario) -> np.ndarray:
@@ -106,4 +113,6 @@ def pack(s: Scenario) -> np.ndarray:
     p[BASE_Y] = s.base_y_m
     p[BASE_Z] = s.base_z_m
     p[MAX_INTERVALS] = s.max_intervals
+    p[TASK_MODEL] = BACKLOG if s.task_model == "backlog" else REDRAW
+    p[ARRIVAL_MEAN] = s.task_arrival_mean
     return p

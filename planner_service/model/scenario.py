@@ -17,6 +17,7 @@ from .errors import ScenarioError
 PROPULSION_MODELS = ("paper", "rotary-wing")
 HOVER_LAYOUTS = ("original", "uniform")
 RETURN_KINDS = ("mean", "sum")
+TASK_MODELS = ("redraw", "backlog")
 
 
 @dataclass(frozen=True)
@@ -84,6 +85,18 @@ class Scenario:
     """[phi] standard deviation of the task count."""
     task_max: int = 20
     """[u_max] task counts are rounded and clipped to [0, u_max]. *decision* (authors' code)"""
+    task_model: str = "redraw"
+    """What a user's task count is from one interval to the next. ``redraw`` (the paper's):
+    every interval every user draws a new count u_i(t), whatever was served before.
+    ``backlog``: the count is data waiting to be offloaded. The first interval's counts are
+    drawn as in ``redraw``; a service offloads the served user's whole backlog (it drops
+    to 0); between intervals every user's backlog grows by a Poisson number of new tasks
+    of mean ``task_arrival_mean``, capped at u_max (the user's buffer). *decision*"""
+    task_arrival_mean: float = 1.0
+    """[lambda] ``backlog`` only: mean new tasks per user per interval. Poisson, because a
+    user's tasks are generated independently at a constant rate; 1 per interval adds, over
+    a sortie of m = 10 intervals, the paper's mean count (10) on top of the first backlog.
+    *decision*"""
 
     # --- energy (6)-(8) --------------------------------------------------------------
     hover_power_w: float = 1.0
@@ -250,7 +263,7 @@ def _validate(s: Scenario) -> None:
     non_negative = (
         "user_move_range_m", "task_std", "hover_power_w", "cycles_per_bit", "cpu_hz",
         "switched_capacitance", "nearest_tie_m", "max_intervals", "uct_c", "task_mean",
-        "user_max_altitude_m", "fairness_threshold_tasks",
+        "user_max_altitude_m", "fairness_threshold_tasks", "task_arrival_mean",
     )
     for name in non_negative:
         if getattr(s, name) < 0:
@@ -261,6 +274,8 @@ def _validate(s: Scenario) -> None:
         raise ScenarioError("dimensions", f"dimensions must be 2 or 3, got {s.dimensions}")
     if s.hover_layout not in HOVER_LAYOUTS:
         raise ScenarioError("hover_layout", f"hover_layout must be one of {HOVER_LAYOUTS}")
+    if s.task_model not in TASK_MODELS:
+        raise ScenarioError("task_model", f"task_model must be one of {TASK_MODELS}, got {s.task_model!r}")
     if s.propulsion_model not in PROPULSION_MODELS:
         raise ScenarioError("propulsion_model", f"propulsion_model must be one of {PROPULSION_MODELS}")
     if s.dimensions == 3 and not s.plane_altitudes_m:

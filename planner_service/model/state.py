@@ -6,6 +6,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .world import World, world_from
+
 
 @dataclass
 class SortieState:
@@ -40,3 +42,22 @@ class SortieState:
             task_table=self.task_table,  # never written: shared
             reward_sum=self.reward_sum,
         )
+
+    def world(self) -> World:
+        """This state as the kernels' ``World`` record. Its arrays are this state's own where
+        they already have the kernels' type, so a step changes both; ``absorb`` then brings
+        the rest (the scalars) back."""
+        return world_from(self.uav_xyz, self.hover_index, self.users, self.tasks, self.served, self.battery_j,
+                          self.interval, self.energy_used_j, self.reward_sum)
+
+    def absorb(self, w: World) -> None:
+        """Take the values of ``w`` (made by ``world()`` and stepped) into this state."""
+        for name in ("uav_xyz", "users", "tasks", "served"):
+            mine, theirs = getattr(self, name), getattr(w, name)
+            if mine is not theirs:
+                mine[...] = theirs.reshape(mine.shape)
+        self.hover_index = int(w.hover[0])
+        self.battery_j = float(w.battery_j[0])
+        self.interval = int(w.interval[0])
+        self.energy_used_j = float(w.energy_used_j[0])
+        self.reward_sum = float(w.reward_sum[0])

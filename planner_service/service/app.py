@@ -125,7 +125,7 @@ class Service:
         self._busy_logged = (self.mono(), 0)
         self.planner = Planner(self.scenario, MctsConfig(iterations=config.planner.iterations or None,
                                                          budget_ms=config.planner.budget_ms),
-                               config.planner.seed, _max_points(config))
+                               config.planner.seed, _max_points(config), config.planner.algo)
         self.link = parts.open_link(self._on_link_event)
         self.executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix="planner")
         self.stopping = asyncio.Event()
@@ -231,14 +231,8 @@ class Service:
             log.info("stopped: journal flushed")
 
     async def _warm_up(self) -> None:
-        """Load the compiled kernels before the first request needs them."""
-        from .journal import UserRow
-
-        fix = VehicleFix(0.0, 0.0, 0.0, self.scenario.battery_j, False)
-        warm = assemble(self.scenario, [UserRow("warm-up", 100.0, 100.0, 0.0, 0)], [], [], fix, -1)
-        warm.state.tasks[0] = 10
-        probe = Planner(self.scenario, MctsConfig(iterations=50), 0)
-        await asyncio.get_running_loop().run_in_executor(self.executor, probe.decide, warm)
+        """Compile every kernel the planner uses before the first request needs them."""
+        await asyncio.get_running_loop().run_in_executor(self.executor, self.planner.warm_up)
 
     async def _connect_loop(self) -> None:
         while True:

@@ -108,12 +108,21 @@ class MavlinkConfig:
     beside the key (KEY.service-timestamp)."""
 
 
+FLIGHT_ALGOS = ("mcts", "greedy", "random", "ts-mcts", "mcts-paper")
+"""The algorithms the service can fly (``planner.algo``); the learners (``ql``, ``dqn``)
+train before a sortie and are not among them."""
+
+
 @dataclass(frozen=True)
 class PlannerConfig:
+    algo: str = "mcts"
+    """The algorithm flown: ``mcts`` (default), ``greedy``, ``random``, ``ts-mcts`` or
+    ``mcts-paper`` (``FLIGHT_ALGOS``)."""
     budget_ms: float = 200.0
-    """Wall-clock budget of one MCTS decision."""
+    """Wall-clock budget of one MCTS decision (``mcts``)."""
     iterations: int = 0
-    """Iteration cap per decision; 0: the budget alone decides."""
+    """Iteration cap per decision; 0: the budget alone decides. ``mcts-paper`` and
+    ``ts-mcts`` run this many iterations, 0 meaning the paper's 1000."""
     seed: int = 0
     """Seed of the planner's random generator."""
     min_requests: int = 1
@@ -362,6 +371,8 @@ def validate(c: ServiceConfig) -> None:
     if not 3 <= m.max_mission_items <= 65535:  # home, takeoff and RTL; MISSION_COUNT is uint16
         raise ConfigError("mavlink.max_mission_items", f"must lie in 3..65535, got {m.max_mission_items}")
     _validate_signing(m)
+    if p.algo not in FLIGHT_ALGOS:
+        raise ConfigError("planner.algo", f"{p.algo!r} is not one of {FLIGHT_ALGOS}")
     if not p.budget_ms > 0:
         raise ConfigError("planner.budget_ms", "must be positive")
     if p.iterations < 0 or p.min_requests < 1 or p.replan_min_interval_s < 0:

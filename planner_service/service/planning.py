@@ -6,10 +6,15 @@ numbers out): the service runs ``Planner.decide`` in a worker thread.
   with a pending request has its task count, any other has 0 (nothing to offload, so not
   eligible); service counts come from the journal (the fairness rule spans restarts).
 - ``predict_path``: the planner's line as hovering points with hold times, by stepping a
-  copy of the state along it with the model: the user served at each point, its upload
-  time (bits / rate: the hold), the energy. A served user's request is consumed (its next
-  task count is unknown until it asks again), so the line stops where nobody known is
-  eligible, and where the next step would break the energy reserve (9b) with the way home.
+  copy of the state along it with the model's own ``step``, with nothing happening
+  between the intervals (the service knows no future): the user served at each point, its
+  upload time (bits / rate: the hold), the energy. A served user's request is consumed
+  (the step offloads its tasks; its next request is unknown until it asks again), so the
+  line stops where nobody known is eligible, and where the next step would break the
+  energy reserve (9b) with the way home.
+- ``Planner``: the algorithm the operator chose (``planner.algo``): ``mcts`` (default),
+  ``ts-mcts``, ``mcts-paper`` (their principal line is the path), ``greedy`` or ``random``
+  (one-step rules: the path is the same rule applied again along the predicted state).
 - ``check_path``: an independent guard before upload: every point inside the area and
   altitude limits, the predicted energy above the reserve.
 
@@ -22,18 +27,22 @@ pay for users that do not exist.
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import dataclass
+from typing import Callable
 
 import numpy as np
 
 from protocol import Area
 
-from ..mcts import MctsConfig, MctsPlanner
-from ..model import AT_BASE, NO_USER, Scenario, SortieState, base_position, hover_points, pack
+from ..mcts import MctsConfig, MctsPlanner, PaperMctsPlanner, warm_up
+from ..model import AT_BASE, NO_MOVES, NO_NEWS, NO_USER, Scenario, SortieState, base_position, hover_points, pack
 from ..model.channel import channel_gain, upload_rate_bps
 from ..model.energy import flight_energy_j
-from ..model.interval import return_energy_j, service_outcome, within_budget
+from ..model.interval import remaining_intervals, return_energy_j, served_user, user_outcome, within_budget
+from ..model.world import World, clone, evaluate, scene_of, step
 from ..policy import Decision
+from .config import FLIGHT_ALGOS
 from .errors import PlanningError
 from .journal import RequestRow, ServiceRow, UserRow
 
@@ -125,8 +134,9 @@ def predict_path(scenario: Scenario, points: np.ndarray, assembled: Assembled, l
     most ``max_points`` of them (what the autopilot's mission holds): a shorter path is
     safe, since every step kept the energy for the way home from its point."""
     p = pack(scenario)
-    state = assembled.state.copy()
-    uav, hover_index, battery = state.uav_xyz.copy(), state.hover_index, state.battery_j
+    state = assembled.state
+    scene = scene_of(p, points, state.task_table)
+    w = clone(state.world())
     out: list[PlannedPoint] = []
     reason = "the planned line ends"
     for k in line:
@@ -135,29 +145,46 @@ def predict_path(scenario: Scenario, points: np.ndarray, assembled: Assembled, l
             break
         if not 0 <= k < len(points):
             raise PlanningError("line", f"hovering point {k} does not exist (K = {len(points)})")
-        if k == hover_index and not scenario.allow_stay:
+        if k == w.hover[0] and not scenario.allow_stay:
             reason = "the line stays at one point"
             break
-        user, bits, e_h, e_c, e_f, q = service_outcome(p, uav, points[k], state.users, state.tasks, state.served)
+        user = served_user(p, points[k], w.users, w.tasks, w.served)
         if user == NO_USER:
             reason = "nobody known is eligible further on"
             break
+        bits, e_h, e_c, e_f, q = user_outcome(p, w.uav_xyz, points[k], w.users[user], w.tasks[user])
         energy = e_h + e_c + e_f
-        if not within_budget(p, battery, energy, points[k]):
+        if not within_budget(p, w.battery_j[0], energy, points[k]):
             reason = "the energy reserve"
             break
+        hold = hold_time_s(p, points[k], w.users[user], bits)
+        served = step(scene, w, int(k), NO_MOVES, NO_NEWS)  # its request is consumed; nothing else changes
         out.append(PlannedPoint(
             hover_index=int(k), x_m=float(points[k][0]), y_m=float(points[k][1]), z_m=float(points[k][2]),
-            hold_s=hold_time_s(p, points[k], state.users[user], bits), user_id=assembled.user_ids[user],
-            request_id=assembled.request_ids[user], tasks=int(state.tasks[user]), bits=float(bits),
-            energy_j=float(energy), reward=float(q)))
-        battery -= energy
-        state.served[user] += 1
-        state.tasks[user] = 0  # its request is consumed; its next one is not known yet
-        uav, hover_index = points[k].copy(), int(k)
-    home = return_energy_j(p, uav) if out else return_energy_j(p, state.uav_xyz)
+            hold_s=hold, user_id=assembled.user_ids[user], request_id=assembled.request_ids[user],
+            tasks=int(served.tasks), bits=float(served.bits), energy_j=float(energy), reward=float(served.reward)))
+    home = return_energy_j(p, w.uav_xyz)
     spent = sum(pt.energy_j for pt in out) + home
     return PlannedPath(tuple(out), float(spent), float(state.battery_j - spent), reason)
+
+
+def one_step_line(scenario: Scenario, points: np.ndarray, state: SortieState, choose: Callable[[np.ndarray], int],
+                  max_points: int | None = None) -> tuple[int, ...]:
+    """A one-step rule's path: ``choose`` (q (K,), -inf where not allowed -> an allowed
+    index) applied at the state, then again along the state predicted as ``predict_path``
+    predicts it, until nothing is allowed (at most ``max_points`` points)."""
+    p = pack(scenario)
+    scene = scene_of(p, points, state.task_table)
+    w = clone(state.world())
+    q = np.empty(len(points))
+    longest = remaining_intervals(p, len(state.users), state.interval)
+    if max_points is not None:
+        longest = min(longest, max_points)
+    line: list[int] = []
+    while len(line) < max(longest, 1) and evaluate(scene, w, q) > 0:
+        line.append(int(choose(q)))
+        step(scene, w, line[-1], NO_MOVES, NO_NEWS)
+    return tuple(line)
 
 
 def check_path(path: PlannedPath, area: Area, scenario: Scenario, battery_j: float) -> None:
@@ -207,23 +234,32 @@ def should_return(battery_fraction: float, airborne: bool, returning: bool, thre
     return airborne and not returning and battery_fraction <= threshold
 
 
-class Planner:
-    """The MCTS planner for the current set of users; rebuilt when that set grows."""
+PAPER_ITERATIONS = 1000
+"""Iterations of ``mcts-paper`` and ``ts-mcts`` when ``planner.iterations`` is 0: the
+paper's n (they run a number of iterations, not a clock budget)."""
 
-    def __init__(self, scenario: Scenario, config: MctsConfig, seed: int, max_points: int | None = None) -> None:
+
+class Planner:
+    """The chosen algorithm for the current set of users; rebuilt when that set grows."""
+
+    def __init__(self, scenario: Scenario, config: MctsConfig, seed: int, max_points: int | None = None,
+                 algo: str = "mcts") -> None:
+        if algo not in FLIGHT_ALGOS:
+            raise PlanningError("algo", f"unknown algorithm {algo!r}; choose from {FLIGHT_ALGOS}")
         self.base = scenario
         self.config = config
+        self.algo = algo
         self.max_points = max_points
         """The most hovering points one mission holds (the autopilot's capacity)."""
         self.points = hover_points(scenario)
         self.rng = np.random.default_rng(seed)
-        self._planner: MctsPlanner | None = None
+        self._planner: MctsPlanner | PaperMctsPlanner | None = None
         self._users = -1
 
     def new_sortie(self) -> None:
         """Forget the search tree: a new sortie starts from the base with fresh counts, which
         the tree of the last one knows nothing about (the generator runs on)."""
-        if self._planner is not None:
+        if isinstance(self._planner, MctsPlanner):
             self._planner.reset()
 
     def scenario_for(self, num_users: int) -> Scenario:
@@ -234,13 +270,56 @@ class Planner:
         allowed (the sortie is over for now). Runs in a worker thread: CPU-bound, nogil."""
         n = len(assembled.user_ids)
         scenario = self.scenario_for(n)
-        if n != self._users or self._planner is None:
-            self._planner = MctsPlanner(scenario, self.points, self.config, self.rng)
+        if n != self._users or (self._planner is None and self.algo in ("mcts", "ts-mcts", "mcts-paper")):
+            self._planner = self._build(scenario)
             self._users = n
         if n == 0:
             return None, predict_path(scenario, self.points, assembled, ())
         try:
-            decision = self._planner.plan(assembled.state)
+            decision = self._plan(scenario, assembled.state)
         except ValueError:  # no hovering point allowed: nobody eligible or no energy
             return None, predict_path(scenario, self.points, assembled, ())
         return decision, predict_path(scenario, self.points, assembled, decision.line, self.max_points)
+
+    def warm_up(self) -> None:
+        """Compile (or load from numba's cache) every kernel this planner uses in flight, so
+        that the first real decision compiles nothing (``mcts.warm_up``, then this
+        planner's own decision and path on a small state)."""
+        warm_up(self.base, algos=(self.algo,))
+        probe = Planner(self.base, self.config, 0, self.max_points, self.algo)
+        probe.decide(warm_up_assembled(self.base))
+        planning_battery_j(self.base, self.base.battery_j, 1.0, 0.0)
+
+    def _build(self, scenario: Scenario) -> MctsPlanner | PaperMctsPlanner | None:
+        if self.algo == "mcts":
+            return MctsPlanner(scenario, self.points, self.config, self.rng)
+        if self.algo in ("mcts-paper", "ts-mcts"):
+            n = self.config.iterations or PAPER_ITERATIONS
+            schedule = "timesaving" if self.algo == "ts-mcts" else "paper"
+            return PaperMctsPlanner(scenario, self.points, n, self.rng, schedule=schedule)
+        return None
+
+    def _plan(self, scenario: Scenario, state: SortieState) -> Decision:
+        if self._planner is not None:
+            return self._planner.plan(state)
+        start = time.perf_counter()
+        if self.algo == "greedy":
+            line = one_step_line(scenario, self.points, state, lambda q: int(np.argmax(q)), self.max_points)
+        else:
+            line = one_step_line(scenario, self.points, state,
+                                 lambda q: int(self.rng.choice(np.flatnonzero(np.isfinite(q)))), self.max_points)
+        if not line:
+            raise ValueError("no hovering point is allowed in this state: the sortie is over")
+        return Decision(action=line[0], line=line, wall_s=time.perf_counter() - start)
+
+
+def warm_up_assembled(scenario: Scenario) -> Assembled:
+    """A small state as the service assembles it, in the air part-way through a sortie:
+    three users with requests, one served already."""
+    users = [UserRow(user_id=f"warm-up-{i}", x_m=100.0 + 150.0 * i, y_m=150.0 + 100.0 * i, z_m=0.0,
+                     services=int(i == 0)) for i in range(3)]
+    pending = [RequestRow(request_id=i + 1, user_id=u.user_id, x_m=u.x_m, y_m=u.y_m, z_m=u.z_m,
+                          tasks=18 if i == 0 else 8 + i, client_ref=None, accepted_at_s=0.0, status="pending",
+                          reason="") for i, u in enumerate(users)]
+    fix = VehicleFix(50.0, 50.0, scenario.altitude_m, 0.9 * scenario.battery_j, True)
+    return assemble(scenario, users, pending, [], fix, 0)

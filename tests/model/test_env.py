@@ -136,3 +136,53 @@ def test_cannot_stay_unless_allowed():
     stay.reset(seed=0)
     stay.step(a)
     assert stay.action_values()[a] > -np.inf or not stay.action_mask().any()
+
+
+def test_backlog_persists_until_served_and_new_tasks_arrive():
+    """task_model = backlog: the served user's tasks leave, everyone else's grow by the
+    arrivals (capped at u_max); the first counts are the paper's draws."""
+    s = paper().replace(task_model="backlog", task_arrival_mean=1.5)
+    env = SortieEnv(s)
+    first, _ = env.reset(seed=4)
+    redraw = SortieEnv(paper())
+    assert first["tasks"].tolist() == redraw.reset(seed=4)[0]["tasks"].tolist()  # same first draw
+    grew = 0
+    while not env.done:
+        before = env.state.tasks.copy()
+        *_, info = env.step(int(np.argmax(env.action_values())))
+        after = env.state.tasks
+        served = info["user"]
+        assert info["tasks"] == before[served]
+        assert 0 <= after[served] <= 10  # from empty, one interval's arrivals (Poisson 1.5)
+        others = np.arange(s.num_users) != served
+        assert (after[others] >= np.minimum(before[others], s.task_max)).all() and after.max() <= s.task_max
+        grew += int((after[others] > before[others]).sum())
+    assert grew > 0
+
+
+def test_backlog_arrivals_are_poisson_of_the_configured_mean():
+    s = paper().replace(task_model="backlog", task_arrival_mean=2.0, num_users=2000, task_max=10_000,
+                        user_move_range_m=0.0)
+    env = SortieEnv(s)
+    env.reset(seed=1)
+    before = env.state.tasks.copy()
+    env.step(int(np.argmax(env.action_values())))
+    arrivals = np.delete(env.state.tasks - before, env.state.served.argmax())
+    assert arrivals.mean() == pytest.approx(2.0, abs=0.15) and arrivals.var() == pytest.approx(2.0, abs=0.3)
+
+
+def test_backlog_task_table_gives_the_arrivals():
+    s = paper().replace(task_model="backlog", user_move_range_m=0.0)
+    table = np.vstack([np.arange(1, 11), np.full(10, 2), np.full(10, 3)])
+    env = SortieEnv(s)
+    env.reset(seed=0, options={"task_table": table})
+    *_, info = env.step(int(np.argmax(env.action_values())))
+    expected = np.arange(1, 11) + 2
+    expected[info["user"]] = 2  # served: emptied, then the interval's arrivals
+    assert env.state.tasks.tolist() == expected.tolist()
+
+
+def test_unknown_task_model_is_refused():
+    with pytest.raises(ScenarioError) as err:
+        paper().replace(task_model="queue")
+    assert err.value.field == "task_model"

@@ -44,6 +44,7 @@ def test_file_then_overrides(tmp_path: Path) -> None:
     ({"mavlink.retries": "many"}, "mavlink.retries"),
     ({"planner.budget_ms": "0"}, "planner.budget_ms"),
     ({"planner.budget": "5"}, "planner.budget"),
+    ({"planner.algo": "dqn"}, "planner.algo"),
     ({"scenario.speed_kph": "5"}, "scenario.speed_kph"),
     ({"safety.max_altitude_m": "50"}, "safety.max_altitude_m"),
     ({"safety.energy_margin_j": "-1"}, "safety.energy_margin_j"),

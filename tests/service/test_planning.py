@@ -8,11 +8,14 @@ import math
 import numpy as np
 import pytest
 
+from planner_service.mcts import MctsConfig
 from planner_service.model import field, hover_points, pack
 from planner_service.model.energy import flight_energy_j
+from planner_service.model.world import evaluate, scene_of
+from planner_service.service.config import FLIGHT_ALGOS, build_config
 from planner_service.service.errors import PlanningError
 from planner_service.service.journal import RequestRow, UserRow
-from planner_service.service.planning import (PlannedPath, PlannedPoint, VehicleFix, assemble, check_path,
+from planner_service.service.planning import (PlannedPath, PlannedPoint, Planner, VehicleFix, assemble, check_path,
                                               hold_time_s, not_served_reason, planning_battery_j, predict_path,
                                               should_return)
 from protocol import Area
@@ -119,3 +122,49 @@ def test_not_served_reasons_and_return() -> None:
     assert not_served_reason(S, 16, 1, "sortie ended") == "sortie ended"
     assert should_return(0.10, True, False, 0.1) and not should_return(0.11, True, False, 0.1)
     assert not should_return(0.05, False, False, 0.1) and not should_return(0.05, True, True, 0.1)
+
+
+def crowd(battery_j: float = 100_000.0):
+    """Six users with requests around the area, the vehicle on the ground."""
+    spots = [(3, 12), (8, 18), (11, 7), (14, 16), (17, 9), (19, 11)]
+    users = [UserRow(f"u{i}", HP[k][0] + 5.0, HP[k][1] - 5.0, 0.0, 0) for i, (k, _) in enumerate(spots)]
+    pending = [RequestRow(i + 1, u.user_id, u.x_m, u.y_m, 0.0, t, None, 0.0, "pending", "")
+               for i, (u, (_, t)) in enumerate(zip(users, spots))]
+    return assemble(S, users, pending, [], VehicleFix(0.0, 0.0, 0.0, battery_j, False), -1)
+
+
+@pytest.mark.parametrize("algo", FLIGHT_ALGOS)
+def test_each_algorithm_flies_through_the_planner(algo: str) -> None:
+    a = crowd()
+    planner = Planner(S, MctsConfig(iterations=300), seed=4, max_points=4, algo=algo)
+    decision, path = planner.decide(a)
+    q = np.empty(len(HP))
+    evaluate(scene_of(P, HP, a.state.task_table), a.state.world(), q)
+    assert np.isfinite(q[decision.action]), "the decision is an allowed point"
+    assert decision.line[0] == decision.action
+    # the path is the algorithm's line, cut where the model stops it or at the capacity
+    assert [pt.hover_index for pt in path.points] == list(decision.line[:len(path.points)])
+    assert 1 <= len(path.points) <= 4
+    if algo == "greedy":
+        assert decision.action == int(np.argmax(q))
+        # the repeated decision along the predicted state: each point the best q there
+        assert len(path.points) == min(4, len(a.user_ids))
+    if algo in ("greedy", "random"):
+        assert len(decision.line) <= 4
+    again = Planner(S, MctsConfig(iterations=300), seed=4, max_points=4, algo=algo).decide(a)[0]
+    assert (again.action, again.line) == (decision.action, decision.line)  # seeded
+
+
+def test_the_operator_picks_the_algorithm_in_the_configuration() -> None:
+    assert build_config({}).planner.algo == "mcts"
+    assert build_config({}, {"planner.algo": "greedy"}).planner.algo == "greedy"
+    with pytest.raises(PlanningError):
+        Planner(S, MctsConfig(), 0, algo="dqn")
+
+
+def test_random_draws_among_the_allowed_points() -> None:
+    a = crowd()
+    firsts = {Planner(S, MctsConfig(), seed, max_points=3, algo="random").decide(a)[0].action for seed in range(12)}
+    q = np.empty(len(HP))
+    evaluate(scene_of(P, HP, a.state.task_table), a.state.world(), q)
+    assert len(firsts) > 3 and all(np.isfinite(q[k]) for k in firsts)

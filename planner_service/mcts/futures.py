@@ -1,0 +1,374 @@
+"""Every action's reward at a playout step, without scoring every point against every user.
+
+A playout step needs q for all K hovering points (the allowed set, the greedy-leaning
+playout, the expansion order), and q needs the user served at each point: scanned
+plainly, K x I distances a step. Two things make it cheaper without changing a result:
+
+- **The futures fix the users.** The users' moves and task draws do not depend on what
+  the UAV does, so along sampled future s the users' positions at step h are the same in
+  every iteration that plays s. Only the service counts (and, under the backlog model,
+  the served users' tasks) depend on the actions, and only for the users this iteration
+  has served: at most one a step. So for each (s, h) the index keeps, per hovering point,
+  the answer on the *trajectory* (the users as they are at (s, h), with the root's
+  service counts): the user served, the energy of its upload and its task term of q, and
+  the reach of its tie window. Rows are computed the first time a playout needs them.
+- **Only the touched users can change an answer.** A user's eligibility can only fall
+  when it is served (the fairness rule (3) is monotone in the service count, and a served
+  backlog only shrinks), so the users eligible at (s, h) in an iteration are those of the
+  trajectory, less some of the users the iteration served. An answer changes only if one
+  of those lies inside its tie window; then, and only then, the point is asked again: from
+  the row's list of the point's M nearest eligible users on the trajectory (skipping the
+  touched users no longer eligible), or, when that list cannot settle it, through the
+  row's k-d tree of the users (``model.user_tree``), which answers exactly as the plain
+  scan does. The tree is built once, on the root's users; a row only refits its boxes to
+  where the users have moved. Upload energies are kept per listed user, computed when first needed.
+
+Then a step costs O(K) for the clean points (a glance at their tie window's users), a
+short list walk for the few points a served user touched, plus what the world's own step
+costs (O(I): every user moves), instead of O(K x I). The flight energy between hovering
+points and home is a table. Every number is computed by the same expressions as
+``model.interval.evaluate_actions``, so the rewards are equal to the last bit and the
+search takes the same decisions (``tests/mcts/test_futures.py`` compares the two on random
+playouts; ``mcts/reference.py`` stays the plain specification).
+
+With no shared futures (``MctsConfig.futures = 0``) each step's chance is fresh: the step
+refits the root's tree to the users where they are and asks every point through it.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numpy as np
+
+from ..model import params as P
+from ..model._jit import jit_borrow
+from ..model.channel import distance_sq_m2
+from ..model.fairness import is_eligible
+from ..model.interval import NO_USER, budget_ok, hop_energy_j, return_energy_j, service_cost, user_outcome
+from ..model.reward import reward_of, task_reward
+from ..model.user_tree import (UserTree, empty_tree, fill_tree, refit_tree, tree_nearest, tree_nearest_list,
+                               tree_window_choice)
+from ..model.world import Scene, World, advance
+
+
+NEAREST = 6
+"""M: users listed per point and row (the nearest eligible on the trajectory). Enough for
+the tie window and the touched users in it almost always; the tree answers otherwise."""
+
+
+class FutureIndex(NamedTuple):
+    """The shared futures of one decision and the answers along them.
+
+    S futures of H steps, I users, K points, N nodes of a users' tree, M = ``NEAREST``.
+    Futures: ``moves`` (S, H, I, 3), ``news`` (S, H, I). Rows h = 1..H of each future are
+    filled lazily (row 0 is the root, kept in ``root_*``): ``ready`` (S,) rows done;
+    ``traj_users`` (S, I, 3), ``traj_tasks`` (S, I) future s's users at its last row done;
+    the users' tree built at the root (``tree``: its ``order`` and ``span`` serve every row)
+    and each row's boxes ``box`` (S, H + 1, N, 6). Per point, on the trajectory: ``user`` (S, H + 1, K) served, ``cost``
+    (e_hover + e_comp of that service), ``gain`` (its task term of q), ``reach_sq`` (its
+    tie window); ``window`` how many listed users the window holds (-1: not all listed);
+    ``near_user``, ``near_d2``, ``near_cost`` (S, H + 1, K, M) the nearest eligible users
+    in (distance, index) order, their squared distance and upload energy (NaN until first
+    needed), ``near_count`` (S, H + 1, K) how many, ``near_cover`` every eligible user
+    nearer than this squared distance is listed. Tables: ``hop`` (K, K) flight energy
+    between points, ``home`` (K,) flight home. The root: ``root_q`` (K,), ``root_user``
+    (K,), ``root_allowed`` (1,). ``tree``: the root's tree (its boxes are refitted at a fresh
+    step). ``served0`` (I,):
+    the root's service counts; ``clock`` (1,): scratch for a row's interval.
+    """
+
+    moves: np.ndarray
+    news: np.ndarray
+    ready: np.ndarray
+    traj_users: np.ndarray
+    traj_tasks: np.ndarray
+    box: np.ndarray
+    user: np.ndarray
+    cost: np.ndarray
+    gain: np.ndarray
+    reach_sq: np.ndarray
+    window: np.ndarray
+    near_user: np.ndarray
+    near_d2: np.ndarray
+    near_cost: np.ndarray
+    near_count: np.ndarray
+    near_cover: np.ndarray
+    hop: np.ndarray
+    home: np.ndarray
+    root_q: np.ndarray
+    root_user: np.ndarray
+    root_allowed: np.ndarray
+    tree: UserTree
+    served0: np.ndarray
+    clock: np.ndarray
+
+
+@jit_borrow
+def point_tables(p: np.ndarray, hover_points: np.ndarray, hop: np.ndarray, home: np.ndarray) -> None:
+    """``hop`` (K, K): flight energy from point j to point k; ``home`` (K,): from each
+    point back to base (``interval.hop_energy_j``, ``interval.return_energy_j``)."""
+    for j in range(hover_points.shape[0]):
+        home[j] = return_energy_j(p, hover_points[j])
+        for k in range(hover_points.shape[0]):
+            hop[j, k] = hop_energy_j(p, hover_points[j], hover_points[k])
+
+
+@jit_borrow
+def evaluate_tree(scene: Scene, w: World, t: UserTree, home: np.ndarray, out_q: np.ndarray,
+                  out_user: np.ndarray) -> int:
+    """``interval.evaluate_actions`` on ``w`` through the tree ``t`` of its users (already
+    filled), also giving the user each point serves (``out_user``); returns how many
+    points are allowed."""
+    p = scene.p
+    hp = scene.hover_points
+    stay = p[P.ALLOW_STAY] > 0.5
+    allowed = 0
+    for k in range(hp.shape[0]):
+        out_q[k] = -math.inf
+        out_user[k] = NO_USER
+        if k == w.hover[0] and not stay:
+            continue
+        user, _ = tree_nearest(p, hp[k], w.users, w.tasks, w.served, t)
+        if user == NO_USER:
+            continue
+        bits, e_h, e_c, e_f, q = user_outcome(p, w.uav_xyz, hp[k], w.users[user], w.tasks[user])
+        if not budget_ok(p, w.battery_j[0], e_h + e_c + e_f, home[k]):
+            continue
+        out_q[k] = q
+        out_user[k] = user
+        allowed += 1
+    return allowed
+
+
+@jit_borrow
+def _fill_row(scene: Scene, idx: FutureIndex, root: World, s: int) -> None:
+    """Row ready[s] + 1 of future s: step its trajectory on, index it, answer every point."""
+    p = scene.p
+    hp = scene.hover_points
+    h = idx.ready[s] + 1
+    users = idx.traj_users[s]
+    tasks = idx.traj_tasks[s]
+    served = idx.served0
+    idx.clock[0] = root.interval[0] + h  # the interval due after h steps (a task table's row)
+    traj = World(root.uav_xyz, root.hover, users, tasks, served, root.battery_j, idx.clock,
+                 root.energy_used_j, root.reward_sum)
+    advance(scene, traj, idx.moves[s, h - 1], idx.news[s, h - 1])
+    t = UserTree(idx.tree.order, idx.tree.span, idx.box[s, h], idx.tree.stack, idx.tree.bounds)
+    refit_tree(users, t)
+    size = idx.near_user.shape[3]
+    for k in range(hp.shape[0]):
+        near_user = idx.near_user[s, h, k]
+        near_d2 = idx.near_d2[s, h, k]
+        for j in range(size):
+            idx.near_cost[s, h, k, j] = math.nan
+        count, cover = tree_nearest_list(p, hp[k], users, tasks, served, t, near_user, near_d2)
+        idx.near_count[s, h, k] = count
+        idx.near_cover[s, h, k] = cover
+        if count == 0:
+            idx.user[s, h, k] = NO_USER
+            idx.reach_sq[s, h, k] = math.inf
+            idx.window[s, h, k] = 0
+            continue
+        reach = math.sqrt(near_d2[0]) + p[P.TIE_M]  # as interval.nearest_eligible
+        reach_sq = reach * reach
+        inside = 0
+        while inside < count and near_d2[inside] <= reach_sq:
+            inside += 1
+        if inside < count or count < size or reach_sq < cover:  # the whole window is listed
+            chosen = 0
+            for j in range(1, inside):
+                u, c = near_user[j], near_user[chosen]
+                if tasks[u] > tasks[c] or (tasks[u] == tasks[c] and u < c):
+                    chosen = j
+            user = near_user[chosen]
+            idx.window[s, h, k] = inside
+        else:  # a crowd within the window: choose among it through the tree
+            user = tree_window_choice(p, hp[k], users, tasks, served, t, reach_sq)
+            chosen = -1
+            idx.window[s, h, k] = -1
+        bits, e_h, e_c = service_cost(p, hp[k], users[user], tasks[user])
+        idx.user[s, h, k] = user
+        idx.reach_sq[s, h, k] = reach_sq
+        idx.cost[s, h, k] = e_h + e_c
+        idx.gain[s, h, k] = task_reward(p, tasks[user])
+        if chosen >= 0:
+            idx.near_cost[s, h, k, chosen] = e_h + e_c
+    idx.ready[s] = h
+
+
+@jit_borrow
+def _listed_choice(p: np.ndarray, idx: FutureIndex, s: int, h: int, k: int, w: World, flag: np.ndarray) -> int:
+    """The listed user point k serves in ``w`` (as ``interval.nearest_eligible`` would):
+    its list position, -1 for nobody, or -2 when the list cannot tell."""
+    near_user = idx.near_user[s, h, k]
+    near_d2 = idx.near_d2[s, h, k]
+    count = idx.near_count[s, h, k]
+    chosen = -1
+    reach_sq = math.inf
+    for j in range(count):
+        if chosen >= 0 and near_d2[j] > reach_sq:
+            return chosen  # every farther user, listed or not, is outside the window
+        u = near_user[j]
+        if flag[u] and not is_eligible(p, w.tasks[u], w.served[u]):
+            continue
+        if chosen < 0:
+            reach = math.sqrt(near_d2[j]) + p[P.TIE_M]
+            reach_sq = reach * reach
+            chosen = j
+        else:
+            c = near_user[chosen]
+            if w.tasks[u] > w.tasks[c] or (w.tasks[u] == w.tasks[c] and u < c):
+                chosen = j
+    if count < near_user.shape[0] or (chosen >= 0 and reach_sq < idx.near_cover[s, h, k]):
+        return chosen
+    return -2
+
+
+@jit_borrow
+def evaluate_future(scene: Scene, idx: FutureIndex, root: World, s: int, h: int, w: World, touched: np.ndarray,
+                    flag: np.ndarray, out_q: np.ndarray, out_user: np.ndarray) -> int:
+    """``evaluate_tree`` for ``w``, the state after h >= 1 steps of future s from ``root``
+    in which the users ``touched[:h]`` (``flag`` set) were served."""
+    while idx.ready[s] < h:
+        _fill_row(scene, idx, root, s)
+    p = scene.p
+    hp = scene.hover_points
+    stay = p[P.ALLOW_STAY] > 0.5
+    prev = w.hover[0]
+    battery = w.battery_j[0]
+    allowed = 0
+    for k in range(hp.shape[0]):
+        out_q[k] = -math.inf
+        out_user[k] = NO_USER
+        if k == prev and not stay:
+            continue
+        user = idx.user[s, h, k]
+        if user == NO_USER:  # nobody eligible on the trajectory: nobody now either
+            continue
+        window = idx.window[s, h, k]
+        dirty = False
+        if window >= 0:
+            for j in range(window):
+                if flag[idx.near_user[s, h, k, j]]:
+                    dirty = True
+                    break
+        else:
+            for j in range(h):
+                if distance_sq_m2(hp[k], w.users[touched[j]]) <= idx.reach_sq[s, h, k]:
+                    dirty = True
+                    break
+        if not dirty:
+            cost = idx.cost[s, h, k]
+            gain = idx.gain[s, h, k]
+        else:
+            j = _listed_choice(p, idx, s, h, k, w, flag)
+            if j == -1:
+                continue
+            if j >= 0:
+                user = idx.near_user[s, h, k, j]
+                cost = idx.near_cost[s, h, k, j]
+            else:
+                user, _ = tree_nearest(p, hp[k], w.users, w.tasks, w.served,
+                                       UserTree(idx.tree.order, idx.tree.span, idx.box[s, h], idx.tree.stack,
+                                                idx.tree.bounds))
+                if user == NO_USER:
+                    continue
+                cost = math.nan
+            if flag[user] or cost != cost:  # a served user's tasks may differ from the trajectory's
+                bits, e_h, e_c = service_cost(p, hp[k], w.users[user], w.tasks[user])
+                cost = e_h + e_c
+                if j >= 0 and not flag[user]:
+                    idx.near_cost[s, h, k, j] = cost
+            gain = task_reward(p, w.tasks[user])
+        energy = cost + idx.hop[prev, k]
+        if not budget_ok(p, battery, energy, idx.home[k]):
+            continue
+        out_q[k] = reward_of(p, gain, energy)
+        out_user[k] = user
+        allowed += 1
+    return allowed
+
+
+@jit_borrow
+def evaluate_step(scene: Scene, idx: FutureIndex, root: World, w: World, future: int, steps: int,
+                  touched: np.ndarray, flag: np.ndarray, out_q: np.ndarray, out_user: np.ndarray) -> int:
+    """Every point's q and user at a playout step: the root's (step 0), along a shared
+    future, or (no future) through a fresh tree of the users where they are. ``touched``
+    lists the users served at the steps so far, ``flag`` (I,) marks them."""
+    if steps == 0:
+        for k in range(out_q.shape[0]):
+            out_q[k] = idx.root_q[k]
+            out_user[k] = idx.root_user[k]
+        return idx.root_allowed[0]
+    if future >= 0:
+        return evaluate_future(scene, idx, root, future, steps, w, touched, flag, out_q, out_user)
+    refit_tree(w.users, idx.tree)
+    return evaluate_tree(scene, w, idx.tree, idx.home, out_q, out_user)
+
+
+@jit_borrow
+def root_values(scene: Scene, root: World, tree: UserTree, home: np.ndarray, out_q: np.ndarray,
+                out_user: np.ndarray) -> int:
+    """Every point's q and user in the root state (``evaluate_tree``)."""
+    fill_tree(root.users, tree)
+    return evaluate_tree(scene, root, tree, home, out_q, out_user)
+
+
+class PointTables(NamedTuple):
+    """What depends only on the hovering points: ``hop`` (K, K), ``home`` (K,)."""
+
+    hop: np.ndarray
+    home: np.ndarray
+
+
+def point_tables_of(p: np.ndarray, hover_points: np.ndarray) -> PointTables:
+    k = len(hover_points)
+    tables = PointTables(np.empty((k, k)), np.empty(k))
+    point_tables(p, hover_points, tables.hop, tables.home)
+    return tables
+
+
+class RootValues(NamedTuple):
+    """The root state's q (K,), users served (K,) and allowed count (1,), and the k-d tree
+    of its users."""
+
+    q: np.ndarray
+    user: np.ndarray
+    allowed: np.ndarray
+    tree: UserTree
+
+
+def root_values_of(scene: Scene, root: World, tables: PointTables) -> RootValues:
+    k = len(scene.hover_points)
+    values = RootValues(np.empty(k), np.empty(k, dtype=np.int64), np.zeros(1, dtype=np.int64),
+                        empty_tree(len(root.users)))
+    values.allowed[0] = root_values(scene, root, values.tree, tables.home, values.q, values.user)
+    return values
+
+
+def index_of(scene: Scene, root: World, moves: np.ndarray, news: np.ndarray, tables: PointTables,
+             values: RootValues) -> FutureIndex:
+    """An empty index of the futures ``moves`` (S, H, I, 3) and ``news`` (S, H, I) from
+    ``root``; rows are filled as playouts reach them."""
+    s, h, i = news.shape
+    k = len(scene.hover_points)
+    nodes = len(values.tree.box)
+    rows = (s, h + 1)
+    return FutureIndex(
+        moves=moves, news=news, ready=np.zeros(s, dtype=np.int64),
+        traj_users=np.repeat(root.users[None], s, axis=0), traj_tasks=np.repeat(root.tasks[None], s, axis=0),
+        box=np.empty((*rows, nodes, 6)), user=np.empty((*rows, k), dtype=np.int64), cost=np.empty((*rows, k)),
+        gain=np.empty((*rows, k)), reach_sq=np.empty((*rows, k)), window=np.empty((*rows, k), dtype=np.int64),
+        near_user=np.empty((*rows, k, NEAREST), dtype=np.int64), near_d2=np.empty((*rows, k, NEAREST)),
+        near_cost=np.empty((*rows, k, NEAREST)), near_count=np.empty((*rows, k), dtype=np.int64),
+        near_cover=np.empty((*rows, k)), hop=tables.hop, home=tables.home,
+        root_q=values.q, root_user=values.user, root_allowed=values.allowed,
+        tree=values.tree._replace(box=values.tree.box.copy()),
+        served0=root.served.copy(), clock=np.zeros(1, dtype=np.int64),
+    )
+
+
+__all__ = ["FutureIndex", "PointTables", "RootValues", "evaluate_future", "evaluate_step", "evaluate_tree",
+           "index_of", "point_tables_of", "root_values_of"]
