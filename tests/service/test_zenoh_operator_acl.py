@@ -30,9 +30,10 @@ def test_only_operator_certificates_may_command(stack: Stack, tmp_path: Path) ->
     certs = tmp_path / "tls"
     make_certs(certs)
     make_certs(certs, "--operator", "console2")
+    make_certs(certs, "--user", "u-1")  # the shipped example user
     assert (certs / "operator.pem").is_file() and (certs / "console2.pem").is_file()
     service_conf = shipped("service-tls-acl.json5", certs, tmp_path / "service.json5")
-    user_conf = shipped("user-tls.json5", certs, tmp_path / "user.json5")
+    user_conf = shipped("user-tls.json5", certs, tmp_path / "user.json5", **{"/user.": "/u-1."})
     operator_conf = shipped("operator-tls.json5", certs, tmp_path / "operator.json5")
     console2_conf = shipped("operator-tls.json5", certs, tmp_path / "console2.json5", **{"/operator.": "/console2."})
 
