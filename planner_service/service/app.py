@@ -314,15 +314,16 @@ class Service:
             return ins.PlanFailed(basis, f"journal: {err}")
         if basis.at_point is not None:
             assembled = _at_point(assembled, basis)
+        newest = max((r.request_id for r in self.journal.pending()), default=0)
         t0 = time.perf_counter()
         try:
             _, path = await asyncio.get_running_loop().run_in_executor(self.executor, self.planner.decide, assembled)
         except Exception as err:  # noqa: BLE001 - a planner bug must not stop the sortie
             log.exception("the planner failed")
             return ins.PlanFailed(basis, f"planner: {err}")
-        log.info("decision (%s): %s in %.0f ms", basis.reason, [p.hover_index for p in path.points],
-                 (time.perf_counter() - t0) * 1e3)
-        return ins.Planned(basis, path)
+        planner_ms = (time.perf_counter() - t0) * 1e3
+        log.info("decision (%s): %s in %.0f ms", basis.reason, [p.hover_index for p in path.points], planner_ms)
+        return ins.Planned(basis, path, planner_ms, newest)
 
     async def _upload(self, up: fx.Upload) -> ins.Input:
         t0 = self.mono()
@@ -334,7 +335,7 @@ class Service:
         log.info("plan %d: %s uploaded (%d items, %.0f ms; %s)", up.plan_id,
                  [p.hover_index for p in up.path.points], len(up.items), (self.mono() - t0) * 1e3,
                  up.path.stop_reason)
-        return ins.Uploaded(up, self.link.generation)
+        return ins.Uploaded(up, self.link.generation, (self.mono() - t0) * 1e3)
 
     async def _read_back(self) -> ins.Input:
         try:

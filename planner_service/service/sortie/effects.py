@@ -48,6 +48,8 @@ class Upload:
     restart_current: bool = False
     """Start ``current_seq`` again even if the vehicle flies it (its content changed, and the
     autopilot restarts no return-to-launch item by itself)."""
+    planner_ms: float = 0.0
+    newest_request: int = 0
 
 
 @dataclass(frozen=True)

@@ -93,6 +93,9 @@ class Landed:
 class Planned:
     basis: PlanBasis
     path: PlannedPath
+    planner_ms: float = 0.0
+    newest_request: int = 0
+    """The newest request id the decision saw (a client can tell whether its request is in)."""
 
 
 @dataclass(frozen=True)
@@ -105,6 +108,7 @@ class PlanFailed:
 class Uploaded:
     upload: Upload
     generation: int
+    upload_ms: float = 0.0
 
 
 @dataclass(frozen=True)

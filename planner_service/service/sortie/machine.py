@@ -40,7 +40,7 @@ from ...model.fairness import is_eligible
 from ...model.reward import interval_reward
 from ..errors import PlanningError
 from ..link.base import HOLDING_MODES, MISSION_MODES, RETURNING_MODES
-from ..planning import PlannedPath, PlannedPoint, check_path, hold_time_s
+from ..planning import check_path, hold_time_s
 from . import effects as fx
 from . import inputs as ins
 from .authority import Authority, next_sortie
@@ -188,13 +188,13 @@ class SortieLogic:
             case ins.Landed():
                 if s.flown:
                     s = self._end(s, "the vehicle landed", v, out)
-            case ins.Planned(basis=basis, path=path):
-                s = self._planned(replace(s, busy="", last_plan_at=now), basis, path, v, now, out)
+            case ins.Planned():
+                s = self._planned(replace(s, busy="", last_plan_at=now), event, v, now, out)
             case ins.PlanFailed(error=error):
                 s = self._failed(replace(s, busy="", last_plan_at=now), f"plan {s.plan_id + 1} not flown: {error}",
                                  now, out)
-            case ins.Uploaded(upload=up, generation=gen):
-                s = self._uploaded(replace(s, busy=""), up, gen, v, out)
+            case ins.Uploaded():
+                s = self._uploaded(replace(s, busy=""), event, out)
             case ins.UploadFailed(upload=up, error=error, outcome_unknown=unknown):
                 s = self._upload_failed(replace(s, busy=""), up, error, unknown, now, out)
             case ins.ReadBackDone(items=items, generation=gen):
@@ -394,8 +394,8 @@ class SortieLogic:
             return fx.PlanBasis("new requests on the way home", s.version, s.held.rtl_seq - 1)
         return None
 
-    def _planned(self, s: Sortie, basis: fx.PlanBasis, path: PlannedPath, v: ins.Vehicle, now: float,
-                 out: list[fx.Effect]) -> Sortie:
+    def _planned(self, s: Sortie, planned: ins.Planned, v: ins.Vehicle, now: float, out: list[fx.Effect]) -> Sortie:
+        basis, path = planned.basis, planned.path
         if basis.version != s.version or s.over is not None or s.doubt is not None or s.degraded is not None:
             return replace(s, dirty=True)  # stale: the state it was made on is gone
         if basis.at_point is not None:
@@ -435,7 +435,8 @@ class SortieLogic:
         except (PlanningError, MissionError) as err:
             return self._failed(replace(s, plan_id=s.plan_id + 1), f"plan {s.plan_id + 1} not flown: {err}", now, out)
         out.append(fx.Upload(plan_id, tuple(items), mission, path, current, basis.keep_through,
-                             restart_current=current is not None and basis.keep_through is not None))
+                             restart_current=current is not None and basis.keep_through is not None,
+                             planner_ms=planned.planner_ms, newest_request=planned.newest_request))
         return replace(s, busy="upload", plan_id=plan_id)
 
     def _hold_for_binding(self, s: Sortie, held: HeldMission, items: list[MissionItem], seq: int,
@@ -453,8 +454,8 @@ class SortieLogic:
         items = [replace(i, param1=encoded_hold_s(hold, self.rules.flavour)) if i.seq == seq else i for i in items]  # type: ignore[arg-type]
         return held, items
 
-    def _uploaded(self, s: Sortie, up: fx.Upload, gen: int, v: ins.Vehicle, out: list[fx.Effect]) -> Sortie:
-        keep = up.keep_through
+    def _uploaded(self, s: Sortie, uploaded: ins.Uploaded, out: list[fx.Effect]) -> Sortie:
+        up, gen, keep = uploaded.upload, uploaded.generation, uploaded.upload.keep_through
         judged = frozenset(q for q in s.judged if keep is not None and q <= keep)
         watch, binding = s.watch, s.binding
         if watch is not None and (keep is None or watch.seq > keep):
@@ -467,7 +468,8 @@ class SortieLogic:
                 fx.PublishPlan(up.mission, up.path.predicted_energy_j),
                 fx.Emit("mission_uploaded", f"plan {up.plan_id}: {len(up.path.points)} points"
                                             + (f" after item {keep}" if keep is not None else "")
-                                            + f"; ends: {up.path.stop_reason}")]
+                                            + f"; planner_ms={up.planner_ms:.1f} upload_ms={uploaded.upload_ms:.1f} "
+                                              f"newest_request={up.newest_request}; ends: {up.path.stop_reason}")]
         if not up.path.points:
             out.append(fx.Emit("returning", f"nothing more to serve ({up.path.stop_reason}): return to launch"))
         return s
