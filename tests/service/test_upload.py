@@ -109,3 +109,19 @@ def test_download_of_nothing_refusal_and_silence() -> None:
     assert silent.on_timeout() is None
     done = silent.on_timeout()
     assert done is not None and not done.ok and done.result == "NO_ANSWER after 1 requests for MISSION_COUNT"
+
+
+def test_a_repeated_item_answered_invalid_sequence_goes_on() -> None:
+    # ArduPilot answers an item it already has (our repeat crossed its next request) with
+    # INVALID_SEQUENCE and asks again for the next one a second later: the upload waits.
+    up, sent = machine(retries=2)
+    up.begin()
+    up.on_message(req(0))
+    up.on_message(req(1))
+    for _ in range(5):  # more repeats than the retries: each one answered
+        assert up.on_timeout() is None and sent[-1].seq == 1
+        assert up.on_message(ack(M.MAV_MISSION_INVALID_SEQUENCE)) is None
+    for seq in range(2, len(ITEMS)):
+        up.on_message(req(seq))
+    done = up.on_message(ack(M.MAV_MISSION_ACCEPTED))
+    assert done is not None and done.accepted

@@ -78,7 +78,9 @@ class MissionUpload:
                 return None  # a stale ACK of an earlier operation
             if msg.type == mavlink.MAV_MISSION_INVALID_SEQUENCE:
                 # A repeated or reordered item: ArduPilot answers it so and goes on waiting
-                # for the item it asked for (MissionItemProtocol.cpp); so does this upload.
+                # for the item it asked for, asking again every second (MissionItemProtocol.cpp);
+                # so does this upload. The vehicle answered: it is not silent.
+                self.silent = 0
                 return None
             self.done = UploadDone(msg.type == mavlink.MAV_MISSION_ACCEPTED, result_name(msg.type), self.sent)
             return self.done
