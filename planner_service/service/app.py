@@ -372,7 +372,6 @@ class Service:
 
     # --- the vehicle as the logic sees it ----------------------------------------------------------
     def _vehicle(self) -> Vehicle:
-        self.view.reach_s = self.cfg.planner.budget_ms / 1e3 + self._upload_s()
         vehicle, self._waiting_for = self.view.see(self.link.telemetry, self.mono())
         return vehicle
 

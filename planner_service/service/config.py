@@ -164,8 +164,8 @@ class SafetyConfig:
     """A service counts only while the vehicle's own position is within this distance of
     its hovering point (ArduPilot's WPNAV_RADIUS is 2 m; GPS wanders about a metre)."""
     hold_margin_s: float = 1.0
-    """Each planned hold is this much (or one position-report gap, if longer) longer than
-    the upload needs, so that the reports show the whole hold."""
+    """Each planned hold is this much longer than the upload needs: the service ends a hold
+    itself once the vehicle's position reports show it; the autopilot's hold is the ceiling."""
     energy_margin_j: float = 1000.0
     """Kept back from every plan on top of the model's reserve and the landing descent,
     for what the model does not see (wind, an estimate's error)."""

@@ -9,8 +9,6 @@ clock's readings), and the only place that turns the autopilot's numbers into th
   less what the model says the vehicle spends since (the most power-hungry of hovering and
   cruising, in vehicle time), and said to come from the model; with no good reading ever,
   unknown.
-- **Reporting gap**: vehicle seconds between two position reports, smoothed: the
-  tolerance of a hold judged from them.
 """
 
 from __future__ import annotations
@@ -34,12 +32,8 @@ class VehicleView:
     scenario: Scenario
     origin: GeoOrigin
     area: Area
-    reach_s: float = 0.5
-    """Wall seconds a plan made now takes to be on board (search and upload)."""
     _good: tuple[float, float] | None = None
     """(fraction, monotonic time) of the last good battery reading."""
-    _last_boot_s: float = math.nan
-    _gap_s: float = 0.0
     _power_w: float = field(init=False)
 
     def __post_init__(self) -> None:
@@ -58,27 +52,16 @@ class VehicleView:
                 waiting = (f"a position inside the area: the autopilot reports one {out / 1000:.1f} km outside it "
                            f"(check [origin] against the autopilot's home)")
         boot = t.position_boot_s if t.position_boot_s is not None else math.nan
-        self._note_report(boot)
         fraction, source = self._battery(t, now)
         return Vehicle(connected=t.connected, position_ok=position_ok, xyz=xyz if position_ok else (0.0, 0.0, 0.0),
                        boot_s=boot, armed=t.armed, airborne=t.airborne, landed_known=t.landed_known, mode=t.mode,
-                       seq=t.mission_seq, battery_fraction=fraction, battery_source=source,
-                       reach_m=self.scenario.speed_mps * t.time_rate * self.reach_s,
-                       report_gap_s=self._gap_s), waiting
+                       seq=t.mission_seq, battery_fraction=fraction, battery_source=source), waiting
 
     def _outside_m(self, xyz: tuple[float, float, float]) -> float:
         side = self.area.side_m
         dx = max(-xyz[0], 0.0, xyz[0] - side)
         dy = max(-xyz[1], 0.0, xyz[1] - side)
         return math.hypot(dx, dy)
-
-    def _note_report(self, boot: float) -> None:
-        last = self._last_boot_s
-        if not math.isnan(boot) and not math.isnan(last) and boot > last:
-            gap = boot - last
-            self._gap_s = gap if self._gap_s == 0.0 else 0.9 * self._gap_s + 0.1 * gap
-        if not math.isnan(boot):
-            self._last_boot_s = boot
 
     def _battery(self, t: Telemetry, now: float) -> tuple[float | None, str]:
         if t.energy_used_j is not None:

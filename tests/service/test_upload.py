@@ -125,3 +125,20 @@ def test_a_repeated_item_answered_invalid_sequence_goes_on() -> None:
         up.on_message(req(seq))
     done = up.on_message(ack(M.MAV_MISSION_ACCEPTED))
     assert done is not None and done.accepted
+
+
+def test_error_after_the_last_item_means_the_ack_was_lost() -> None:
+    # ArduPilot answers ERROR to an item after the upload ended: our repeat of the last item
+    # crossed its (lost) ACCEPTED. Maybe committed: the link reads the mission back.
+    up, sent = machine()
+    up.begin()
+    for seq in range(len(ITEMS)):
+        up.on_message(req(seq))
+    assert up.on_timeout() is None and sent[-1].seq == len(ITEMS) - 1
+    done = up.on_message(ack(M.MAV_MISSION_ERROR))
+    assert done is not None and not done.accepted and done.maybe_committed
+    early, _ = machine()
+    early.begin()
+    early.on_message(req(0))
+    done = early.on_message(ack(M.MAV_MISSION_ERROR))
+    assert done is not None and not done.maybe_committed, "an ERROR before the last item is a refusal"

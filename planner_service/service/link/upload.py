@@ -82,6 +82,12 @@ class MissionUpload:
                 # so does this upload. The vehicle answered: it is not silent.
                 self.silent = 0
                 return None
+            if msg.type == mavlink.MAV_MISSION_ERROR and self.last_sent == len(self.items) - 1:
+                # ArduPilot answers ERROR to an item that comes after the upload ended: our
+                # repeat of the last item crossed its ACCEPTED, which was lost. Committed
+                # most likely, not certainly: the caller reads the mission back.
+                self.done = UploadDone(False, result_name(msg.type), self.sent, maybe_committed=True)
+                return self.done
             self.done = UploadDone(msg.type == mavlink.MAV_MISSION_ACCEPTED, result_name(msg.type), self.sent)
             return self.done
         if kind in ("MISSION_REQUEST_INT", "MISSION_REQUEST"):

@@ -33,10 +33,7 @@ class Vehicle:
     battery_fraction: float | None = None
     """The best estimate: the autopilot's reading, else the model's fallback; None: unknown."""
     battery_source: Literal["autopilot", "model", "unknown"] = "unknown"
-    reach_m: float = 0.0
-    """How far it may fly before a plan made now is on board (reading age, search, upload)."""
-    report_gap_s: float = 0.0
-    """Vehicle seconds between two position reports (the tolerance of a hold's length)."""
+
 
 
 class World(Protocol):

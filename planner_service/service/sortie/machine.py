@@ -49,8 +49,10 @@ from .mission import HeldMission
 
 Busy = Literal["", "plan", "upload", "readback"]
 
-MAX_HOLD_MARGIN_S = 5.0
-"""The most a hold is lengthened for the reporting gap (a slower stream is a link problem)."""
+START_LAPSE_S = 5.0
+"""Wall seconds after an accepted start before a vehicle still on the ground, disarmed, is
+taken as not started."""
+
 
 
 @dataclass(frozen=True)
@@ -110,6 +112,7 @@ class Sortie:
     """The vehicle has been airborne in this sortie (so a landing ends it)."""
     started: bool = False
     """The mission was started (by the service or, seen airborne, by someone)."""
+    started_at: float = -math.inf
     authority: Authority = field(default_factory=Authority)
     commanded_landing: bool = True
     """The landing that ended the sortie was the service's (its mission's return, its own
@@ -204,7 +207,7 @@ class SortieLogic:
                                              f"trying again"))
                 s = replace(s, busy="", retry_at=now + self.rules.retry_s)
             case ins.CommandDone(command=cmd):
-                s = self._command_done(replace(s, commanding=""), cmd, out)
+                s = self._command_done(replace(s, commanding=""), cmd, now, out)
             case ins.CommandFailed(command=cmd, error=error):
                 s = self._command_failed(replace(s, commanding=""), cmd, error, now, out)
             case ins.RequestIn(user_id=user, tasks=tasks):
@@ -229,6 +232,7 @@ class SortieLogic:
         if (s.flown and s.over is None and v.connected and v.landed_known and not v.airborne and not v.armed):
             s = self._end(s, "the vehicle was found landed", v, out)
         s = self._maybe_begin(s, v, out)
+        s = self._start_lapsed(s, v, now, out)
         s = self._watch(s, v, out)
         s = self._safety(s, v, out)
         return self._next(s, v, now, out)
@@ -369,8 +373,8 @@ class SortieLogic:
         if s.flown and not v.landed_known:
             return None  # in the air or landed meanwhile? know first
         if not v.airborne:
-            if s.started or s.flown:
-                return None  # taking off, or landed: the sortie ends
+            if s.started or s.flown or s.commanding == "start":
+                return None  # starting or taking off (a new mission now would restart it), or landed
             if self.world.pending_count() < r.min_requests:
                 return None
             if s.held is not None and not (s.dirty and now - s.last_plan_at >= r.replan_min_interval_s):
@@ -404,10 +408,10 @@ class SortieLogic:
         airborne = v.airborne
         if not path.points and not airborne and not s.must_upload:
             return s  # nothing to fly yet
-        # Each hold is planned one reporting gap longer than the upload needs: a service is
-        # recorded from the reports of the vehicle's position, which see a hold at most one
-        # gap short of what it was.
-        margin = min(max(self.rules.hold_margin_s, v.report_gap_s), MAX_HOLD_MARGIN_S)
+        # Each hold is planned a little longer than the upload needs: the service ends holds
+        # itself once the reports show them (``_maybe_end_hold``); the item's own hold is the
+        # ceiling the autopilot keeps to if the service cannot end it (a lost link).
+        margin = self.rules.hold_margin_s
         path = replace(path, points=tuple(replace(p, hold_s=p.hold_s + margin) for p in path.points))
         try:
             check_path(path, self.rules.area, self.rules.scenario, path.battery_after_j + path.predicted_energy_j)
@@ -569,17 +573,26 @@ class SortieLogic:
             return self._command(s, fx.Command("resume", first, f"plan {s.held.plan_id} (was {v.mode})"), out)
         return s
 
+    def _start_lapsed(self, s: Sortie, v: ins.Vehicle, now: float, out: list[fx.Effect]) -> Sortie:
+        """A start the autopilot accepted but that never took off (it disarmed on the ground
+        again: its own auto-disarm, a refused takeoff) is started again."""
+        if not s.started or s.flown or v.airborne or v.armed or not v.landed_known or now - s.started_at < START_LAPSE_S:
+            return s
+        out.append(fx.Log("warning", "the vehicle is on the ground and disarmed after the mission was started: "
+                                     "starting it again"))
+        return replace(s, started=False)
+
     def _command(self, s: Sortie, cmd: fx.Command, out: list[fx.Effect]) -> Sortie:
         mode = self.rules.mode_names.get(cmd.kind)
         authority = s.authority.commanding(mode) if mode else s.authority
         out.append(cmd)
         return replace(s, commanding=cmd.kind, authority=authority)
 
-    def _command_done(self, s: Sortie, cmd: fx.Command, out: list[fx.Effect]) -> Sortie:
+    def _command_done(self, s: Sortie, cmd: fx.Command, now: float, out: list[fx.Effect]) -> Sortie:
         match cmd.kind:
             case "start":
                 out.append(fx.Log("info", "mission started"))
-                return replace(s, started=True, failures=0)
+                return replace(s, started=True, started_at=now, failures=0)
             case "resume":
                 out.append(fx.Emit("mission_resumed", f"{cmd.why}; from item {cmd.seq}"))
                 return replace(s, resume_pending=False)
