@@ -8,7 +8,9 @@ clock's readings), and the only place that turns the autopilot's numbers into th
   unknown or impossible reading is unknown, never full: the last good reading is carried on
   less what the model says the vehicle spends since (the most power-hungry of hovering and
   cruising, in vehicle time), and said to come from the model; with no good reading ever,
-  unknown.
+  unknown. An autopilot restarted in the air counts its battery from its boot again (energy
+  consumed from 0, often the remaining charge from full): until it lands, a reading is
+  believed only up to what was known before the restart, less the model's spend since.
 """
 
 from __future__ import annotations
@@ -34,6 +36,9 @@ class VehicleView:
     area: Area
     _good: tuple[float, float] | None = None
     """(fraction, monotonic time) of the last good battery reading."""
+    _ceiling: tuple[float, float] | None = None
+    """Since a restart in the air: (fraction, monotonic time) known before it."""
+    _boot_s: float = -math.inf
     _power_w: float = field(init=False)
 
     def __post_init__(self) -> None:
@@ -64,15 +69,33 @@ class VehicleView:
         return math.hypot(dx, dy)
 
     def _battery(self, t: Telemetry, now: float) -> tuple[float | None, str]:
+        self._note_restart(t, now)
         if t.energy_used_j is not None:
             fraction: float | None = max(1.0 - t.energy_used_j / self.scenario.battery_j, 0.0)
         else:
             fraction = t.battery_fraction
+        if fraction is not None and self._ceiling is not None:
+            ceiling = self._carried(self._ceiling, t, now)
+            if fraction > ceiling:
+                return ceiling, "model"
         if fraction is not None:
             self._good = (fraction, t.battery_at or now)
             return fraction, "autopilot"
         if self._good is None:
             return None, "unknown"
-        last, at = self._good
+        return self._carried(self._good, t, now), "model"
+
+    def _carried(self, known: tuple[float, float], t: Telemetry, now: float) -> float:
+        """A fraction known at a time, less what the model says was spent since."""
+        fraction, at = known
         spent_j = self._power_w * t.time_rate * max(now - at, 0.0)
-        return max(last - spent_j / self.scenario.battery_j, 0.0), "model"
+        return max(fraction - spent_j / self.scenario.battery_j, 0.0)
+
+    def _note_restart(self, t: Telemetry, now: float) -> None:
+        boot = t.boot_s if t.boot_s is not None else -math.inf
+        restarted = boot < self._boot_s - 5.0
+        self._boot_s = boot
+        if restarted and t.airborne and self._good is not None:
+            self._ceiling = (self._carried(self._good, t, now), now)
+        elif self._ceiling is not None and t.landed_known and not t.airborne and not t.armed:
+            self._ceiling = None  # on the ground: a swapped battery reads as itself again

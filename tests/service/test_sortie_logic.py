@@ -299,3 +299,19 @@ def test_a_backlog_grown_since_the_plan_lengthens_the_hold_it_is_bound_to() -> N
     assert b.needed_s > 60.0, "the planned 60 s hold cannot carry 20 tasks"
     (up,) = only(run.feed(ins.Planned(plan.basis, path(point(9, 400.0, 300.0, "b", 2)))), fx.Upload)
     assert up.items[2].param1 >= b.needed_s + 1.0 and up.mission.point_at(2).hold_s >= b.needed_s
+
+
+def test_the_mode_a_restarted_autopilot_comes_back_in_is_not_a_pilots() -> None:
+    world = FakeWorld()
+    run, _ = fly_to_first_point(world)
+    run.feed(ins.ModeChanged("LOITER"), mode="LOITER", boot_s=1.0)  # heard before the restart is believed
+    assert run.s.authority.state == "revoked"
+    out = run.feed(ins.VehicleRestarted("its clock went back (seen twice)"))
+    assert run.s.authority.granted, "the restart changed the mode, not a pilot"
+    assert "authority_granted" in [e.event for e in only(out, fx.Emit)]
+    run.now += 10.0  # a later restart explains nothing
+    run.feed(ins.ModeChanged("AUTO", commanded=True), mode="AUTO")
+    run.feed(ins.ModeChanged("LOITER"), mode="LOITER")
+    run.now += 10.0
+    run.feed(ins.VehicleRestarted("again"))
+    assert run.s.authority.state == "revoked"

@@ -53,9 +53,13 @@ class Authority:
         own command) and the mission's own return (its last item) are the service's;
         changes while disarmed are the ground crew's and harmless (the service sets the
         mode when it starts); anything else it did not command ends the authority."""
-        if not self.granted or not armed or mode == self.expected_mode or self.expected_mode is None:
+        if not self.granted or mode == self.expected_mode:
             return self
-        if commanded or mission_return:
+        if commanded:
+            return replace(self, expected_mode=mode)
+        if not armed or self.expected_mode is None:
+            return self
+        if mission_return:
             return replace(self, expected_mode=mode)
         return self.revoke(f"mode changed to {mode} (not commanded by the service; was {self.expected_mode})")
 

@@ -49,6 +49,9 @@ from .mission import HeldMission
 
 Busy = Literal["", "plan", "upload", "readback"]
 
+RESTART_GRACE_S = 5.0
+"""Wall seconds within which a vehicle restart explains a mode change seen before it (the
+link believes a restart only after a second message)."""
 START_LAPSE_S = 5.0
 """Wall seconds after an accepted start before a vehicle still on the ground, disarmed, is
 taken as not started."""
@@ -150,6 +153,9 @@ class Sortie:
     degraded: str | None = None
     beginning: bool = False
     """The next sortie was asked of the journal (``BeginSortie``)."""
+    revoked_by_mode: tuple[Authority, float] | None = None
+    """The authority a mode change ended, and when: a vehicle restart seen just after gives it
+    back (the restart changed the mode)."""
     next_authority: Authority | None = None
     """The authority the next sortie begins with, when the operator gave it."""
     services: int = 0
@@ -183,11 +189,18 @@ class SortieLogic:
                     s = self._doubt(s, "the link was lost", out)
                 s = replace(s, retry_at=min(s.retry_at, now), failures=0)
             case ins.VehicleRestarted(why=why):
-                s = replace(s, restarted=True, authority=replace(s.authority, expected_mode=None))
+                # The mode a restarted autopilot comes back in (it holds) is the restart's, not
+                # a pilot's: an authority ended by it in the seconds before is given back.
+                authority = s.authority
+                if s.revoked_by_mode is not None and now - s.revoked_by_mode[1] <= RESTART_GRACE_S:
+                    authority = s.revoked_by_mode[0]
+                    out.append(fx.Emit("authority_granted", f"the mode change was the autopilot's restart: "
+                                                            f"{authority.detail}"[:256]))
+                s = replace(s, restarted=True, authority=replace(authority, expected_mode=None), revoked_by_mode=None)
                 out.append(fx.Emit("vehicle_restarted", why[:256]))
                 s = self._doubt(s, f"the vehicle restarted: {why}", out, hold_interrupted=True)
             case ins.ModeChanged(mode=mode, commanded=commanded):
-                s = self._mode(s, v, mode, commanded, out)
+                s = self._mode(s, v, mode, commanded, now, out)
             case ins.Landed():
                 if s.flown:
                     s = self._end(s, "the vehicle landed", v, out)
@@ -545,12 +558,14 @@ class SortieLogic:
             s = self._doubt(s, f"the service started with plan {s.held.plan_id} in its journal", out)
         return s
 
-    def _mode(self, s: Sortie, v: ins.Vehicle, mode: str, commanded: bool, out: list[fx.Effect]) -> Sortie:
+    def _mode(self, s: Sortie, v: ins.Vehicle, mode: str, commanded: bool, now: float,
+              out: list[fx.Effect]) -> Sortie:
         held = s.held
         mission_return = (held is not None and v.seq == held.rtl_seq and mode in RETURNING_MODES)
         authority = s.authority.on_mode(mode, armed=v.armed or v.airborne, mission_return=mission_return,
                                         commanded=commanded)
         if authority.state == "revoked" and s.authority.granted:
+            s = replace(s, revoked_by_mode=(s.authority, now))
             out += [fx.Emit("authority_revoked", authority.detail[:256]),
                     fx.Log("warning", f"authority ended: {authority.detail}; no more commands until the operator "
                                       f"grants it again")]
