@@ -499,8 +499,9 @@ class SortieLogic:
                             out)
         elif self.rules.flavour == "ardupilot" and s.held is not None:
             # ArduPilot writes an upload's items as they arrive: a failed one may leave part of
-            # it in the mission held (PX4 switches over only when the upload is complete).
-            s = self._doubt(s, f"plan {up.plan_id}'s upload failed part-way", out)
+            # it in the mission held, or all of it if only its ACK was lost (PX4 switches over
+            # only when the upload is complete). The read-back tells which.
+            s = self._doubt(replace(s, unconfirmed=up.mission), f"plan {up.plan_id}'s upload failed part-way", out)
         return self._failed(s, f"plan {up.plan_id} not flown: {error}", now, out)
 
     def _failed(self, s: Sortie, why: str, now: float, out: list[fx.Effect]) -> Sortie:
@@ -582,8 +583,11 @@ class SortieLogic:
                 and v.battery_fraction is not None and v.battery_source == "autopilot"):
             return self._command(s, fx.Command("start", why=f"plan {s.held.plan_id}"), out)
         if s.resume_pending and s.held_gen is not None and s.busy == "" and v.airborne:
+            if v.mode in MISSION_MODES:  # PX4 flies a new mission's marked item in mission mode by itself
+                out.append(fx.Emit("mission_resumed", f"plan {s.held.plan_id}: the vehicle flies it in {v.mode}"))
+                return replace(s, resume_pending=False)
             if v.mode not in HOLDING_MODES:
-                return replace(s, resume_pending=False)  # flying it, going home, or in the operator's hands
+                return replace(s, resume_pending=False)  # going home, or in the operator's hands
             first = s.held.points[0][0] if s.held.points else s.held.rtl_seq
             return self._command(s, fx.Command("resume", first, f"plan {s.held.plan_id} (was {v.mode})"), out)
         return s
