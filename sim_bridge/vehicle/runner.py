@@ -231,7 +231,7 @@ class Vehicle:
             self._send_streamed(M.MAVLINK_MSG_ID_EXTENDED_SYS_STATE, tm.extended_sys_state(self.flight))
         self._report_all(events)
         if self.track is not None:
-            self.track.write(self.flight, now)
+            self.track.write(self.flight)
         self.store.tick()
         if self.signer is not None and now >= self._signing_due:
             self._signing_due = now + SIGNING_TICK_S

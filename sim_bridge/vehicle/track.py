@@ -5,7 +5,8 @@ flown (a hold at a point) with this, not with what the service believed.
 CSV, one line a tick: ``time_s,x_m,y_m,z_m,seq,mode,armed`` (simulated seconds of the
 flight, local metres east/north/up of the origin, the mission item flown, the mode's name,
 0/1). Appended, so a vehicle restarted with ``--state-file`` goes on in the same file (its
-time goes on from the saved flight); flushed about once a second of wall time.
+time goes on from the saved flight); flushed every line, so a vehicle killed mid-flight (a
+fault test's SIGKILL) loses none of what it flew.
 """
 
 from __future__ import annotations
@@ -18,7 +19,6 @@ from typing import IO, Iterator
 from .flight import Flight
 
 HEADER = ("time_s", "x_m", "y_m", "z_m", "seq", "mode", "armed")
-FLUSH_S = 1.0
 
 
 @dataclass(frozen=True)
@@ -37,15 +37,12 @@ class Track:
         self._csv = csv.writer(self._file)
         if fresh:
             self._csv.writerow(HEADER)
-        self._flushed = 0.0
 
-    def write(self, flight: Flight, wall_s: float) -> None:
+    def write(self, flight: Flight) -> None:
         x, y, z = flight.pos
         self._csv.writerow((f"{flight.time_s:.3f}", f"{x:.3f}", f"{y:.3f}", f"{z:.3f}", flight.current,
                             flight.mode.value, int(flight.armed)))
-        if wall_s - self._flushed >= FLUSH_S:
-            self._file.flush()
-            self._flushed = wall_s
+        self._file.flush()
 
     def close(self) -> None:
         self._file.close()

@@ -148,7 +148,7 @@ def test_a_landing_while_the_service_is_down_ends_the_sortie(stack: Stack) -> No
         gcs.wait_vehicle()
         assert gcs.command(M.MAV_CMD_NAV_LAND) == M.MAV_RESULT_ACCEPTED
         deadline = time.monotonic() + 30.0
-        while "disarmed at" not in vehicle.log():
+        while not re.search(r"disarmed( \(landed\))? at", vehicle.log()):
             assert time.monotonic() < deadline, vehicle.log()[-2000:]
             time.sleep(0.1)
     finally:
