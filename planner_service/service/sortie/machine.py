@@ -390,8 +390,9 @@ class SortieLogic:
                 return None  # starting or taking off (a new mission now would restart it), or landed
             if self.world.pending_count() < r.min_requests:
                 return None
-            if s.held is not None and not (s.dirty and now - s.last_plan_at >= r.replan_min_interval_s):
-                return None
+            if s.held is not None and (s.authority.granted or not s.dirty
+                                       or now - s.last_plan_at < r.replan_min_interval_s):
+                return None  # held and about to be started (a new one now would delay it), or nothing new
             return fx.PlanBasis("requests before takeoff", s.version, None)
         if v.mode in RETURNING_MODES:
             return None  # returning: the safety, the pilot or the mission decided
