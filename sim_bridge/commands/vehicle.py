@@ -53,7 +53,8 @@ def configure(parser: argparse.ArgumentParser) -> None:
                         help="simulated seconds per wall second (default 1)")
     parser.add_argument("--sysid", type=_system_id, default=1, help="MAVLink system id (default 1)")
     parser.add_argument("--item-timeout", type=positive_float, default=1.0,
-                        help="seconds before re-requesting a mission item during an upload (default 1)")
+                        help="seconds of the vehicle's time before re-requesting a mission item during an upload, as "
+                             "ArduPilot (default 1; at a speed-up, that much less wall time, at least 0.1 s)")
     parser.add_argument("--retries", type=positive_int, default=5, help="re-requests before an upload is abandoned (default 5)")
     parser.add_argument("--fence-margin", type=non_negative_float, default=100.0,
                         help="geofence: the scenario area grown by this many metres (default 100)")

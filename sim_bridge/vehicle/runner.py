@@ -57,6 +57,9 @@ Position Estimate`` on SITL); wall-clock here, as the telemetry rates, so that a
 speed-up does not flood the link and the logs."""
 
 
+MIN_ITEM_TIMEOUT_S = 0.1
+"""The shortest wall-clock wait for a mission item (a link's round trip is not sped up)."""
+
 @dataclass(frozen=True)
 class VehicleConfig:
     """Everything the vehicle stub is started with."""
@@ -70,6 +73,9 @@ class VehicleConfig:
     component_id: int = 1
     tick_s: float = 0.02
     item_timeout_s: float = 1.0
+    """Wait for the next mission item before asking again, in the vehicle's time (ArduPilot's
+    1 s, its scheduler's clock): ``item_timeout_s / speedup`` of wall time, at least
+    ``MIN_ITEM_TIMEOUT_S``, as SITL behaves at a speed-up."""
     max_retries: int = 5
     fence_margin_m: float = 100.0
     """Geofence: the scenario's area grown by this margin; waypoints outside are refused."""
@@ -138,7 +144,8 @@ class Vehicle:
             text=lambda text, peer: self._send_to(tm.statustext(M.MAV_SEVERITY_INFO, text), peer),
         )
         self.store = MissionStore(
-            self._send_to, clock, flavour=config.flavour, hooks=hooks, item_timeout_s=config.item_timeout_s,
+            self._send_to, clock, flavour=config.flavour, hooks=hooks,
+            item_timeout_s=max(config.item_timeout_s / config.speedup, MIN_ITEM_TIMEOUT_S),
             max_retries=config.max_retries, capacity=config.max_mission_items,
         )
         self.streams: dict[Hashable, PeerStreams] = {}
