@@ -556,6 +556,9 @@ class SortieLogic:
         out.append(fx.Log("info", f"autopilot connected ({mode})"))
         if v.airborne:
             s = replace(s, started=True)
+            if s.authority.granted and mode in MISSION_MODES:
+                # the service restarted in flight: the mission mode it finds is the one it keeps
+                s = replace(s, authority=s.authority.commanding(mode))
         if s.held is not None:  # from the journal: does the vehicle still fly it?
             s = self._doubt(s, f"the service started with plan {s.held.plan_id} in its journal", out)
         return s
@@ -724,9 +727,10 @@ class SortieLogic:
         if s.watch is not None:
             s = self._judge(replace(s, watch=s.watch.abandon(why)), out)
         out.append(fx.EndSortie(why))
-        commanded = s.authority.granted and s.authority.expected_mode is not None
+        # Under authority still held, the landing was the mission's or the service's own:
+        # any change by someone else would have ended the authority first.
         return replace(s, over=why, version=s.version + 1, busy="" if s.busy == "plan" else s.busy,
-                       commanded_landing=commanded)
+                       commanded_landing=s.authority.granted)
 
     def _maybe_begin(self, s: Sortie, v: ins.Vehicle, out: list[fx.Effect]) -> Sortie:
         """Begin the next sortie once the vehicle is ready again: on the ground, disarmed,
