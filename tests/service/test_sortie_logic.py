@@ -99,6 +99,7 @@ def fly_to_first_point(world: FakeWorld) -> tuple[Run, fx.Upload]:
     assert only(out, fx.Command)[0].kind == "start"
     run.feed(ins.CommandDone(fx.Command("start")), armed=True, mode="AUTO")
     run.tick(airborne=True, seq=1, xyz=(0.0, 0.0, 50.0), boot_s=5.0)
+    run.tick(seq=2, xyz=(30.0, 50.0, 100.0), boot_s=8.0)  # on the way to the first point
     return run, up
 
 
@@ -186,6 +187,17 @@ def test_restart_read_back_and_a_lost_mission_resumed_from_where_it_is() -> None
     out = run.feed(ins.Uploaded(up2, 4))
     (cmd,) = only(out, fx.Command)
     assert (cmd.kind, cmd.seq) == ("resume", 2)
+
+
+def test_a_hold_found_under_way_is_left_to_the_autopilot() -> None:
+    # The service (re)started with the vehicle already holding: when the hold began is not
+    # known, so no decision is made there (a replacement would start the hold again).
+    world = FakeWorld()
+    run, _ = fly_to_first_point(world)
+    run.s = replace(run.s, watch=None)
+    out = run.tick(seq=2, xyz=(120.0, 200.0, 100.0), boot_s=20.0)
+    assert run.s.watch.phase == "holding" and not run.s.watch.approached
+    assert not only(out, fx.Plan) and not only(run.tick(seq=2, boot_s=25.0), fx.Plan)
 
 
 def test_a_link_gap_read_back_as_ours_keeps_the_hold() -> None:

@@ -51,6 +51,11 @@ class HoldWatch:
     arrival_gap_s: float = 0.0
     """Vehicle seconds between the last report before the arrival and the first inside."""
     why_left: str = ""
+    abandoned: bool = False
+    """Ended from outside (a restart, a lost mission), not by the reports."""
+    approached: bool = False
+    """A report showed the vehicle outside the radius before it arrived: the arrival was
+    seen (not so for a watch begun with the vehicle already there, after a restart of ours)."""
 
     @property
     def arrived(self) -> bool:
@@ -67,8 +72,11 @@ class HoldWatch:
 
     @property
     def covered_s(self) -> float:
-        """The hold as the reports show it, the arrival's reporting gap included."""
-        return self.held_s + self.arrival_gap_s if self.arrived else 0.0
+        """The hold as the reports show it, the arrival's reporting gap included; only what
+        was seen if the watch was abandoned (when the vehicle left is then unknown)."""
+        if not self.arrived:
+            return 0.0
+        return self.held_s if self.abandoned else self.held_s + self.arrival_gap_s
 
     def feed(self, s: Sample) -> "HoldWatch":
         """The watch after report ``s`` (reports older than the last are ignored, except a
@@ -86,8 +94,8 @@ class HoldWatch:
                 return replace(self, phase="passed", last_s=s.boot_s, why_left=f"item {s.seq} flown before arriving")
             if s.seq == self.seq and inside:
                 return replace(self, phase="holding", arrived_s=s.boot_s, last_in_s=s.boot_s, last_s=s.boot_s,
-                               arrival_gap_s=min(gap, MAX_ARRIVAL_GAP_S))
-            return replace(self, last_s=s.boot_s)
+                               arrival_gap_s=min(gap, MAX_ARRIVAL_GAP_S) if self.approached else 0.0)
+            return replace(self, last_s=s.boot_s, approached=self.approached or not inside)
         # holding
         if s.seq > self.seq:
             return self._end(f"item {s.seq} flown next", s.boot_s)
@@ -99,7 +107,7 @@ class HoldWatch:
         """End the watch from outside (the mission was lost, the link gave no reports)."""
         if self.over:
             return self
-        return replace(self, phase="left" if self.arrived else "passed", why_left=why)
+        return replace(self, phase="left" if self.arrived else "passed", why_left=why, abandoned=True)
 
     def _end(self, why: str, boot_s: float) -> "HoldWatch":
         phase: Phase = "left" if self.arrived else "passed"

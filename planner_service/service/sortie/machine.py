@@ -401,7 +401,9 @@ class SortieLogic:
         if s.held is None or v.mode not in MISSION_MODES:
             return None  # not flying a mission of ours: the operator has the vehicle
         w = s.watch
-        if w is not None and w.phase == "holding" and s.decided_at != w.seq:
+        if w is not None and w.phase == "holding" and s.decided_at != w.seq and w.approached:
+            # (a hold found already under way, its start unseen, is left to the autopilot's
+            # own timer: a replacement now would start it again; the next arrival decides)
             point = s.held.point_at(w.seq)
             b = s.binding
             serving = b.user_id if b is not None and b.request_id is not None else None
