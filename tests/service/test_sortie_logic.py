@@ -327,3 +327,18 @@ def test_the_mode_a_restarted_autopilot_comes_back_in_is_not_a_pilots() -> None:
     run.now += 10.0
     run.feed(ins.VehicleRestarted("again"))
     assert run.s.authority.state == "revoked"
+
+
+def test_the_holds_margins_are_paid_for_out_of_the_reserve() -> None:
+    # A path whose last point leaves the battery just above the floor: the margins' hovering
+    # (a command's latency at x80 is 8 s a point) would break it, so that point is cut.
+    run = Run(FakeWorld())
+    floor = SCENARIO.energy_floor_j
+    tight = PlannedPath((point(3, 120.0, 200.0, "a", 1), point(7, 320.0, 200.0, "b", 2)), 20_000.0, floor + 1000.0,
+                        "the planned line ends")
+    fast = run.logic._with_margins(tight, 1.0 + 0.1 * 80)
+    assert [p.user_id for p in fast.points] == ["a"] and fast.stop_reason.startswith("the energy reserve")
+    assert fast.battery_after_j >= floor
+    assert fast.battery_after_j + fast.predicted_energy_j == pytest.approx(tight.battery_after_j + tight.predicted_energy_j)
+    slow = run.logic._with_margins(tight, 1.0)
+    assert len(slow.points) == 2 and slow.points[0].hold_s == 61.0

@@ -40,7 +40,8 @@ from ...model.fairness import is_eligible
 from ...model.reward import interval_reward
 from ..errors import PlanningError
 from ..link.base import HOLDING_MODES, MISSION_MODES, RETURNING_MODES
-from ..planning import check_path, hold_time_s
+from ...model.interval import return_energy_j
+from ..planning import PlannedPath, check_path, hold_time_s
 from . import effects as fx
 from . import inputs as ins
 from .authority import Authority, next_sortie
@@ -49,6 +50,10 @@ from .mission import HeldMission
 
 Busy = Literal["", "plan", "upload", "readback"]
 
+CONTROL_LATENCY_S = 0.1
+"""Wall seconds from a hold's position report to the vehicle obeying the command that ends
+it (a tick of the loop and a command's round trip): that much more hovering, in vehicle time,
+is planned at each point."""
 RESTART_GRACE_S = 5.0
 """Wall seconds within which a vehicle restart explains a mode change seen before it (the
 link believes a restart only after a second message)."""
@@ -424,11 +429,8 @@ class SortieLogic:
         airborne = v.airborne
         if not path.points and not airborne and not s.must_upload:
             return s  # nothing to fly yet
-        # Each hold is planned a little longer than the upload needs: the service ends holds
-        # itself once the reports show them (``_maybe_end_hold``); the item's own hold is the
-        # ceiling the autopilot keeps to if the service cannot end it (a lost link).
-        margin = self.rules.hold_margin_s
-        path = replace(path, points=tuple(replace(p, hold_s=p.hold_s + margin) for p in path.points))
+        margin = self.rules.hold_margin_s + CONTROL_LATENCY_S * v.time_rate
+        path = self._with_margins(path, margin)
         try:
             check_path(path, self.rules.area, self.rules.scenario, path.battery_after_j + path.predicted_energy_j)
             hover = [HoverPoint(p.x_m, p.y_m, p.z_m, p.hold_s) for p in path.points]
@@ -458,6 +460,27 @@ class SortieLogic:
                              restart_current=current is not None and basis.keep_through is not None,
                              planner_ms=planned.planner_ms, newest_request=planned.newest_request))
         return replace(s, busy="upload", plan_id=plan_id)
+
+    def _with_margins(self, path: PlannedPath, margin_s: float) -> PlannedPath:
+        """The path as it will be flown: each hold ``margin_s`` longer than its upload needs
+        (the service ends a hold once its position reports show it, a command's latency
+        later, in vehicle time; the item's own hold is the ceiling the autopilot keeps to
+        when the service cannot end it), and cut where that hovering breaks the energy
+        reserve the planner kept."""
+        sc = self.rules.scenario
+        points = [replace(p, hold_s=p.hold_s + margin_s) for p in path.points]
+        extra = margin_s * sc.hover_power_w
+        battery = path.battery_after_j
+        while points and battery - extra * len(points) < sc.energy_floor_j:
+            dropped = points.pop()
+            home = np.array([points[-1].x_m, points[-1].y_m, points[-1].z_m]) if points else None
+            gone = np.array([dropped.x_m, dropped.y_m, dropped.z_m])
+            battery += dropped.energy_j + return_energy_j(self.p, gone)
+            battery -= return_energy_j(self.p, home) if home is not None else 0.0
+        spent = path.predicted_energy_j - (battery - path.battery_after_j) + extra * len(points)
+        reason = path.stop_reason if len(points) == len(path.points) else "the energy reserve (with the holds' margins)"
+        return replace(path, points=tuple(points), battery_after_j=battery - extra * len(points),
+                       predicted_energy_j=spent, stop_reason=reason)
 
     def _hold_for_binding(self, s: Sortie, held: HeldMission, items: list[MissionItem], seq: int,
                           margin: float) -> tuple[HeldMission, list[MissionItem]]:
