@@ -94,7 +94,7 @@ def fly_to_first_point(world: FakeWorld) -> tuple[Run, fx.Upload]:
     assert plan.basis.keep_through is None
     out = run.feed(ins.Planned(plan.basis, path(point(3, 120.0, 200.0, "a", 1), point(7, 320.0, 200.0, "b", 2))))
     (up,) = only(out, fx.Upload)
-    assert [i.seq for i in up.items] == [0, 1, 2, 3, 4] and up.current_seq is None
+    assert [i.seq for i in up.items] == [0, 1, 2, 3, 4] and up.current_seq == 1, "on the ground: from the takeoff"
     out = run.feed(ins.Uploaded(up, 1))
     assert only(out, fx.Command)[0].kind == "start"
     run.feed(ins.CommandDone(fx.Command("start")), armed=True, mode="AUTO")

@@ -415,7 +415,7 @@ class SortieLogic:
             return fx.PlanBasis(f"arrived at point {point.hover_index if point else w.seq}", s.version, w.seq,
                                 at_point=point, serving=serving, serving_tasks=b.tasks if serving and b else 0)
         if (s.dirty and v.seq == s.held.rtl_seq and now - s.last_plan_at >= r.replan_min_interval_s
-                and self.world.pending_count() > 0):
+                and self.world.pending_count() > 0 and v.xyz[2] >= r.area.min_flight_altitude_m):
             return fx.PlanBasis("new requests on the way home", s.version, s.held.rtl_seq - 1)
         return None
 
@@ -438,7 +438,10 @@ class SortieLogic:
             if basis.keep_through is None or held is None:
                 items = encode_path(hover, self.rules.origin, self.rules.flavour)  # type: ignore[arg-type]
                 mission = HeldMission.fresh(plan_id, items, path.points, self.rules.flavour)
-                current = mission.points[0][0] if airborne and mission.points else None
+                # The autopilot keeps its index across an upload, also from the last sortie's
+                # mission: in the air fly the first point, on the ground start at the takeoff.
+                takeoff = 1 if self.rules.flavour == "ardupilot" else 0
+                current = (mission.points[0][0] if airborne else takeoff) if mission.points else None
             else:
                 items, _ = replacement_items(held.items, basis.keep_through, hover, self.rules.origin,
                                              self.rules.flavour)  # type: ignore[arg-type]
