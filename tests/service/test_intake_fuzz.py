@@ -13,6 +13,8 @@ State (the payload is ignored) and no journal change.
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import json
 import sqlite3
 import time
@@ -23,7 +25,7 @@ import zenoh
 from hostile_payloads import REQUEST_FIELDS, Case, batches, field_root, valid_request
 from hypothesis import HealthCheck, given, settings
 
-from planner_service.service.app import Service
+from planner_service.service.app import Service, build_parts
 from planner_service.service.config import IntakeConfig, build_config
 from planner_service.service.intake import Accepted, Intake, Rejected
 from planner_service.service.journal import Journal
@@ -149,7 +151,7 @@ class RecordingQuery:
 
 def test_a_state_query_answers_the_same_state_whatever_it_carries(tmp_path: Path) -> None:
     config = build_config({}, {"journal.path": str(tmp_path / "journal.sqlite")})
-    service = Service(config, clock=lambda: NOW)
+    service = Service(config, replace(build_parts(config), wall=lambda: NOW))
     try:
         accepted = service.intake.handle(b'{"kind": "task_request", "user_id": "u-1", "x_m": 10, "y_m": 20, "tasks": 3}')
         assert isinstance(accepted, Accepted)

@@ -25,7 +25,7 @@ from typing import Any
 import pytest
 
 from planner_service.model import Scenario, field
-from planner_service.service.app import Service
+from planner_service.service.app import Service, build_parts
 from planner_service.service.config import build_config
 from planner_service.service.journal import Journal
 from planner_service.service.processes import Child
@@ -153,16 +153,18 @@ def test_restore_between_and_during_sorties(tmp_path: Path) -> None:
     j.end_sortie("the vehicle landed", {}, 5.0)
     j.close()
 
-    between = Service(config)  # between sorties: the intake refuses, waiting for the battery
+    between = Service(config, build_parts(config))  # between sorties: the intake refuses, waiting for the battery
     try:
-        assert between.sortie_over == "the vehicle landed" and between.journal.sortie == 1
+        assert between.state.over == "the vehicle landed" and between.state.number == between.journal.sortie == 1
         assert between.intake.closed_reason == (
             "sortie over: waiting for the battery (at least 90%) with the vehicle on the ground and disarmed "
             "before sortie 2")
-        assert between.plan_id == 1 and between.held is not None
+        assert between.state.plan_id == 1 and between.state.held is not None
+        assert between.state.judged == {2}  # its one point was served after its mission was accepted
     finally:
         between.journal.close()
-    one = Service(build_config({}, {"journal.path": str(path), "sortie.repeat": "false"}))
+    once = build_config({}, {"journal.path": str(path), "sortie.repeat": "false"})
+    one = Service(once, build_parts(once))
     try:
         assert one.intake.closed_reason == "sortie over: the vehicle landed; this service flies one sortie " \
             "(sortie.repeat = false)"
@@ -173,11 +175,12 @@ def test_restore_between_and_during_sorties(tmp_path: Path) -> None:
     j.accept("u2", 200.0, 200.0, 0.0, 7, None, 7.0)
     j.close()
 
-    during = Service(config)  # in sortie 2: nothing of sortie 1 is held or counted
+    during = Service(config, build_parts(config))  # in sortie 2: nothing of sortie 1 is held or counted
     try:
-        assert during.sortie_over is None and during.intake.closed_reason is None
-        assert during.journal.sortie == 2 and during.held is None and during.last_hover_index == -1
-        assert during.plan_id == 1  # plan ids run on
+        assert during.state.over is None and during.intake.closed_reason is None
+        assert during.state.number == during.journal.sortie == 2 and during.state.held is None
+        assert during.state.last_hover_index == -1 and during.state.services == 0
+        assert during.state.plan_id == 1  # plan ids run on
         assert [(u.user_id, u.services) for u in during.journal.users()] == [("u2", 0)]
     finally:
         during.journal.close()
