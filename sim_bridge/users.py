@@ -3,18 +3,20 @@ backlog of tasks that it asks the service to take (simulated seconds; ``speedup`
 seconds pass per wall second, as in the vehicle stub).
 
 Start positions are the scenario's user layout (the paper's two rows). Tasks follow one of
-two laws (``TaskParams.law``), both drawing from the model (``draw_tasks``: N(mean, phi^2),
-rounded, clipped to [0, u_max]) once per interval:
+two laws (``TaskParams.law``), both the model's (one physics with the planner's futures):
 
-- ``backlog`` (default): the draw is the tasks that *arrive* in the interval; they are added
-  to the user's backlog, capped at ``backlog_max``; what the service serves is taken off.
+- ``backlog`` (default; the model's ``task_model = "backlog"``): a user's first backlog is
+  the paper's draw (``draw_tasks``: N(mean, phi^2), rounded, clipped to [0, u_max]); every
+  interval after it, new tasks arrive (``draw_arrivals``: Poisson of the scenario's
+  ``task_arrival_mean``), added to the backlog, capped at ``backlog_max``; what the service
+  serves is taken off.
   The user sends its whole backlog and position when the service's count of it differs from
   its own (new tasks, a service it learnt of, a request that crossed a service on the
   wire), when it has moved ``resend_m`` since its last request, and at least once an
   interval while it has tasks; a backlog of 0 is sent only to end a wait the service still
   counts ("nothing more to offload").
-- ``redraw`` (the paper's experiments): the draw replaces the task count every interval and
-  is sent then, whatever was served.
+- ``redraw`` (the paper's experiments): a draw (``draw_tasks``) replaces the task count
+  every interval and is sent then, whatever was served.
 
 A user learns what was served from its ack (``served_tasks`` in its ``sortie``) and from its
 ``user_place`` publication (which also says the service's count of its backlog); counts are
@@ -35,7 +37,7 @@ from typing import Literal
 import numpy as np
 
 from planner_service.model import Scenario, pack, user_rows
-from planner_service.model.mobility import draw_tasks
+from planner_service.model.mobility import draw_arrivals, draw_tasks
 from protocol import ProtocolError, TaskAck, UserPlace, printable
 from protocol.client import ClientError, PlannerClient
 
@@ -61,8 +63,10 @@ class WalkParams:
 class TaskParams:
     """How tasks arrive and when a user speaks (simulated seconds, metres)."""
 
-    interval_s: float = 40.0
-    """One draw of the model per interval; the longest silence of a user with tasks."""
+    interval_s: float = 90.0
+    """One interval of the model, in simulated seconds: about what a flown interval of the
+    field preset lasts (a flight between hovering points and a hold); the longest silence
+    of a user with tasks."""
     law: Law = "backlog"
     backlog_max: int = 20
     """The most tasks a user holds (``backlog``); arrivals beyond it are lost."""
@@ -85,6 +89,7 @@ class Walker:
     """Tasks waiting, as this user knows them."""
     next_draw_s: float = 0.0
     """Simulated time of the next draw of the model."""
+    draws: int = 0
     fresh: bool = False
     """``redraw``: a draw not sent yet."""
     view: int | None = None
@@ -153,7 +158,11 @@ def arrive(w: Walker, now_s: float, p: np.ndarray, tp: TaskParams, rng: np.rando
     (capped) or, ``redraw``, in its place."""
     one = np.zeros(1, dtype=np.int64)
     while now_s >= w.next_draw_s:
-        draw_tasks(p, one, rng)
+        if tp.law == "backlog" and w.draws > 0:
+            draw_arrivals(p, one, rng)
+        else:
+            draw_tasks(p, one, rng)
+        w.draws += 1
         drawn = int(one[0])
         if tp.law == "redraw":
             w.backlog, w.fresh = drawn, True

@@ -1,5 +1,6 @@
-"""Simulated ground users: each walks by random waypoint, keeps a backlog of tasks (new ones
-arrive every interval; what the service serves is taken off) and submits it over zenoh when
+"""Simulated ground users: each walks by random waypoint, keeps a backlog of tasks (a first
+one drawn, new ones arriving every interval, as the model's backlog task model; what the
+service serves is taken off) and submits it over zenoh when
 it changes, when the user has moved, and at least every interval (--tasks redraw: the
 paper's fresh draw every interval instead). Stops on SIGINT/SIGTERM, after --duration, or
 when the service says it flies no more sorties (between two sorties it refuses requests and
@@ -23,14 +24,16 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--count", type=positive_int, default=10, help="number of users (default 10)")
     parser.add_argument("--preset", default="field", help="scenario preset: area, layout and task draws (default field)")
     parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE", help="override a scenario field")
-    parser.add_argument("--interval", type=positive_float, default=40.0,
-                        help="simulated seconds between two draws of a user's tasks, and the longest a user with "
-                             "tasks stays silent (default 40)")
+    parser.add_argument("--interval", type=positive_float, default=90.0,
+                        help="simulated seconds of one interval of the model (about a flown interval of the field "
+                             "preset: a flight and a hold), and the longest a user with tasks stays silent "
+                             "(default 90)")
     parser.add_argument("--tasks", choices=("backlog", "redraw"), default="backlog",
-                        help="backlog (default): each interval's draw N(mean, phi^2) of the scenario arrives and is "
-                             "added to the user's backlog (capped at --backlog-max), what is served is taken off, "
-                             "the backlog is sent when it changes; redraw: the paper's experiments, a fresh draw "
-                             "replaces the task count every interval and is sent then")
+                        help="backlog (default; the model's task_model = backlog): a first backlog drawn N(mean, "
+                             "phi^2), then each interval Poisson(task_arrival_mean) new tasks (capped at "
+                             "--backlog-max); what is served is taken off; the backlog is sent when it changes; "
+                             "redraw: the paper's experiments, a fresh N(mean, phi^2) draw replaces the count every "
+                             "interval and is sent then")
     parser.add_argument("--backlog-max", type=positive_int, default=None, metavar="N",
                         help="most tasks a user holds (default: the scenario's task_max, u_max)")
     parser.add_argument("--resend-m", type=positive_float, default=50.0, metavar="M",

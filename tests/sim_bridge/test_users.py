@@ -11,8 +11,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from planner_service.model import field, pack
-from planner_service.model.mobility import draw_tasks
+from planner_service.model import field, pack, preset
+from planner_service.model.mobility import draw_arrivals, draw_tasks
 from planner_service.service.intake import Accepted, Intake, fairness_rule
 from planner_service.service.journal import Journal
 from protocol import Area, TaskAck, UserPlace
@@ -21,6 +21,8 @@ from sim_bridge.users import (TaskParams, WalkParams, Walker, arrive, learn_serv
 
 SCENARIO = field()
 P = pack(SCENARIO)
+BUSY = pack(SCENARIO.replace(task_arrival_mean=6.0))
+"""Arrivals that keep the users' backlogs busy (about 6 tasks an interval each)."""
 WALK = WalkParams(SCENARIO.area_side_m)
 
 
@@ -28,37 +30,40 @@ def walker() -> Walker:
     return Walker("u", np.array([10.0, 10.0]), np.array([400.0, 10.0]), 1.0, next_draw_s=0.0)
 
 
-def draws(seed: int, n: int) -> list[int]:
-    """The model's first ``n`` draws from ``seed``, one a call, as ``arrive`` makes them."""
+def draws(seed: int, n: int, p: np.ndarray, law: str = "backlog") -> list[int]:
+    """The model's first ``n`` draws from ``seed``, one a call, as ``arrive`` makes them:
+    ``backlog``, the first backlog (``draw_tasks``) then the arrivals (``draw_arrivals``);
+    ``redraw``, ``draw_tasks`` every time."""
     rng, one, out = np.random.default_rng(seed), np.zeros(1, dtype=np.int64), []
-    for _ in range(n):
-        draw_tasks(P, one, rng)
+    for k in range(n):
+        (draw_arrivals if k and law == "backlog" else draw_tasks)(p, one, rng)
         out.append(int(one[0]))
     return out
 
 
-def test_backlog_law_adds_each_interval_s_draw_and_caps_it() -> None:
+def test_backlog_law_a_first_draw_then_the_arrivals_capped() -> None:
+    busy = pack(preset("field").replace(task_arrival_mean=6.0))  # arrivals that fill the buffer soon
     tp = TaskParams(interval_s=40.0, backlog_max=25)
     w, rng = walker(), np.random.default_rng(7)
     expected, backlog, lost = [], 0, 0
-    for d in draws(7, 6):
+    for d in draws(7, 6, busy):
         kept = min(d, 25 - backlog)
         backlog, lost = backlog + kept, lost + d - kept
         expected.append(backlog)
     seen = []
     for k in range(6):
-        arrive(w, 40.0 * k + 39.0, P, tp, rng)  # one draw per interval, at its start
+        arrive(w, 40.0 * k + 39.0, busy, tp, rng)  # one draw per interval, at its start
         seen.append(w.backlog)
     assert seen == expected and w.lost == lost and w.arrived == backlog
-    assert w.backlog == 25 and lost > 0  # six draws of mean 10 fill a backlog of 25
-    arrive(w, 239.0, P, tp, rng)  # nothing more is due
+    assert w.backlog == 25 and lost > 0  # a first backlog of about 10 and 6 a interval fill 25
+    arrive(w, 239.0, busy, tp, rng)  # nothing more is due
     assert w.backlog == 25
 
 
 def test_redraw_law_replaces_the_count_and_sends_it_once_an_interval() -> None:
     tp = TaskParams(interval_s=40.0, law="redraw")
     w, rng = walker(), np.random.default_rng(3)
-    expected = draws(3, 3)
+    expected = draws(3, 3, P, "redraw")
     for k in range(3):
         arrive(w, 40.0 * k, P, tp, rng)
         assert w.backlog == expected[k] and wants_to_send(w, 40.0 * k, tp)
@@ -145,7 +150,7 @@ def test_a_whole_walk_against_the_intake_and_journal_keeps_the_counts_right(tmp_
         clock["t"] = now
         for w in walkers:
             step(w, 5.0, WALK, rng)
-            arrive(w, now, P, tp, rng)
+            arrive(w, now, BUSY, tp, rng)
             if wants_to_send(w, now, tp):
                 x, y = (float(v) for v in np.clip(w.xy, 0.0, WALK.side_m))
                 tasks = sent(w, now)
