@@ -140,7 +140,7 @@ def test_a_sortie_records_only_holds_the_vehicle_was_seen_at() -> None:
     # Passes item 3's point without ever coming within the radius: no service.
     out = run.tick(seq=4, xyz=(300.0, 280.0, 100.0), boot_s=50.0)
     assert not only(out, fx.RecordService)
-    assert [e.event for e in only(out, fx.Emit)] == ["waypoint_skipped"]
+    assert [e.event.kind for e in only(out, fx.Emit)] == ["waypoint_skipped"]
 
 
 def test_a_hold_cut_short_serves_what_it_carried() -> None:
@@ -174,7 +174,7 @@ def test_restart_read_back_and_a_lost_mission_resumed_from_where_it_is() -> None
     run, up = fly_to_first_point(world)
     (searching,) = only(run.tick(seq=2, xyz=(120.0, 200.0, 100.0), boot_s=20.0), fx.Plan)
     out = run.feed(ins.VehicleRestarted("its clock went back"), boot_s=1.0, mode="LOITER", seq=0)
-    assert [e.event for e in only(out, fx.Emit)][0] == "vehicle_restarted"
+    assert [e.event.kind for e in only(out, fx.Emit)][0] == "vehicle_restarted"
     assert not only(out, fx.RecordService), "a hold of no measurable length serves nothing"
     # The decision being searched was made on the mission the restart lost: dropped.
     out = run.feed(ins.Planned(searching.basis, path(point(9, 400.0, 300.0, "b", 2))))
@@ -221,7 +221,7 @@ def test_uncommanded_mode_change_ends_authority_and_no_command_follows() -> None
     world = FakeWorld()
     run, _ = fly_to_first_point(world)
     out = run.feed(ins.ModeChanged("LOITER"), mode="LOITER")
-    assert [e.event for e in only(out, fx.Emit)] == ["authority_revoked"]
+    assert [e.event.kind for e in only(out, fx.Emit)] == ["authority_revoked"]
     assert run.s.authority.state == "revoked"
     out = run.tick(battery_fraction=0.05)  # the battery guard would fire with authority
     assert not only(out, fx.Command)
@@ -290,7 +290,7 @@ def test_failed_uploads_back_off_and_stop_after_the_bound() -> None:
         waits.append(run.s.retry_at - run.now)
     assert waits[0] == pytest.approx(1.0, abs=0.1) and waits[1] == pytest.approx(2.0, abs=0.1)
     assert math.isinf(run.s.retry_at)
-    assert "upload_abandoned" in [e.event for e in only(run.effects, fx.Emit)]
+    assert "upload_abandoned" in [e.event.kind for e in only(run.effects, fx.Emit)]
     run.now += 100.0
     assert not only(run.tick(), fx.Plan)
     run.feed(ins.RequestIn("a", 11))
@@ -323,7 +323,7 @@ def test_the_mode_a_restarted_autopilot_comes_back_in_is_not_a_pilots() -> None:
     assert run.s.authority.state == "revoked"
     out = run.feed(ins.VehicleRestarted("its clock went back (seen twice)"))
     assert run.s.authority.granted, "the restart changed the mode, not a pilot"
-    assert "authority_granted" in [e.event for e in only(out, fx.Emit)]
+    assert "authority_granted" in [e.event.kind for e in only(out, fx.Emit)]
     run.now += 10.0  # a later restart explains nothing
     run.feed(ins.ModeChanged("AUTO", commanded=True), mode="AUTO")
     run.feed(ins.ModeChanged("LOITER"), mode="LOITER")
