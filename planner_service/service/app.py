@@ -334,7 +334,11 @@ class Service:
         try:
             await self.link.upload(list(up.items), current_seq=up.current_seq, restart_current=up.restart_current)
         except LinkError as err:
-            return ins.UploadFailed(up, err.result, err.outcome_unknown)
+            if err.operation != "set_current()":
+                return ins.UploadFailed(up, err.result, err.outcome_unknown)
+            # The mission is held; only the item flown could not be confirmed (an autopilot
+            # that does not report MISSION_CURRENT): its own index stands.
+            log.warning("plan %d is held, but the item the vehicle flies could not be set: %s", up.plan_id, err)
         self._upload_times_s = [*self._upload_times_s, self.mono() - t0][-UPLOAD_HISTORY:]
         log.info("plan %d: %s uploaded (%d items, %.0f ms; %s)", up.plan_id,
                  [p.hover_index for p in up.path.points], len(up.items), (self.mono() - t0) * 1e3,
