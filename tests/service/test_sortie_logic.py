@@ -97,7 +97,7 @@ def fly_to_first_point(world: FakeWorld) -> tuple[Run, fx.Upload]:
     assert plan.basis.keep_through is None
     out = run.feed(ins.Planned(plan.basis, path(point(3, 120.0, 200.0, "a", 1), point(7, 320.0, 200.0, "b", 2))))
     (up,) = only(out, fx.Upload)
-    assert [i.seq for i in up.items] == [0, 1, 2, 3, 4] and up.current_seq == 1, "on the ground: from the takeoff"
+    assert [i.seq for i in up.items] == [0, 1, 2, 3, 4] and up.current_seq is None, "a fresh vehicle is at 0"
     out = run.feed(ins.Uploaded(up, 1))
     assert only(out, fx.Command)[0].kind == "start"
     run.feed(ins.CommandDone(fx.Command("start")), armed=True, mode="AUTO")
@@ -345,6 +345,18 @@ def test_the_holds_margins_are_paid_for_out_of_the_reserve() -> None:
     assert fast.battery_after_j + fast.predicted_energy_j == pytest.approx(tight.battery_after_j + tight.predicted_energy_j)
     slow = run.logic._with_margins(tight, 1.0)
     assert len(slow.points) == 2 and slow.points[0].hold_s == 61.0
+
+
+def test_a_mission_on_the_ground_starts_at_its_takeoff_after_a_sortie() -> None:
+    # The autopilot keeps its index across an upload: after a sortie it points at the last
+    # mission's return; the next first mission must be flown from its takeoff.
+    world = FakeWorld()
+    world.ask("a", 120.0, 200.0, 10, 1)
+    run = Run(world)
+    run.v = replace(run.v, seq=6)
+    (plan,) = only(run.tick(), fx.Plan)
+    (up,) = only(run.feed(ins.Planned(plan.basis, path(point(3, 120.0, 200.0, "a", 1)))), fx.Upload)
+    assert up.current_seq == 1
 
 
 def test_the_user_served_is_the_models_choice_at_arrival() -> None:

@@ -458,7 +458,12 @@ class SortieLogic:
                 # The autopilot keeps its index across an upload, also from the last sortie's
                 # mission: in the air fly the first point, on the ground start at the takeoff.
                 takeoff = 1 if self.rules.flavour == "ardupilot" else 0
-                current = (mission.points[0][0] if airborne else takeoff) if mission.points else None
+                if not mission.points:
+                    current = None
+                elif airborne:
+                    current = mission.points[0][0]
+                else:
+                    current = takeoff if v.seq > takeoff else None  # (already there: nothing to wait for)
             else:
                 items, _ = replacement_items(held.items, basis.keep_through, hover, self.rules.origin,
                                              self.rules.flavour)  # type: ignore[arg-type]
