@@ -369,3 +369,18 @@ def test_the_user_served_is_the_models_choice_at_arrival() -> None:
     run.tick(seq=2, xyz=(120.0, 200.0, 100.0), boot_s=20.0)
     b = run.s.binding
     assert (b.user_id, b.request_id, b.tasks, b.planned) == ("c", 6, 9, False)
+
+
+def test_a_user_done_early_ends_the_hold_but_not_the_physics() -> None:
+    world = FakeWorld()
+    run, _ = fly_to_first_point(world)
+    (plan,) = only(run.tick(seq=2, xyz=(120.0, 200.0, 100.0), boot_s=20.0), fx.Plan)
+    (up,) = only(run.feed(ins.Planned(plan.basis, path(point(9, 400.0, 300.0, "b", 2)))), fx.Upload)
+    run.feed(ins.Uploaded(up, 2))
+    needed = run.s.binding.needed_s
+    run.tick(seq=2, boot_s=20.0 + needed / 4)
+    out = run.feed(ins.RequestIn("a", 0))  # "nothing more to offload"
+    out += run.tick(seq=2, boot_s=21.0 + needed / 4)
+    assert [(c.kind, c.seq) for c in only(out, fx.Command)] == [("set_current", 3)]
+    (svc,) = only(run.tick(seq=3, xyz=(150.0, 200.0, 100.0), boot_s=22.0 + needed / 4), fx.RecordService)
+    assert 0 < svc.tasks < 10, "a quarter of the hold carries about a quarter of the tasks"

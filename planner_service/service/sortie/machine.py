@@ -381,8 +381,10 @@ class SortieLogic:
             return s
         if b is None or b.request_id is None:
             return s
+        # What the hold carried, whatever the user said: a user whose upload is done ended the
+        # hold early (``_maybe_end_hold``), but no more is recorded than the time held carries.
         covered = w.covered_s
-        if b.done or covered >= b.needed_s - 0.5:
+        if covered >= b.needed_s - 0.5:
             tasks = b.tasks
         else:
             tasks = int(b.tasks * covered / b.needed_s) if b.needed_s > 0 else 0
