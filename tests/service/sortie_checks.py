@@ -16,7 +16,7 @@ from pathlib import Path
 
 from planner_service.model import Scenario
 from planner_service.service.sortie import item_from_dict
-from planner_service.service.report import fairness_violations
+from planner_service.model.fairness import fairness_violations
 from protocol import Area, GeoOrigin, mission_digest, validate_mission
 from protocol.mission import NAV_RTL
 
