@@ -29,6 +29,15 @@ def configure(parser: argparse.ArgumentParser) -> None:
                              "ratio to the clean link); with --quick 10 uploads per rate (about 30 s), else "
                              "--link-uploads")
     parser.add_argument("--link-uploads", type=int, default=50, help="uploads per loss rate with --link (default: 50)")
+    parser.add_argument("--flight", action="store_true",
+                        help="instead: the same seeded world flown through the service (stub, simulated users, "
+                             "real processes) and planned offline, side by side per algorithm: tasks/interval, "
+                             "reward, tasks per sortie, services of the planned request, decisions per service "
+                             "(medians over --seeds; with --quick 2 seeds and mcts only)")
+    parser.add_argument("--seeds", default="1-6", metavar="A-B", help="seeds with --flight (default 1-6)")
+    parser.add_argument("--algos", default="mcts,greedy,random", help="algorithms with --flight (default mcts,greedy,random)")
+    parser.add_argument("--speedup", type=float, default=25.0, help="the stub's speed-up with --flight (default 25)")
+    parser.add_argument("--budget-ms", type=float, default=150.0, help="planner budget with --flight (default 150)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -36,6 +45,8 @@ def run(args: argparse.Namespace) -> int:
         return _run_e2e(args)
     if args.link:
         return _run_link(args)
+    if args.flight:
+        return _run_flight(args)
     from ..bench.run import SIZES, format_table, run_bench
 
     if (args.decisions is not None and args.decisions < 1) or args.iterations < 1 or args.reference_decisions < 0:
@@ -68,4 +79,26 @@ def _run_link(args: argparse.Namespace) -> int:
         return 2
     results = run_link_bench(uploads, progress=lambda msg: print(msg, file=sys.stderr, flush=True))
     print(json.dumps(results, indent=1) if args.json else format_link(results))
+    return 0
+
+
+def _run_flight(args: argparse.Namespace) -> int:
+    from ..bench.flight import ALGOS, format_flight, run_flight_bench
+
+    try:
+        lo, _, hi = args.seeds.partition("-")
+        seeds = list(range(int(lo), int(hi or lo) + 1))
+    except ValueError:
+        print(f"error: --seeds: {args.seeds!r} is not A-B", file=sys.stderr)
+        return 2
+    algos = [a for a in args.algos.split(",") if a]
+    if not seeds or any(a not in ALGOS + ("ts-mcts", "mcts-paper") for a in algos) or not args.speedup > 0:
+        print("error: --seeds, --algos (mcts, greedy, random, ts-mcts, mcts-paper) or --speedup invalid",
+              file=sys.stderr)
+        return 2
+    if args.quick:
+        seeds, algos = seeds[:2], ["mcts"]
+    results = run_flight_bench(seeds, algos, speedup=args.speedup, budget_ms=args.budget_ms,
+                               progress=lambda msg: print(msg, file=sys.stderr, flush=True))
+    print(json.dumps(results, indent=1) if args.json else format_flight(results))
     return 0

@@ -26,6 +26,20 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--flavour", default="ardupilot", choices=["ardupilot", "px4"], help="autopilot the stub imitates")
     parser.add_argument("--seed", type=int, default=1, help="seed of the users and the planner (default 1)")
     parser.add_argument("--timeout", type=positive_float, default=180.0, help="give up after this many wall seconds (default 180)")
+    parser.add_argument("--algo", default="mcts", choices=("mcts", "greedy", "random", "ts-mcts", "mcts-paper"),
+                        help="the planner the service flies (planner.algo; default mcts)")
+    parser.add_argument("--mavlink", default=None, metavar="URL", type=_mavlink_url,
+                        help="fly the autopilot at this connection string (e.g. tcp:127.0.0.1:5760 for ArduCopter "
+                             "SITL) instead of starting the stub; --speedup is then the autopilot's speed-up")
+
+
+def _mavlink_url(text: str) -> str:
+    from ..service.config import mavlink_url_problem
+
+    why = mavlink_url_problem(text, "pymavlink")
+    if why is not None:
+        raise argparse.ArgumentTypeError(why)
+    return text
 
 
 def run(args: argparse.Namespace) -> int:
@@ -34,7 +48,8 @@ def run(args: argparse.Namespace) -> int:
     out = Path(args.out)
     try:
         summary = run_demo(out, users=args.users, speedup=args.speedup, budget_ms=args.budget_ms, backend=args.backend,
-                           flavour=args.flavour, seed=args.seed, timeout_s=args.timeout, echo=_echo)
+                           flavour=args.flavour, seed=args.seed, timeout_s=args.timeout, mavlink=args.mavlink, algo=args.algo,
+                           echo=_echo)
     except DemoError as err:
         print(f"demo failed: {err}", file=sys.stderr)
         return 1
@@ -46,6 +61,11 @@ def run(args: argparse.Namespace) -> int:
           f"energy {summary['energy_used_j'] / 1e3:.1f} of {summary['energy_budget_j'] / 1e3:.1f} kJ, "
           f"fairness violations {summary['fairness_violations']}, energy violation {summary['energy_violation']}")
     print(f"requests: {json.dumps(summary['requests'])}")
+    if summary.get("flown_to_offline") is not None:
+        off = summary["offline"]
+        print(f"planned offline on the same scenario and seed ({summary['algo']}, the model alone): "
+              f"{off['throughput_tasks_per_interval']:.1f} tasks/interval, average reward {off['average_reward']:.3f}; "
+              f"flown / offline: {summary['flown_to_offline']:.2f}")
     print(f"{summary['wall_s']:.1f} s wall; wrote {out / 'summary.json'}, {out / 'trajectory.png'}, {out / 'mission.plan'}")
     return 0
 

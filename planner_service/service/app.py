@@ -104,6 +104,9 @@ class JournalWorld:
     def pending_count(self) -> int:
         return self.journal.pending_count()
 
+    def pending(self) -> list[RequestRow]:
+        return self.journal.pending()
+
 
 class Service:
     def __init__(self, config: ServiceConfig, parts: Parts) -> None:

@@ -305,7 +305,9 @@ def build_config(raw: Mapping[str, Any], overrides: Mapping[str, Any] | None = N
     for name in merged:
         if name not in _SECTIONS and name != "scenario":
             raise ConfigError(name, f"unknown section; expected one of {sorted([*_SECTIONS, 'scenario'])}")
-    scenario = dict(merged.get("scenario", {}))
+    # Live users' requests are data waiting (docs/PROTOCOL.md): the planner's futures keep
+    # their backlogs unless the configuration says otherwise (the paper's redraw).
+    scenario = {"task_model": "backlog", **merged.get("scenario", {})}
     preset_name = scenario.pop("preset", "field")
     if not isinstance(preset_name, str):
         raise ConfigError("scenario.preset", "must be a string")

@@ -27,8 +27,13 @@ class DemoError(ServiceError):
 
 def run_demo(out: Path, *, users: int = 10, speedup: float = 25.0, budget_ms: float = 150.0,
              backend: str = "pymavlink", flavour: str = "ardupilot", seed: int = 1, timeout_s: float = 180.0,
+             mavlink: str | None = None, algo: str = "mcts", offline: bool = True,
              echo: Callable[[str], None] = print) -> dict[str, Any]:
-    """Fly one sortie; returns the summary (also written to ``out/summary.json``)."""
+    """Fly one sortie; returns the summary (also written to ``out/summary.json``). With
+    ``mavlink`` (a connection string) the service flies the autopilot there (SITL or a real
+    one) instead of starting the stub; ``speedup`` is then that autopilot's, for the users'
+    clock. With ``offline`` the same scenario and seed are also planned offline (the model
+    alone, ``bench --flight``'s other half) and the summary says how the flown sortie compares."""
     out.mkdir(parents=True, exist_ok=True)
     journal_path = out / "journal.sqlite"
     for stale in (journal_path, out / "journal.sqlite-wal", out / "journal.sqlite-shm"):
@@ -36,8 +41,9 @@ def run_demo(out: Path, *, users: int = 10, speedup: float = 25.0, budget_ms: fl
     zenoh_port, mav_port = free_port(), free_port(socket.SOCK_DGRAM)
     endpoint = f"tcp/127.0.0.1:{zenoh_port}"
     config = build_config({}, {
-        "zenoh.listen": endpoint, "mavlink.url": f"udpout:127.0.0.1:{mav_port}", "mavlink.backend": backend,
+        "zenoh.listen": endpoint, "mavlink.url": mavlink or f"udpout:127.0.0.1:{mav_port}", "mavlink.backend": backend,
         "mavlink.flavour": flavour, "mavlink.start_mission": "true", "planner.budget_ms": str(budget_ms),
+        "planner.algo": algo,
         "planner.seed": str(seed), "journal.path": str(journal_path),
         "planner.min_requests": str(users),  # the first plan sees every user
     })
@@ -49,11 +55,11 @@ def run_demo(out: Path, *, users: int = 10, speedup: float = 25.0, budget_ms: fl
     landed = threading.Event()
     start = time.monotonic()
     try:
-        echo(f"demo: vehicle stub ({flavour}, x{speedup:g}), service ({backend}, {budget_ms:g} ms), {users} users; "
-             f"logs in {out}")
-        start_vehicle_and_service(
-            out, ["--mavlink", f"udpin:127.0.0.1:{mav_port}", "--flavour", flavour, "--speedup", str(speedup)], children
-        )
+        vehicle = f"the autopilot at {mavlink}" if mavlink else f"vehicle stub ({flavour}, x{speedup:g})"
+        echo(f"demo: {vehicle}, service ({backend}, {budget_ms:g} ms), {users} users; logs in {out}")
+        stub = None if mavlink else ["--mavlink", f"udpin:127.0.0.1:{mav_port}", "--flavour", flavour,
+                                     "--speedup", str(speedup)]
+        start_vehicle_and_service(out, stub, children)
         with PlannerClient([endpoint], config.keys()) as client:
             if not client.wait_for_service(20.0):
                 raise DemoError("the service's liveliness token never appeared")
@@ -94,7 +100,7 @@ def run_demo(out: Path, *, users: int = 10, speedup: float = 25.0, budget_ms: fl
         known = [st.battery_fraction for st in statuses if st.battery_fraction is not None]  # None: unknown
         final_battery = known[-1] * scenario.battery_j if known else None
         summary = sortie_summary(journal, scenario, final_battery)
-        summary.update(preset=scenario.name, algo="mcts", backend=backend, flavour=flavour, users=users,
+        summary.update(preset=scenario.name, algo=algo, backend=backend, flavour=flavour, users=users,
                        speedup=speedup, budget_ms=budget_ms, seed=seed, wall_s=wall, scenario=scenario.as_dict(),
                        config=str(out / "planner.toml"))
         missions = [m for m in journal.missions() if m.result == "accepted" and m.points]
@@ -105,6 +111,14 @@ def run_demo(out: Path, *, users: int = 10, speedup: float = 25.0, budget_ms: fl
         services = journal.services()
     finally:
         journal.close()
+    if offline:
+        from ..bench.flight import plan_offline
+
+        planned = plan_offline(algo, seed, users, budget_ms, lambda _: None)
+        summary["offline"] = {k: planned[k] for k in ("intervals", "throughput_tasks_per_interval", "average_reward",
+                                                      "total_tasks")}
+        summary["flown_to_offline"] = (summary["throughput_tasks_per_interval"] / planned["throughput_tasks_per_interval"]
+                                       if planned["throughput_tasks_per_interval"] else None)
     (out / "summary.json").write_text(json.dumps(summary, indent=1))
     plot_trajectory(out / "trajectory.png", scenario, statuses, requests, services, summary)
     return summary

@@ -68,13 +68,15 @@ class Child:
         return int(self.proc.returncode)
 
 
-def start_vehicle_and_service(folder: Path, vehicle_args: list[str], children: list[Child]) -> None:
-    """Start the vehicle stub (``python -m sim_bridge vehicle VEHICLE_ARGS``), then the
-    service on ``folder/planner.toml``, each once ready; both are appended to ``children``
-    as they start, so the caller's cleanup stops whatever did start."""
-    vehicle = Child("sim_bridge", ["vehicle", *vehicle_args], folder / "vehicle.log")
-    children.append(vehicle)
-    vehicle.wait_ready("listening")
+def start_vehicle_and_service(folder: Path, vehicle_args: list[str] | None, children: list[Child]) -> None:
+    """Start the vehicle stub (``python -m sim_bridge vehicle VEHICLE_ARGS``; None: no stub,
+    the service flies an autopilot of its own), then the service on ``folder/planner.toml``,
+    each once ready; both are appended to ``children`` as they start, so the caller's
+    cleanup stops whatever did start."""
+    if vehicle_args is not None:
+        vehicle = Child("sim_bridge", ["vehicle", *vehicle_args], folder / "vehicle.log")
+        children.append(vehicle)
+        vehicle.wait_ready("listening")
     service = Child("planner_service", ["serve", "--config", str(folder / "planner.toml")], folder / "service.log")
     children.append(service)
     service.wait_ready("ready:", 60.0)

@@ -12,6 +12,22 @@ from ..model.fairness import fairness_violations
 from .journal import Journal
 
 
+def planned_requests(services: list[Any], missions: list[Any]) -> int:
+    """Services whose request is the one the plan was made for: the request id of the user's
+    point in the last mission accepted before the service (a newer request of the user, sent
+    since, was bound instead when the vehicle arrived)."""
+    accepted = sorted((m for m in missions if m.result == "accepted"), key=lambda m: m.time_s)
+    n = 0
+    for s in services:
+        before = [m for m in accepted if m.time_s <= s.time_s]
+        for m in reversed(before):
+            planned = next((p["request_id"] for p in m.points if p["user_id"] == s.user_id), None)
+            if planned is not None:
+                n += planned == s.request_id
+                break
+    return n
+
+
 def sortie_summary(journal: Journal, scenario: Scenario, final_battery_j: float | None,
                    sortie: int | None = None) -> dict[str, Any]:
     """The figures of one sortie (None: the journal's current one)."""
@@ -43,6 +59,7 @@ def sortie_summary(journal: Journal, scenario: Scenario, final_battery_j: float 
         "requests": {"accepted": len(requests), **{k: statuses.get(k, 0) for k in ("served", "replaced", "not_served", "pending")}},
         "not_served_reasons": dict(reasons),
         "missions_uploaded": sum(1 for m in missions if m.result == "accepted"),
+        "services_of_the_planned_request": planned_requests(services, missions),
         "upload_failures": sum(1 for m in missions if m.result != "accepted"),
         "sortie_over": row.why if row is not None and row.over else None,
     }

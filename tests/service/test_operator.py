@@ -27,6 +27,9 @@ class NoRequests:
     def pending_count(self) -> int:
         return 0
 
+    def pending(self) -> list:
+        return []
+
 
 LOGIC = SortieLogic(Rules(preset("field"), GeoOrigin(), Area(500.0, 120.0, 10.0)), NoRequests())
 READY = Vehicle(connected=True, position_ok=True, boot_s=1.0, landed_known=True, mode="STABILIZE",

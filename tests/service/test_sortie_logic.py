@@ -34,6 +34,9 @@ class FakeWorld:
     def pending_count(self) -> int:
         return len(self.requests)
 
+    def pending(self) -> list[RequestRow]:
+        return [r for r in self.requests.values() if r.tasks > 0]
+
     def ask(self, user_id: str, x: float, y: float, tasks: int, rid: int) -> None:
         self.requests[user_id] = RequestRow(rid, user_id, x, y, 0.0, tasks, None, 0.0, "pending", "")
 
@@ -342,3 +345,15 @@ def test_the_holds_margins_are_paid_for_out_of_the_reserve() -> None:
     assert fast.battery_after_j + fast.predicted_energy_j == pytest.approx(tight.battery_after_j + tight.predicted_energy_j)
     slow = run.logic._with_margins(tight, 1.0)
     assert len(slow.points) == 2 and slow.points[0].hold_s == 61.0
+
+
+def test_the_user_served_is_the_models_choice_at_arrival() -> None:
+    # The plan counted on "a" at the first point; by the arrival "a" has nothing left and "c",
+    # as near, has a backlog: the model's rule (the nearest eligible) serves "c".
+    world = FakeWorld()
+    run, _ = fly_to_first_point(world)
+    world.ask("a", 120.0, 200.0, 0, 5)
+    world.ask("c", 125.0, 195.0, 9, 6)
+    run.tick(seq=2, xyz=(120.0, 200.0, 100.0), boot_s=20.0)
+    b = run.s.binding
+    assert (b.user_id, b.request_id, b.tasks, b.planned) == ("c", 6, 9, False)

@@ -50,6 +50,9 @@ class World(Protocol):
     def pending_count(self) -> int:
         """Requests waiting."""
 
+    def pending(self) -> list[RequestRow]:
+        """The requests waiting (one per user: its request in force)."""
+
 
 @dataclass(frozen=True)
 class Tick:

@@ -36,12 +36,12 @@ from protocol.errors import MissionError
 from protocol.mission import MAX_HOLD_S, encoded_hold_s
 
 from ...model import Scenario, pack
-from ...model.fairness import is_eligible
 from ...model.reward import interval_reward
 from ..errors import PlanningError
 from ..link.base import HOLDING_MODES, MISSION_MODES, RETURNING_MODES
-from ...model.interval import return_energy_j
-from ..planning import PlannedPath, check_path, hold_time_s
+from ...model.interval import NO_USER, return_energy_j, served_user
+from ..journal import RequestRow
+from ..planning import PlannedPath, PlannedPoint, check_path, hold_time_s
 from . import effects as fx
 from . import inputs as ins
 from .authority import Authority, next_sortie
@@ -302,30 +302,46 @@ class SortieLogic:
         return self._judge(s, out) if watch.over else s
 
     def _arrived(self, s: Sortie, v: ins.Vehicle, out: list[fx.Effect]) -> Sortie:
-        """The vehicle is at the point: bind the request in force for its user."""
+        """The vehicle is at the point: bind the request in force of the user the model's
+        rule serves from here now (the nearest eligible, ties to the larger backlog: the rule
+        the planner's futures follow), the planned user or, if its backlog or place changed,
+        another."""
         assert s.watch is not None and s.held is not None
         seq = s.watch.seq
         point = s.held.point_at(seq)
         assert point is not None
-        request = self.world.request_for(point.user_id)
-        services = self.world.services_of(point.user_id)
-        backlog = request.backlog if request is not None else 0
-        if request is None or not is_eligible(self.p, backlog, services):
-            why = "no request waiting" if request is None else (
-                "nothing to offload" if backlog <= 0 else f"not eligible with {backlog} tasks "
-                                                          f"after {services} services")
+        request = self._served_here(point)
+        if request is None:
+            planned = self.world.request_for(point.user_id)
+            services = self.world.services_of(point.user_id)
+            backlog = planned.backlog if planned is not None else 0
+            why = "nobody eligible near" + (": the planned user has no request" if planned is None else (
+                " (the planned user has nothing to offload)" if backlog <= 0 else
+                f" (the planned user has {backlog} tasks after {services} services)"))
             binding = Binding(seq, point.user_id, None, why_not=why)
             out.append(fx.Emit("waypoint_reached", f"point {point.hover_index}: {why}", user_id=point.user_id))
         else:
+            backlog = request.backlog
             xyz = np.array([point.x_m, point.y_m, point.z_m])
             user = np.array([request.x_m, request.y_m, request.z_m])
             needed = hold_time_s(self.p, xyz, user, backlog * self.rules.scenario.bits_per_task)
-            binding = Binding(seq, point.user_id, request.request_id, backlog, needed,
+            binding = Binding(seq, request.user_id, request.request_id, backlog, needed,
                               planned=request.request_id == point.request_id)
             out.append(fx.Emit("waypoint_reached", f"point {point.hover_index}: serving {backlog} tasks, "
-                                                   f"{needed:.1f} s", user_id=point.user_id,
+                                                   f"{needed:.1f} s", user_id=request.user_id,
                                request_id=request.request_id))
         return replace(s, binding=binding, last_hover_index=point.hover_index)
+
+    def _served_here(self, point: PlannedPoint) -> RequestRow | None:
+        """The request the model's rule serves from ``point`` now (``model.served_user``)."""
+        rows = self.world.pending()
+        if not rows:
+            return None
+        users = np.array([[r.x_m, r.y_m, r.z_m] for r in rows], dtype=np.float64)
+        tasks = np.array([r.backlog for r in rows], dtype=np.int64)
+        served = np.array([self.world.services_of(r.user_id) for r in rows], dtype=np.int64)
+        i = served_user(self.p, np.array([point.x_m, point.y_m, point.z_m]), users, tasks, served)
+        return None if i == NO_USER else rows[i]
 
     def _maybe_end_hold(self, s: Sortie, out: list[fx.Effect]) -> Sortie:
         """End the hold once the bound request is served: the replacement uploaded at the
