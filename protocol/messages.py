@@ -34,6 +34,9 @@ STATUS_SCHEMA_VERSION = 2
 """``status`` (and ``state``, which holds one) at version 2: authority, battery source and
 unknown battery, position check, what the service waits for, the degraded state."""
 OPERATOR_SCHEMA_VERSION = 1
+EVENT_SCHEMA_VERSION = 2
+"""``event``'s layout: 2 added the kinds of the sortie logic (waypoint_skipped,
+upload_abandoned, command_failed, authority_*, degraded)."""
 MAX_PAYLOAD_BYTES = 4096
 """A request is a few hundred bytes; anything larger is refused before parsing."""
 MAX_TASKS = 1000
@@ -52,6 +55,8 @@ EventKind = Literal[
     "request_accepted", "request_rejected", "plan_updated", "mission_uploaded",
     "upload_failed", "user_served", "waypoint_reached", "returning", "landed", "link_lost",
     "link_restored", "vehicle_restarted", "mission_resumed", "resume_needed", "sortie_started",
+    "waypoint_skipped", "upload_abandoned", "command_failed", "authority_granted", "authority_revoked",
+    "authority_released", "degraded",
 ]
 
 
@@ -191,6 +196,9 @@ class Plan(_Message, tag="plan"):
 
 class Event(_Message, tag="event"):
     """Something happened; ``event`` says what."""
+
+    LAYOUT: ClassVar[int] = EVENT_SCHEMA_VERSION
+    schema: int = EVENT_SCHEMA_VERSION
 
     event: EventKind = "plan_updated"
     time_s: float = 0.0

@@ -30,13 +30,14 @@ from typing import Any, Awaitable, Callable
 
 import numpy as np
 
-from protocol import ErrorReply, Event, PendingRequest, Plan, PlanPoint, State, Status, encode
+from protocol import ErrorReply, PendingRequest, Plan, PlanPoint, State, Status, encode
 from protocol.text import printable
 
 from ..mcts import MctsConfig
 from ..model import pack
 from .config import ServiceConfig
 from .errors import JournalError, LinkError, PlanningError
+from . import events as ev
 from .intake import Accepted, Intake, fairness_rule
 from .journal import Journal, RequestRow
 from .link import (Connected, Landed, LinkEvent, LinkSettings, Lost, ModeChanged, Restarted, Restored, VehicleLink,
@@ -278,8 +279,8 @@ class Service:
                                                 mission.journal_points(), result, self.wall())
                 except JournalError as err:
                     log.error("could not record plan %d's mission: %s", plan_id, err)
-            case fx.Emit(event=event, detail=detail, user_id=user, request_id=rid):
-                self._event(event, detail=detail[:256], user_id=user, request_id=rid)
+            case fx.Emit(event=event):
+                self._event(event)
             case fx.PublishPlan(mission=mission, predicted_energy_j=energy):
                 self._publish_plan(mission, energy)
             case fx.Log(level=level, text=text):
@@ -333,7 +334,11 @@ class Service:
         try:
             await self.link.upload(list(up.items), current_seq=up.current_seq, restart_current=up.restart_current)
         except LinkError as err:
-            return ins.UploadFailed(up, err.result, err.outcome_unknown)
+            if err.operation != "set_current()":
+                return ins.UploadFailed(up, err.result, err.outcome_unknown)
+            # The mission is held; only the item flown could not be confirmed (an autopilot
+            # that does not report MISSION_CURRENT): its own index stands.
+            log.warning("plan %d is held, but the item the vehicle flies could not be set: %s", up.plan_id, err)
         self._upload_times_s = [*self._upload_times_s, self.mono() - t0][-UPLOAD_HISTORY:]
         log.info("plan %d: %s uploaded (%d items, %.0f ms; %s)", up.plan_id,
                  [p.hover_index for p in up.path.points], len(up.items), (self.mono() - t0) * 1e3,
@@ -410,7 +415,7 @@ class Service:
         period = 1.0 / self.cfg.zenoh.status_hz
         while True:
             self._check_journal()
-            self.zio.publish("status", encode(self._status()))
+            self.zio.publish(self._status())
             self._log_busy()
             await asyncio.sleep(period)
 
@@ -432,13 +437,12 @@ class Service:
         outcome = self.intake.handle(payload, key)
         reply_and_drop(query, key, encode(outcome.reply))
         if isinstance(outcome, Accepted):
-            self._event("request_accepted", user_id=outcome.user_id, request_id=outcome.request_id,
-                        detail=outcome.describe()[:256])
+            self._event(ev.RequestAccepted(outcome.describe(), outcome.user_id, outcome.request_id))
             self._feed(ins.RequestIn(outcome.user_id, 0 if outcome.done else outcome.tasks))
         elif self._refusal_events.take(self.mono()):
             unreported = f"[{self._refusals_unreported} more refused, not reported] " if self._refusals_unreported else ""
             self._refusals_unreported = 0
-            self._event("request_rejected", detail=f"{unreported}{outcome.describe()}"[:256])
+            self._event(ev.RequestRejected(f"{unreported}{outcome.describe()}"))
         else:
             self._refusals_unreported += 1
         self._check_journal()
@@ -484,8 +488,8 @@ class Service:
                 pass  # the link logs texts, missing telemetry and the position's state; mission
                 # progress is not used: holds are judged from the vehicle's own position
 
-    def _event(self, event: str, **fields: Any) -> None:
-        self.zio.publish("events", encode(Event(event=event, time_s=self.wall(), **fields)))  # type: ignore[arg-type]
+    def _event(self, event: ev.ServiceEvent) -> None:
+        self.zio.publish(ev.to_wire(event, self.wall()))
 
     # --- publications --------------------------------------------------------------------------------
     def _phase(self) -> str:
@@ -523,7 +527,7 @@ class Service:
         ahead = [p for _, p in held.points_after(v.seq - 1)]
         self.plan_msg = Plan(plan_id=held.plan_id, time_s=self.wall(), predicted_energy_j=max(predicted_energy_j, 0.0),
                              points=[PlanPoint(p.x_m, p.y_m, p.z_m, p.hold_s, p.user_id) for p in ahead])
-        self.zio.publish("plan", encode(self.plan_msg))
+        self.zio.publish(self.plan_msg)
         try:
             places = plan_places(ahead, v.xyz, self.scenario.speed_mps)
             messages = user_places(self.journal.user_backlogs(), places, sortie=self.state.number,
@@ -532,7 +536,8 @@ class Service:
             log.error("plan %d: users' places not published: %s", held.plan_id, err)
             return
         self.intake.set_places(places)
-        self.zio.publish_places(messages)
+        for message in messages:
+            self.zio.publish(message)
 
     # --- failing loud -------------------------------------------------------------------------------
     def _on_failure(self, name: str, error: BaseException) -> None:
@@ -568,9 +573,9 @@ class Service:
         except JournalError as err:
             log.error("could not close sortie %d in the journal: %s", self.state.number, err)
         for rid, reason in reasons.items():
-            self._event("request_rejected", request_id=rid, detail=f"not served: {reason}"[:256])
+            self._event(ev.RequestRejected(f"not served: {reason}", request_id=rid))
         self.intake.closed_reason = self._closed_reason()
-        self._event("landed", detail=f"sortie {self.state.number}: {why}")
+        self._event(ev.Landed(f"sortie {self.state.number}: {why}"))
         log.info("sortie %d over: %s; %d services, %d requests not served", self.state.number, why,
                  len(self.journal.services()), len(reasons))
 

@@ -21,7 +21,7 @@ from typing import Any, Callable, Iterable, Sequence
 
 import zenoh
 
-from protocol import ErrorReply, Keys, ProtocolError, UserPlace, encode
+from protocol import ErrorReply, Event, Keys, Plan, ProtocolError, Status, UserPlace, encode
 from protocol.zenoh_config import error_text
 from protocol.zenoh_config import session_config as _session_config
 
@@ -31,6 +31,8 @@ from .intake import BUSY, client_ref
 
 log = logging.getLogger("planner_service.zenoh")
 
+PUBLICATIONS: dict[type, str] = {Status: "status", Plan: "plan", Event: "events"}
+"""Each published message type and the key (``Keys`` attribute) it goes on."""
 OPEN_RETRY_S = 2.0
 """In client mode, how long one attempt to reach a router lasts before the next."""
 OPERATOR_QUERIES_IN_FLIGHT = 8
@@ -139,7 +141,7 @@ class ZenohIO:
             self.close()
             return False
         s = self.session
-        self._pubs = {name: s.declare_publisher(getattr(self.keys, name)) for name in ("status", "plan", "events")}
+        self._pubs = {name: s.declare_publisher(getattr(self.keys, name)) for name in PUBLICATIONS.values()}
         self._state_q = s.declare_queryable(self.keys.state, self._hand_over(loop, on_state, self.keys.state))
         self._request_q = s.declare_queryable(self.keys.request, self._hand_over(loop, on_request, self.keys.request))
         # every user's own request key (request/{user_id}), which access control can bind to
@@ -186,18 +188,16 @@ class ZenohIO:
         except zenoh.ZError:  # the client went away meanwhile: nothing to answer
             pass
 
-    def publish(self, name: str, payload: bytes) -> None:
-        pub = self._pubs.get(name)
-        if pub is not None:
-            pub.put(payload)
-
-    def publish_places(self, places: Iterable[UserPlace]) -> None:
-        """Each user's ``user_place`` on its own key, ``{prefix}/{vehicle}/users/{user_id}``
-        (under access control only that user may subscribe to it)."""
-        if self.session is None:
+    def publish(self, message: Status | Plan | Event | UserPlace) -> None:
+        """``message`` on its key, chosen by its type: status, plan, events, or a user's own
+        ``users/{user_id}`` (under access control only that user may subscribe to it)."""
+        if isinstance(message, UserPlace):
+            if self.session is not None:
+                self.session.put(self.keys.user(message.user_id), encode(message))
             return
-        for place in places:
-            self.session.put(self.keys.user(place.user_id), encode(place))
+        pub = self._pubs.get(PUBLICATIONS[type(message)])
+        if pub is not None:
+            pub.put(encode(message))
 
     def withdraw_liveliness(self) -> None:
         """Undeclare the liveliness token: clients that wait for the service see it gone

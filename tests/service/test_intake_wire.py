@@ -139,7 +139,7 @@ def test_wire_text_reaches_the_events_escaped(stack: Stack) -> None:
 
 @pytest.mark.timeout(60)
 def test_the_service_s_place_publications_reach_each_user_on_its_key() -> None:
-    """``ZenohIO.publish_places`` (what the loop calls on every re-plan) over a real session:
+    """``ZenohIO.publish`` of ``user_place`` messages (what the loop calls on every re-plan) over a real session:
     a user following its own place gets its own; a simulator following all gets them all."""
     import asyncio
 
@@ -160,7 +160,8 @@ def test_the_service_s_place_publications_reach_each_user_on_its_key() -> None:
             client.follow_places(got["all"].append)
             assert client.wait_for_service(10.0)
             for _ in range(50):
-                zio.publish_places(places)
+                for place in places:
+                    zio.publish(place)
                 await asyncio.sleep(0.05)
                 if got["u-1"] and len({p.user_id for p in got["all"]}) == 2:
                     break

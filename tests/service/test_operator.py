@@ -53,7 +53,7 @@ def test_start_gives_the_authority_and_says_so() -> None:
     assert accepted and new.authority.granted
     assert new.authority.detail == "given by the operator (range clear, pilot ready)"
     assert said.startswith("authority given: the service may arm")
-    assert [e.event for e in out if isinstance(e, fx.Emit)] == ["authority_granted"]
+    assert [e.event.kind for e in out if isinstance(e, fx.Emit)] == ["authority_granted"]
 
 
 def test_start_after_a_revocation_gives_it_back_and_twice_is_harmless() -> None:

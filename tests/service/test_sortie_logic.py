@@ -97,7 +97,7 @@ def fly_to_first_point(world: FakeWorld) -> tuple[Run, fx.Upload]:
     assert plan.basis.keep_through is None
     out = run.feed(ins.Planned(plan.basis, path(point(3, 120.0, 200.0, "a", 1), point(7, 320.0, 200.0, "b", 2))))
     (up,) = only(out, fx.Upload)
-    assert [i.seq for i in up.items] == [0, 1, 2, 3, 4] and up.current_seq == 1, "on the ground: from the takeoff"
+    assert [i.seq for i in up.items] == [0, 1, 2, 3, 4] and up.current_seq is None, "a fresh vehicle is at 0"
     out = run.feed(ins.Uploaded(up, 1))
     assert only(out, fx.Command)[0].kind == "start"
     run.feed(ins.CommandDone(fx.Command("start")), armed=True, mode="AUTO")
@@ -140,7 +140,7 @@ def test_a_sortie_records_only_holds_the_vehicle_was_seen_at() -> None:
     # Passes item 3's point without ever coming within the radius: no service.
     out = run.tick(seq=4, xyz=(300.0, 280.0, 100.0), boot_s=50.0)
     assert not only(out, fx.RecordService)
-    assert [e.event for e in only(out, fx.Emit)] == ["waypoint_skipped"]
+    assert [e.event.kind for e in only(out, fx.Emit)] == ["waypoint_skipped"]
 
 
 def test_a_hold_cut_short_serves_what_it_carried() -> None:
@@ -174,7 +174,7 @@ def test_restart_read_back_and_a_lost_mission_resumed_from_where_it_is() -> None
     run, up = fly_to_first_point(world)
     (searching,) = only(run.tick(seq=2, xyz=(120.0, 200.0, 100.0), boot_s=20.0), fx.Plan)
     out = run.feed(ins.VehicleRestarted("its clock went back"), boot_s=1.0, mode="LOITER", seq=0)
-    assert [e.event for e in only(out, fx.Emit)][0] == "vehicle_restarted"
+    assert [e.event.kind for e in only(out, fx.Emit)][0] == "vehicle_restarted"
     assert not only(out, fx.RecordService), "a hold of no measurable length serves nothing"
     # The decision being searched was made on the mission the restart lost: dropped.
     out = run.feed(ins.Planned(searching.basis, path(point(9, 400.0, 300.0, "b", 2))))
@@ -221,7 +221,7 @@ def test_uncommanded_mode_change_ends_authority_and_no_command_follows() -> None
     world = FakeWorld()
     run, _ = fly_to_first_point(world)
     out = run.feed(ins.ModeChanged("LOITER"), mode="LOITER")
-    assert [e.event for e in only(out, fx.Emit)] == ["authority_revoked"]
+    assert [e.event.kind for e in only(out, fx.Emit)] == ["authority_revoked"]
     assert run.s.authority.state == "revoked"
     out = run.tick(battery_fraction=0.05)  # the battery guard would fire with authority
     assert not only(out, fx.Command)
@@ -290,7 +290,7 @@ def test_failed_uploads_back_off_and_stop_after_the_bound() -> None:
         waits.append(run.s.retry_at - run.now)
     assert waits[0] == pytest.approx(1.0, abs=0.1) and waits[1] == pytest.approx(2.0, abs=0.1)
     assert math.isinf(run.s.retry_at)
-    assert "upload_abandoned" in [e.event for e in only(run.effects, fx.Emit)]
+    assert "upload_abandoned" in [e.event.kind for e in only(run.effects, fx.Emit)]
     run.now += 100.0
     assert not only(run.tick(), fx.Plan)
     run.feed(ins.RequestIn("a", 11))
@@ -323,7 +323,7 @@ def test_the_mode_a_restarted_autopilot_comes_back_in_is_not_a_pilots() -> None:
     assert run.s.authority.state == "revoked"
     out = run.feed(ins.VehicleRestarted("its clock went back (seen twice)"))
     assert run.s.authority.granted, "the restart changed the mode, not a pilot"
-    assert "authority_granted" in [e.event for e in only(out, fx.Emit)]
+    assert "authority_granted" in [e.event.kind for e in only(out, fx.Emit)]
     run.now += 10.0  # a later restart explains nothing
     run.feed(ins.ModeChanged("AUTO", commanded=True), mode="AUTO")
     run.feed(ins.ModeChanged("LOITER"), mode="LOITER")
@@ -345,6 +345,18 @@ def test_the_holds_margins_are_paid_for_out_of_the_reserve() -> None:
     assert fast.battery_after_j + fast.predicted_energy_j == pytest.approx(tight.battery_after_j + tight.predicted_energy_j)
     slow = run.logic._with_margins(tight, 1.0)
     assert len(slow.points) == 2 and slow.points[0].hold_s == 61.0
+
+
+def test_a_mission_on_the_ground_starts_at_its_takeoff_after_a_sortie() -> None:
+    # The autopilot keeps its index across an upload: after a sortie it points at the last
+    # mission's return; the next first mission must be flown from its takeoff.
+    world = FakeWorld()
+    world.ask("a", 120.0, 200.0, 10, 1)
+    run = Run(world)
+    run.v = replace(run.v, seq=6)
+    (plan,) = only(run.tick(), fx.Plan)
+    (up,) = only(run.feed(ins.Planned(plan.basis, path(point(3, 120.0, 200.0, "a", 1)))), fx.Upload)
+    assert up.current_seq == 1
 
 
 def test_the_user_served_is_the_models_choice_at_arrival() -> None:

@@ -19,22 +19,24 @@ import math
 import random
 import re
 from dataclasses import dataclass
-from typing import Any, Callable
+from typing import Any, Callable, get_args
 
 from hypothesis import strategies as st
+
+from protocol.messages import EventKind, Phase
 
 MAX_PAYLOAD_BYTES = 4096
 ID_CHARS = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789_.:-"
 KINDS = ("task_request", "task_ack", "error", "status", "plan", "event", "state", "user_place", "operator_command",
          "operator_reply")
-PHASES = ("idle", "planning", "flying", "returning", "landed", "lost", "degraded")
+PHASES = get_args(Phase)
 AUTHORITIES = ("none", "operator", "revoked")
 BATTERY_SOURCES = ("autopilot", "model", "unknown")
 OPERATOR_COMMANDS = ("start", "hold", "status")
-LAYOUTS = {"status": 2, "state": 2, "operator_command": 1, "operator_reply": 1}
+LAYOUTS = {"status": 2, "state": 2, "operator_command": 1, "operator_reply": 1, "event": 2}
 """Each message type's layout version (docs/PROTOCOL.md); 1 for the others."""
-EVENTS = ("request_accepted", "request_rejected", "plan_updated", "mission_uploaded", "upload_failed",
-          "user_served", "waypoint_reached", "returning", "landed", "link_lost", "link_restored")
+EVENTS = get_args(EventKind)
+"""Every event kind the wire knows (derived from the type: this list cannot drift)."""
 
 
 @dataclass(frozen=True)

@@ -9,6 +9,7 @@ from typing import Literal
 
 from protocol import MissionItem
 
+from ..events import ServiceEvent
 from ..planning import PlannedPath, PlannedPoint
 from .mission import HeldMission
 
@@ -91,12 +92,9 @@ class RecordMission:
 
 @dataclass(frozen=True)
 class Emit:
-    """An event for the events publication (and the log)."""
+    """An event for the events publication."""
 
-    event: str
-    detail: str = ""
-    user_id: str | None = None
-    request_id: int | None = None
+    event: ServiceEvent
 
 
 @dataclass(frozen=True)

@@ -42,6 +42,7 @@ from ..link.base import HOLDING_MODES, MISSION_MODES, RETURNING_MODES
 from ...model.interval import NO_USER, return_energy_j, served_user
 from ..journal import RequestRow
 from ..planning import PlannedPath, PlannedPoint, check_path, hold_time_s
+from .. import events as ev
 from . import effects as fx
 from . import inputs as ins
 from .authority import Authority, next_sortie
@@ -187,9 +188,9 @@ class SortieLogic:
             case ins.LinkConnected(mode=mode):
                 s = self._connected(s, v, mode, out)
             case ins.LinkLost(why=why):
-                out += [fx.Emit("link_lost", why), fx.Log("warning", f"link lost: {why}")]
+                out += [fx.Emit(ev.LinkLost(why)), fx.Log("warning", f"link lost: {why}")]
             case ins.LinkRestored(mode=mode):
-                out += [fx.Emit("link_restored", mode), fx.Log("info", f"link restored ({mode})")]
+                out += [fx.Emit(ev.LinkRestored(mode)), fx.Log("info", f"link restored ({mode})")]
                 if s.held is not None or s.flown:
                     s = self._doubt(s, "the link was lost", out)
                 s = replace(s, retry_at=min(s.retry_at, now), failures=0)
@@ -199,10 +200,10 @@ class SortieLogic:
                 authority = s.authority
                 if s.revoked_by_mode is not None and now - s.revoked_by_mode[1] <= RESTART_GRACE_S:
                     authority = s.revoked_by_mode[0]
-                    out.append(fx.Emit("authority_granted", f"the mode change was the autopilot's restart: "
-                                                            f"{authority.detail}"[:256]))
+                    out.append(fx.Emit(ev.AuthorityGranted(f"the mode change was the autopilot's restart: "
+                                                            f"{authority.detail}"[:256])))
                 s = replace(s, restarted=True, authority=replace(authority, expected_mode=None), revoked_by_mode=None)
-                out.append(fx.Emit("vehicle_restarted", why[:256]))
+                out.append(fx.Emit(ev.VehicleRestarted(why[:256])))
                 s = self._doubt(s, f"the vehicle restarted: {why}", out, hold_interrupted=True)
             case ins.ModeChanged(mode=mode, commanded=commanded):
                 s = self._mode(s, v, mode, commanded, now, out)
@@ -237,7 +238,7 @@ class SortieLogic:
             case ins.Degraded(why=why):
                 if s.degraded is None:
                     s = replace(s, degraded=why, version=s.version + 1)
-                    out += [fx.Emit("degraded", why[:256]), fx.Log("error", f"degraded: {why}")]
+                    out += [fx.Emit(ev.Degraded(why[:256])), fx.Log("error", f"degraded: {why}")]
         if not isinstance(event, ins.Tick):
             s = self._next(s, v, now, out)
         return s, out
@@ -284,8 +285,8 @@ class SortieLogic:
             # service was away): flown unseen, so no service is recorded for them.
             for seq, point in held.points:
                 if seq < v.seq and seq not in s.judged:
-                    out.append(fx.Emit("waypoint_skipped", f"point {point.hover_index}: not seen held (the vehicle "
-                                                           f"flies item {v.seq})", user_id=point.user_id))
+                    out.append(fx.Emit(ev.WaypointSkipped(f"point {point.hover_index}: not seen held (the vehicle "
+                                                           f"flies item {v.seq})", user_id=point.user_id)))
                     s = replace(s, judged=s.judged | {seq})
             point = held.point_at(v.seq)
             if point is not None and v.seq not in s.judged:
@@ -319,7 +320,7 @@ class SortieLogic:
                 " (the planned user has nothing to offload)" if backlog <= 0 else
                 f" (the planned user has {backlog} tasks after {services} services)"))
             binding = Binding(seq, point.user_id, None, why_not=why)
-            out.append(fx.Emit("waypoint_reached", f"point {point.hover_index}: {why}", user_id=point.user_id))
+            out.append(fx.Emit(ev.WaypointReached(f"point {point.hover_index}: {why}", user_id=point.user_id)))
         else:
             backlog = request.backlog
             xyz = np.array([point.x_m, point.y_m, point.z_m])
@@ -327,9 +328,9 @@ class SortieLogic:
             needed = hold_time_s(self.p, xyz, user, backlog * self.rules.scenario.bits_per_task)
             binding = Binding(seq, request.user_id, request.request_id, backlog, needed,
                               planned=request.request_id == point.request_id)
-            out.append(fx.Emit("waypoint_reached", f"point {point.hover_index}: serving {backlog} tasks, "
+            out.append(fx.Emit(ev.WaypointReached(f"point {point.hover_index}: serving {backlog} tasks, "
                                                    f"{needed:.1f} s", user_id=request.user_id,
-                               request_id=request.request_id))
+                               request_id=request.request_id)))
         return replace(s, binding=binding, last_hover_index=point.hover_index)
 
     def _served_here(self, point: PlannedPoint) -> RequestRow | None:
@@ -376,7 +377,7 @@ class SortieLogic:
         if point is None:
             return s
         if not w.arrived:
-            out.append(fx.Emit("waypoint_skipped", f"point {point.hover_index}: {w.why_left}", user_id=point.user_id))
+            out.append(fx.Emit(ev.WaypointSkipped(f"point {point.hover_index}: {w.why_left}", user_id=point.user_id)))
             return s
         if b is None or b.request_id is None:
             return s
@@ -386,17 +387,17 @@ class SortieLogic:
         else:
             tasks = int(b.tasks * covered / b.needed_s) if b.needed_s > 0 else 0
         if tasks <= 0:
-            out.append(fx.Emit("waypoint_reached", f"point {point.hover_index}: held {w.held_s:.1f} s of "
+            out.append(fx.Emit(ev.WaypointReached(f"point {point.hover_index}: held {w.held_s:.1f} s of "
                                                    f"{b.needed_s:.1f} s needed ({w.why_left}): nothing served",
-                               user_id=b.user_id, request_id=b.request_id))
+                               user_id=b.user_id, request_id=b.request_id)))
             return s
         bits = tasks * self.rules.scenario.bits_per_task
         reward = point.reward if tasks == point.tasks else interval_reward(self.p, tasks, point.energy_j)
         out.append(fx.RecordService(b.request_id, b.user_id, point.hover_index, (point.x_m, point.y_m, point.z_m),
                                     tasks, bits, reward, w.held_s, b.planned))
         detail = f"{tasks} tasks at point {point.hover_index}" + ("" if tasks == b.tasks else f" of {b.tasks}")
-        out.append(fx.Emit("user_served", f"{detail}; held {w.held_s:.1f} s", user_id=b.user_id,
-                           request_id=b.request_id))
+        out.append(fx.Emit(ev.UserServed(f"{detail}; held {w.held_s:.1f} s", user_id=b.user_id,
+                           request_id=b.request_id)))
         return replace(s, services=s.services + 1)
 
     # --- deciding ------------------------------------------------------------------------------
@@ -457,7 +458,12 @@ class SortieLogic:
                 # The autopilot keeps its index across an upload, also from the last sortie's
                 # mission: in the air fly the first point, on the ground start at the takeoff.
                 takeoff = 1 if self.rules.flavour == "ardupilot" else 0
-                current = (mission.points[0][0] if airborne else takeoff) if mission.points else None
+                if not mission.points:
+                    current = None
+                elif airborne:
+                    current = mission.points[0][0]
+                else:
+                    current = takeoff if v.seq > takeoff else None  # (already there: nothing to wait for)
             else:
                 items, _ = replacement_items(held.items, basis.keep_through, hover, self.rules.origin,
                                              self.rules.flavour)  # type: ignore[arg-type]
@@ -528,12 +534,12 @@ class SortieLogic:
                     judged=judged, watch=watch, binding=binding, plan_id=up.plan_id)
         out += [fx.RecordMission(up.plan_id, up.mission, "accepted"),
                 fx.PublishPlan(up.mission, up.path.predicted_energy_j),
-                fx.Emit("mission_uploaded", f"plan {up.plan_id}: {len(up.path.points)} points"
+                fx.Emit(ev.MissionUploaded(f"plan {up.plan_id}: {len(up.path.points)} points"
                                             + (f" after item {keep}" if keep is not None else "")
                                             + f"; planner_ms={up.planner_ms:.1f} upload_ms={uploaded.upload_ms:.1f} "
-                                              f"newest_request={up.newest_request}; ends: {up.path.stop_reason}")]
+                                              f"newest_request={up.newest_request}; ends: {up.path.stop_reason}"))]
         if not up.path.points:
-            out.append(fx.Emit("returning", f"nothing more to serve ({up.path.stop_reason}): return to launch"))
+            out.append(fx.Emit(ev.Returning(f"nothing more to serve ({up.path.stop_reason}): return to launch")))
         return s
 
     def _upload_failed(self, s: Sortie, up: fx.Upload, error: str, unknown: bool, now: float,
@@ -552,10 +558,10 @@ class SortieLogic:
     def _failed(self, s: Sortie, why: str, now: float, out: list[fx.Effect]) -> Sortie:
         """A plan or upload failed: try again after a growing wait, give up after a bound."""
         n = s.failures + 1
-        out += [fx.Emit("upload_failed", why[:256]), fx.Log("error", why)]
+        out += [fx.Emit(ev.UploadFailed(why[:256])), fx.Log("error", why)]
         if n >= self.rules.max_failures:
-            out.append(fx.Emit("upload_abandoned", f"{n} failures in a row; no more plans until the link, a "
-                                                   f"request or the operator changes something"[:256]))
+            out.append(fx.Emit(ev.UploadAbandoned(f"{n} failures in a row; no more plans until the link, a "
+                                                   f"request or the operator changes something"[:256])))
             return replace(s, failures=n, retry_at=math.inf, dirty=True)
         wait = min(self.rules.retry_s * 2 ** (n - 1), self.rules.max_retry_s)
         return replace(s, failures=n, retry_at=now + wait, dirty=True)
@@ -591,7 +597,7 @@ class SortieLogic:
         detail = f"{why}: the vehicle holds {len(items)} items, not {ours}; re-planning from where it is"
         out.append(fx.Log("warning", detail))
         if not why or "restarted" not in why:
-            out.append(fx.Emit("vehicle_restarted", detail[:256]))
+            out.append(fx.Emit(ev.VehicleRestarted(detail[:256])))
         return replace(s, held=None, held_gen=None, judged=frozenset(), unconfirmed=None, must_upload=v.airborne,
                        resume_pending=v.airborne, restarted=False, decided_at=None)
 
@@ -615,11 +621,11 @@ class SortieLogic:
                                         commanded=commanded)
         if authority.state == "revoked" and s.authority.granted:
             s = replace(s, revoked_by_mode=(s.authority, now))
-            out += [fx.Emit("authority_revoked", authority.detail[:256]),
+            out += [fx.Emit(ev.AuthorityRevoked(authority.detail[:256])),
                     fx.Log("warning", f"authority ended: {authority.detail}; no more commands until the operator "
                                       f"grants it again")]
         if mode in RETURNING_MODES:
-            out.append(fx.Emit("returning", f"mode {mode}"))
+            out.append(fx.Emit(ev.Returning(f"mode {mode}")))
         return replace(s, authority=authority)
 
     # --- commands ------------------------------------------------------------------------------
@@ -632,7 +638,7 @@ class SortieLogic:
             return self._command(s, fx.Command("start", why=f"plan {s.held.plan_id}"), out)
         if s.resume_pending and s.held_gen is not None and s.busy == "" and v.airborne:
             if v.mode in MISSION_MODES:  # PX4 flies a new mission's marked item in mission mode by itself
-                out.append(fx.Emit("mission_resumed", f"plan {s.held.plan_id}: the vehicle flies it in {v.mode}"))
+                out.append(fx.Emit(ev.MissionResumed(f"plan {s.held.plan_id}: the vehicle flies it in {v.mode}")))
                 return replace(s, resume_pending=False)
             if v.mode not in HOLDING_MODES:
                 return replace(s, resume_pending=False)  # going home, or in the operator's hands
@@ -661,7 +667,7 @@ class SortieLogic:
                 out.append(fx.Log("info", "mission started"))
                 return replace(s, started=True, started_at=now, failures=0)
             case "resume":
-                out.append(fx.Emit("mission_resumed", f"{cmd.why}; from item {cmd.seq}"))
+                out.append(fx.Emit(ev.MissionResumed(f"{cmd.why}; from item {cmd.seq}")))
                 return replace(s, resume_pending=False)
             case "return":
                 return replace(s, commanded_landing=True)
@@ -673,7 +679,7 @@ class SortieLogic:
         return s
 
     def _command_failed(self, s: Sortie, cmd: fx.Command, error: str, now: float, out: list[fx.Effect]) -> Sortie:
-        out += [fx.Emit("command_failed", f"{cmd.kind}: {error}"[:256]),
+        out += [fx.Emit(ev.CommandFailed(f"{cmd.kind}: {error}"[:256])),
                 fx.Log("warning", f"the autopilot refused {cmd.kind} ({error}); trying again later")]
         n = s.failures + 1
         wait = min(self.rules.retry_s * 2 ** (n - 1), self.rules.max_retry_s)
@@ -688,7 +694,7 @@ class SortieLogic:
         if (f is None or not v.connected or not v.airborne or v.mode in RETURNING_MODES or s.commanding
                 or not s.authority.granted or f > self.rules.rtl_battery_fraction):
             return s
-        out.append(fx.Emit("returning", f"battery at {f:.0%} ({v.battery_source}): return to launch commanded"))
+        out.append(fx.Emit(ev.Returning(f"battery at {f:.0%} ({v.battery_source}): return to launch commanded")))
         return self._command(s, fx.Command("return", why=f"battery at {f:.0%}"), out)
 
     # --- requests and the operator --------------------------------------------------------------
@@ -718,7 +724,7 @@ class SortieLogic:
                 s = self._command(s, fx.Command("hold", why=f"the operator's hold{because}"), out)
                 did = f"; {self.rules.mode_names['hold']} commanded"
             authority = s.authority.release(f"handed back by the operator's hold{because}")
-            out.append(fx.Emit("authority_released", authority.detail[:256]))
+            out.append(fx.Emit(ev.AuthorityReleased(authority.detail[:256])))
             return replace(s, authority=authority, resume_pending=False), out, True, (
                 f"authority withdrawn: the service commands no mode and no arming{did}; the vehicle keeps the "
                 f"mission it holds{because}")
@@ -736,7 +742,7 @@ class SortieLogic:
             return replace(s, next_authority=authority, beginning=True), out, True, \
                 f"{said}; sortie {s.number + 1} begins"
         s = replace(s, authority=authority, failures=0, retry_at=0.0)
-        out.append(fx.Emit("authority_granted", authority.detail[:256]))
+        out.append(fx.Emit(ev.AuthorityGranted(authority.detail[:256])))
         if v.airborne and v.mode in HOLDING_MODES:
             s = replace(s, must_upload=True, resume_pending=True)
             said += "; re-planning from where the vehicle is, then resuming"
@@ -792,7 +798,7 @@ class SortieLogic:
     def _begun(self, s: Sortie, number: int, out: list[fx.Effect]) -> Sortie:
         authority = s.next_authority or next_sortie(s.authority, start_mission=self.rules.start_mission,
                                                     commanded_landing=s.commanded_landing)
-        out.append(fx.Emit("sortie_started", f"sortie {number}: authority {authority.state} ({authority.detail})"))
+        out.append(fx.Emit(ev.SortieStarted(f"sortie {number}: authority {authority.state} ({authority.detail})")))
         return Sortie(number=number, authority=authority, plan_id=s.plan_id, version=s.version + 1)
 
 
