@@ -21,7 +21,7 @@ ALLOWED: dict[str, set[str] | None] = {
     MCTS: {SETTINGS, MODEL, POLICY},
     BASELINES: {SETTINGS, MODEL, POLICY},
     SORTIE: {SETTINGS, MODEL, POLICY},
-    "planner_service.experiments": {SETTINGS, MODEL, POLICY, MCTS, BASELINES, SORTIE},
+    "planner_service.experiments": {SETTINGS, MODEL, POLICY, MCTS, SORTIE},
     "planner_service.service": {"protocol", SETTINGS, MODEL, POLICY, MCTS},
     "planner_service.bench": EVERYTHING,
     "planner_service.commands": EVERYTHING,
