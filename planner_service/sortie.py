@@ -1,4 +1,5 @@
-"""One simulated sortie of a planner on the model, and its JSON summary (DESIGN.md)."""
+"""One simulated sortie of a planner on the model, and its JSON summary (the ``plan --json``
+contract of docs/DESIGN.md)."""
 
 from __future__ import annotations
 
@@ -8,6 +9,7 @@ from typing import Any
 import numpy as np
 
 from .model import Scenario, SortieEnv
+from .model.fairness import fairness_violations
 from .policy import Policy, PolicySpec, make_policy
 
 
@@ -24,7 +26,7 @@ def run_sortie(
     spec: PolicySpec | None = None,
     options: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
-    """Fly one sortie with planner ``algo`` and return the summary of DESIGN.md."""
+    """Fly one sortie with planner ``algo`` and return the summary of docs/DESIGN.md."""
     spec = spec or PolicySpec()
     world_rng, planner_rng = seed_streams(seed)
     env = SortieEnv(scenario)
@@ -79,20 +81,8 @@ def summarize(scenario: Scenario, trace: list[dict[str, Any]]) -> dict[str, Any]
         "energy_budget_j": float(budget),
         "served": [r["user"] for r in trace],
         "hover_points": [r["hover_point"] for r in trace],
-        "fairness_violations": fairness_violations(scenario, trace),
+        "fairness_violations": fairness_violations(scenario, [(r["user"], r["tasks"]) for r in trace]),
         "energy_violation": bool(energy > budget + 1e-6),
         "scenario": scenario.as_dict(),
         "trace": trace,
     }
-
-
-def fairness_violations(scenario: Scenario, trace: list[dict[str, Any]]) -> int:
-    """Services that break (3) or (9c): past the limit, or a repeat with tasks <= beta."""
-    counts: dict[int, int] = {}
-    bad = 0
-    for r in trace:
-        seen = counts.get(r["user"], 0)
-        if seen >= scenario.max_services_per_user or (seen >= 1 and r["tasks"] <= scenario.fairness_threshold_tasks):
-            bad += 1
-        counts[r["user"]] = seen + 1
-    return bad

@@ -9,7 +9,7 @@ from typing import Any, Callable, Iterator
 
 import pytest
 
-from support.sitl import Sitl, free_instance, sitl_binary, skip_reason
+from tests.support.sitl import Sitl, free_instance, sitl_binary, skip_reason
 
 REPO = Path(__file__).resolve().parent.parent
 
@@ -29,7 +29,7 @@ def python() -> str:
 
 @pytest.fixture
 def make_sitl(tmp_path: Path) -> Iterator[Callable[..., Sitl]]:
-    """A factory of ArduCopter SITLs (support/sitl.py; keyword arguments go to ``Sitl``, e.g.
+    """A factory of ArduCopter SITLs (tests/support/sitl.py; keyword arguments go to ``Sitl``, e.g.
     ``serials``), each started in its own folder and instance and stopped at the end;
     skipped where the binary is missing."""
     binary = sitl_binary()

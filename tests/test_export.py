@@ -8,7 +8,7 @@ import subprocess
 from pathlib import Path
 
 from planner_service.service.journal import Journal
-from planner_service.service.progress import item_dict
+from planner_service.service.sortie import item_dict
 from protocol import GeoOrigin, HoverPoint, encode_path, read_plan, read_wpl, same_items
 
 ORIGIN = GeoOrigin()

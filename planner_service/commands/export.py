@@ -46,7 +46,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 def journal_items(path: Path, plan_id: int | None) -> list[Any]:
     """The mission items recorded in the journal at ``path`` (read-only)."""
-    from planner_service.service.progress import item_from_dict
+    from planner_service.service.sortie import item_from_dict
 
     if not path.is_file():
         raise ExportError(f"--journal: {path} does not exist")

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import Callable
+from typing import Callable, Literal, get_args
 
 from .errors import ScenarioError
 from .scenario import Scenario
@@ -45,11 +45,14 @@ def field() -> Scenario:
     )
 
 
+Preset = Literal["paper", "paper-3d", "field"]
 PRESETS: dict[str, Callable[[], Scenario]] = {
     "paper": paper,
     "paper-3d": paper_3d,
     "field": field,
 }
+if set(PRESETS) != set(get_args(Preset)):  # pragma: no cover - a preset added to one and not the other
+    raise ImportError("model.presets: PRESETS and Preset must name the same presets")
 
 
 def preset(name: str) -> Scenario:

@@ -1,32 +1,45 @@
 """The service's configuration: a TOML file, every key with a default, overridable on the
 command line with ``--set section.key=value``.
 
-Sections are frozen dataclasses; ``load_config`` reads the file, applies the overrides and
-validates everything, so that a bad value is refused at start with the key that holds it,
-never half-way through a sortie. ``docs/planner.example.toml`` documents every key.
+Sections are frozen dataclasses whose fields are read by their annotations
+(``planner_service.settings``: the same booleans, lists and choices as the scenario's
+``--set``), each bound beside its field and checked when a section is built; a section's
+``check`` holds the rules between its fields (and the files they name), ``ServiceConfig.check``
+those between sections. ``load_config`` reads the file, applies the overrides and checks
+everything, so that a bad value is refused at start with the key that holds it, never
+half-way through a sortie. ``docs/planner.example.toml`` documents every key with its
+default (a test holds it to this file).
 """
 
 from __future__ import annotations
 
-import dataclasses
-import math
 import os
 import re
 import tomllib
 from dataclasses import dataclass, field, fields
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any, ClassVar, Literal, Mapping, get_args
 
 from protocol import Area, GeoOrigin, Keys, ProtocolError
-from protocol.errors import SigningError
+from protocol.errors import MissionError, SigningError
+from protocol.mission import Flavour
 from protocol.signing import default_timestamp_path, load_key
 from protocol.zenoh_config import endpoint_problem
 
 from ..model import Scenario, ScenarioError, preset
+from ..model.presets import Preset
+from ..settings import SettingError, check_fields, kinds, read, read_fields, setting, split_assignment, toml_value
 from .errors import ConfigError
 
-ZENOH_MODES = ("peer", "client", "router")
-BACKENDS = ("pymavlink", "mavsdk")
+ZenohMode = Literal["peer", "client", "router"]
+Backend = Literal["pymavlink", "mavsdk"]
+FlightAlgo = Literal["mcts", "greedy", "random", "ts-mcts", "mcts-paper"]
+"""The algorithms the service can fly (``planner.algo``); the learners (``ql``, ``dqn``)
+train before a sortie and are not among them."""
+SyncLevel = Literal["OFF", "NORMAL", "FULL", "EXTRA"]
+ZENOH_MODES: tuple[str, ...] = get_args(ZenohMode)
+BACKENDS: tuple[str, ...] = get_args(Backend)
+FLIGHT_ALGOS: tuple[str, ...] = get_args(FlightAlgo)
 MAVLINK_SCHEMES = ("udpin", "udpout", "udp", "udpbcast", "tcp", "tcpin")
 """pymavlink's network connection strings, SCHEME:HOST:PORT (``udp`` listens, as udpin)."""
 MAVSDK_SCHEMES = ("udpin", "udpout", "tcpin", "tcpout", "serial")
@@ -35,9 +48,28 @@ _HOST_PORT = re.compile(r"(?P<host>[^\s:/,]+):(?P<port>[0-9]{1,5})")
 _SERIAL = re.compile(r"(?P<device>/[^\s,]+|COM[0-9]+)(,(?P<baud>[0-9]{3,7}))?")
 
 
+class Section:
+    """A section of the configuration (a TOML table). Its fields are checked against their
+    choices and bounds when it is built; ``check`` holds the rules between them."""
+
+    section: ClassVar[str]
+    """The TOML table's name: errors name ``section.key``."""
+
+    def __post_init__(self) -> None:
+        try:
+            check_fields(self)
+        except SettingError as err:
+            raise ConfigError(f"{self.section}.{err.name}", err.message) from None
+
+    def check(self) -> None:
+        """Rules between the section's fields, and the files they name (none by default)."""
+
+
 @dataclass(frozen=True)
-class ZenohConfig:
-    mode: str = "peer"
+class ZenohConfig(Section):
+    section: ClassVar[str] = "zenoh"
+
+    mode: ZenohMode = "peer"
     """peer (default), client (needs ``connect``) or router."""
     listen: tuple[str, ...] = ("tcp/127.0.0.1:7447",)
     """Endpoints this session listens on (loopback by default)."""
@@ -49,9 +81,9 @@ class ZenohConfig:
     """First chunk of every key expression."""
     vehicle: str = "uav1"
     """Second chunk: the vehicle id."""
-    status_hz: float = 2.0
+    status_hz: float = setting(2.0, ge=1.0, unit="Hz")
     """Rate of the status publication (at least 1 Hz)."""
-    max_queries_in_flight: int = 64
+    max_queries_in_flight: int = setting(64, ge=1)
     """Queries handed from zenoh's threads to the event loop and not yet answered; one more
     is answered at once "busy: ..." from zenoh's thread (bounds the memory a flood takes)."""
     config_file: str = ""
@@ -59,43 +91,63 @@ class ZenohConfig:
     timeouts); mode, listen, connect and multicast_scouting above are applied on top. Empty:
     zenoh's defaults."""
 
+    def check(self) -> None:
+        if self.mode == "client" and not self.connect:
+            raise ConfigError("zenoh.connect", "client mode needs at least one endpoint to connect to")
+        for key in ("listen", "connect"):
+            for endpoint in getattr(self, key):
+                why = endpoint_problem(endpoint)
+                if why is not None:
+                    raise ConfigError(f"zenoh.{key}", why)
+        try:
+            Keys(self.prefix, self.vehicle)
+        except ProtocolError as err:
+            raise ConfigError(f"zenoh.{err.field}", err.message) from None
+        if self.config_file and not Path(self.config_file).is_file():
+            raise ConfigError("zenoh.config_file", f"{self.config_file} is not a readable file")
+
 
 @dataclass(frozen=True)
-class IntakeConfig:
-    max_pending_requests: int = 100
+class IntakeConfig(Section):
+    section: ClassVar[str] = "intake"
+
+    max_pending_requests: int = setting(100, ge=1)
     """Pending requests that can be served; beyond it a servable request from a user without
     one is refused "busy: ..." (a user replacing its own pending request is still taken; a
     request of no tasks or one the fairness rule leaves out of the sortie holds no place)."""
-    max_users: int = 200
+    max_users: int = setting(200, ge=1)
     """Distinct user ids in one sortie; a request from a new id beyond it is refused "full: ..."
     (bounds the journal's users and the planner's size)."""
-    max_requests_per_s: float = 50.0
+    max_requests_per_s: float = setting(50.0, gt=0)
     """Accepted requests per second, over a one-second burst, on the monotonic clock; beyond
     it "busy: ..." (bounds the journal's growth and the fsyncs a flood costs)."""
 
 
 @dataclass(frozen=True)
-class MavlinkConfig:
-    backend: str = "pymavlink"
+class MavlinkConfig(Section):
+    section: ClassVar[str] = "mavlink"
+
+    backend: Backend = "pymavlink"
     """pymavlink (default) or mavsdk (the native mavsdk 4 binding, mission_raw)."""
     url: str = "udpout:127.0.0.1:14550"
     """pymavlink connection string (udpout:, udpin:, tcp:, serial device); the mavsdk
     backend takes the same string and rewrites it to its own form (udpout://...)."""
-    flavour: str = "ardupilot"
+    flavour: Flavour = "ardupilot"
     """ardupilot (item 0 is home) or px4."""
     start_mission: bool = False
     """Arm and start the mission once one is uploaded. Off by default: on a real aircraft
     the operator arms; turn it on only where the operator allows it (the stub, SITL)."""
-    item_timeout_s: float = 0.5
+    item_timeout_s: float = setting(0.5, gt=0)
     """Longest wait for the autopilot's next request or ack before repeating the last
     message (the link waits about four measured round trips when that is shorter)."""
-    retries: int = 10
+    retries: int = setting(10, ge=1)
     """Repeats of one message before an upload is given up."""
-    link_timeout_s: float = 3.0
+    link_timeout_s: float = setting(3.0, gt=0)
     """Silence (no message at all) after which the link counts as lost."""
     source_system: int = 255
     source_component: int = 190
-    max_mission_items: int = 512
+    max_mission_items: int = setting(512, ge=3, le=65535,
+                                     why="home, takeoff and return to launch take 3; MISSION_COUNT is a uint16")
     """The autopilot's mission capacity: a plan of more items is refused before upload
     (``protocol.validate_mission``). ArduPilot's depends on its storage; the stub's is
     ``--max-mission-items``."""
@@ -107,78 +159,142 @@ class MavlinkConfig:
     """Where the last signing timestamp is kept so that a restart never reuses one; empty:
     beside the key (KEY.service-timestamp)."""
 
+    def check(self) -> None:
+        why = mavlink_url_problem(self.url, self.backend)
+        if why is not None:
+            raise ConfigError("mavlink.url", why)
+        self._check_signing()
 
-FLIGHT_ALGOS = ("mcts", "greedy", "random", "ts-mcts", "mcts-paper")
-"""The algorithms the service can fly (``planner.algo``); the learners (``ql``, ``dqn``)
-train before a sortie and are not among them."""
+    def _check_signing(self) -> None:
+        """The key must load (exists, 64 hex characters, owner-only) and the timestamp file's
+        folder be writable, so that a signing setup that cannot work is refused at start."""
+        if not self.signing_key_file:
+            if self.signing_timestamp_file:
+                raise ConfigError("mavlink.signing_timestamp_file", "set without mavlink.signing_key_file")
+            return
+        if self.backend != "pymavlink":
+            raise ConfigError("mavlink.backend", "signing needs the pymavlink backend: the mavsdk 4 binding has no "
+                              "MAVLink signing (mavlink.signing_key_file is set)")
+        try:
+            load_key(self.signing_key_file)
+        except SigningError as err:
+            raise ConfigError("mavlink.signing_key_file", str(err)) from None
+        stamps = self.signing_timestamp_file or str(default_timestamp_path(self.signing_key_file, "service"))
+        folder = os.path.dirname(stamps) or "."
+        if not os.access(folder, os.W_OK | os.X_OK):
+            raise ConfigError("mavlink.signing_timestamp_file", f"{stamps}: the folder {folder} is missing or not "
+                              "writable (the signing timestamp is stored there)")
 
 
 @dataclass(frozen=True)
-class PlannerConfig:
-    algo: str = "mcts"
+class PlannerConfig(Section):
+    section: ClassVar[str] = "planner"
+
+    algo: FlightAlgo = "mcts"
     """The algorithm flown: ``mcts`` (default), ``greedy``, ``random``, ``ts-mcts`` or
     ``mcts-paper`` (``FLIGHT_ALGOS``)."""
-    budget_ms: float = 200.0
+    budget_ms: float = setting(200.0, gt=0)
     """Wall-clock budget of one MCTS decision (``mcts``)."""
-    iterations: int = 0
+    iterations: int = setting(0, ge=0)
     """Iteration cap per decision; 0: the budget alone decides. ``mcts-paper`` and
     ``ts-mcts`` run this many iterations, 0 meaning the paper's 1000."""
     seed: int = 0
     """Seed of the planner's random generator."""
-    min_requests: int = 1
+    min_requests: int = setting(1, ge=1)
     """Pending requests needed before the first plan of a sortie."""
-    max_failures: int = 8
+    max_failures: int = setting(8, ge=1)
     """Failed plans or uploads in a row after which the service stops trying (and says so)
     until the link, a request or the operator changes something; each retry waits twice as
     long as the last, from 1 s up to 30 s."""
-    replan_min_interval_s: float = 1.0
+    replan_min_interval_s: float = setting(1.0, ge=0)
     """Least wall time between two re-plans caused by new requests (re-plans at a
     hovering point are never delayed); 0 re-plans on every request."""
 
 
 @dataclass(frozen=True)
-class JournalConfig:
+class JournalConfig(Section):
+    section: ClassVar[str] = "journal"
+
     path: str = "planner-journal.sqlite"
     """SQLite file (WAL); a restart with the same file resumes the sortie."""
-    synchronous: str = "FULL"
+    synchronous: SyncLevel = "FULL"
     """SQLite synchronous level: FULL syncs every accepted request to disk before the ack."""
 
 
 @dataclass(frozen=True)
-class OriginConfig:
+class OriginConfig(Section):
+    section: ClassVar[str] = "origin"
+
     lat_deg: float = 47.397742
     lon_deg: float = 8.545594
     alt_m: float = 488.0
     """The geodetic point that is local (0, 0, 0) (default: PX4 SITL's home)."""
 
+    def check(self) -> None:
+        try:
+            self.point()
+        except MissionError as err:  # its bounds are the protocol's: it names the field
+            raise ConfigError(err.where, err.message) from None
+
+    def point(self) -> GeoOrigin:
+        return GeoOrigin(self.lat_deg, self.lon_deg, self.alt_m)
+
+
+_AREA_KEYS = {"side_m": "area_side_m", "max_altitude_m": "max_altitude_m",
+              "min_flight_altitude_m": "min_flight_altitude_m"}
+
 
 @dataclass(frozen=True)
-class SafetyConfig:
+class SafetyConfig(Section):
+    section: ClassVar[str] = "safety"
+
     area_side_m: float = 500.0
     """Every waypoint and request inside [0, side]^2 local metres."""
     max_altitude_m: float = 120.0
     min_flight_altitude_m: float = 10.0
-    rtl_battery_fraction: float = 0.1
+    rtl_battery_fraction: float = setting(0.1, ge=0, lt=1)
     """Command return to launch when the battery fraction reaches this (airborne)."""
-    hold_radius_m: float = 5.0
+    hold_radius_m: float = setting(5.0, ge=0.5, le=50.0, unit="m")
     """A service counts only while the vehicle's own position is within this distance of
     its hovering point (ArduPilot's WPNAV_RADIUS is 2 m; GPS wanders about a metre)."""
-    hold_margin_s: float = 1.0
+    hold_margin_s: float = setting(1.0, ge=0.0, le=30.0, unit="s")
     """Each planned hold is this much longer than the upload needs: the service ends a hold
     itself once the vehicle's position reports show it; the autopilot's hold is the ceiling."""
-    energy_margin_j: float = 1000.0
+    energy_margin_j: float = setting(1000.0, ge=0)
     """Kept back from every plan on top of the model's reserve and the landing descent,
     for what the model does not see (wind, an estimate's error)."""
 
+    def check(self) -> None:
+        try:
+            self.area()
+        except ProtocolError as err:  # its bounds are the protocol's: name our key for its field
+            raise ConfigError(f"safety.{_AREA_KEYS.get(err.field, err.field)}", err.message) from None
+
+    def area(self) -> Area:
+        return Area(self.area_side_m, self.max_altitude_m, self.min_flight_altitude_m)
+
 
 @dataclass(frozen=True)
-class SortieConfig:
+class SortieConfig(Section):
+    section: ClassVar[str] = "sortie"
+
     repeat: bool = True
     """After a landing, begin the next sortie once the vehicle is ready again; false: one
     sortie per journal, the intake stays closed after the landing."""
-    next_battery_fraction: float = 0.95
+    next_battery_fraction: float = setting(0.95, gt=0, le=1)
     """The next sortie begins when the vehicle is on the ground, disarmed and its battery
-    is back at or above this fraction (swapped or charged)."""
+    is back at or above this fraction (swapped or charged); above
+    ``safety.rtl_battery_fraction`` (``ServiceConfig.check``)."""
+
+
+SECTIONS: dict[str, type[Section]] = {
+    "zenoh": ZenohConfig, "intake": IntakeConfig, "mavlink": MavlinkConfig, "planner": PlannerConfig,
+    "journal": JournalConfig, "origin": OriginConfig, "safety": SafetyConfig, "sortie": SortieConfig}
+"""The TOML tables besides ``[scenario]``, in the order ``to_toml`` writes them."""
+SCENARIO_DEFAULTS: tuple[tuple[str, Any], ...] = (("task_model", "backlog"),)
+"""The ``[scenario]`` keys the service sets besides the preset's: live users' requests are
+data waiting (docs/PROTOCOL.md), so the planner's futures keep their backlogs unless the
+configuration says otherwise (the paper's redraw)."""
 
 
 @dataclass(frozen=True)
@@ -191,129 +307,90 @@ class ServiceConfig:
     origin: OriginConfig = field(default_factory=OriginConfig)
     safety: SafetyConfig = field(default_factory=SafetyConfig)
     sortie: SortieConfig = field(default_factory=SortieConfig)
-    scenario_preset: str = "field"
-    scenario_overrides: tuple[tuple[str, Any], ...] = ()
-    """(name, value) pairs from the [scenario] section besides ``preset``."""
+    scenario_preset: Preset = "field"
+    scenario_overrides: tuple[tuple[str, Any], ...] = SCENARIO_DEFAULTS
+    """(name, value) pairs of the [scenario] section besides ``preset``, each value of its
+    scenario field's type, sorted by name."""
 
     def scenario(self) -> Scenario:
         """The planning scenario: the preset with the configured overrides."""
         try:
-            base = preset(self.scenario_preset)
-            return base.with_overrides({k: v if isinstance(v, str) else _text(v) for k, v in self.scenario_overrides})
+            return preset(self.scenario_preset).replace(**dict(self.scenario_overrides))
         except ScenarioError as err:
             raise ConfigError(f"scenario.{err.field}", str(err)) from None
 
     def area(self) -> Area:
-        s = self.safety
-        return Area(s.area_side_m, s.max_altitude_m, s.min_flight_altitude_m)
+        return self.safety.area()
 
     def origin_point(self) -> GeoOrigin:
-        return GeoOrigin(self.origin.lat_deg, self.origin.lon_deg, self.origin.alt_m)
+        return self.origin.point()
 
     def keys(self) -> Keys:
         return Keys(self.zenoh.prefix, self.zenoh.vehicle)
 
-
-_SECTIONS = {"zenoh": ZenohConfig, "intake": IntakeConfig, "mavlink": MavlinkConfig, "planner": PlannerConfig,
-             "journal": JournalConfig, "origin": OriginConfig, "safety": SafetyConfig, "sortie": SortieConfig}
-
-
-def _text(value: Any) -> str:
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if isinstance(value, (list, tuple)):
-        return ",".join(str(v) for v in value)
-    return str(value)
-
-
-def _coerce(key: str, current: Any, value: Any) -> Any:
-    """``value`` (from TOML or a ``--set`` string) as the type of the default ``current``."""
-    try:
-        if isinstance(current, bool):
-            if isinstance(value, bool):
-                return value
-            text = str(value).strip().lower()
-            if text not in ("true", "false", "1", "0", "yes", "no", "on", "off"):
-                raise ValueError
-            return text in ("true", "1", "yes", "on")
-        if isinstance(current, int):
-            if isinstance(value, bool) or (isinstance(value, float) and not value.is_integer()):
-                raise ValueError
-            return int(value)
-        if isinstance(current, float):
-            if isinstance(value, bool):
-                raise ValueError
-            number = float(value)
-            if not math.isfinite(number):
-                raise ValueError
-            return number
-        if isinstance(current, tuple):
-            if isinstance(value, str):
-                return tuple(part.strip() for part in value.split(",") if part.strip())
-            if isinstance(value, (list, tuple)) and all(isinstance(v, str) for v in value):
-                return tuple(value)
-            raise ValueError
-        if isinstance(current, str):
-            if not isinstance(value, str):
-                raise ValueError
-            return value
-    except (TypeError, ValueError):
-        raise ConfigError(key, f"cannot read {value!r} as {type(current).__name__}") from None
-    return value
-
-
-def _apply(raw: dict[str, dict[str, Any]], overrides: Mapping[str, Any]) -> dict[str, dict[str, Any]]:
-    merged = {section: dict(values) for section, values in raw.items()}
-    for dotted, value in overrides.items():
-        section, _, key = dotted.partition(".")
-        if not key:
-            raise ConfigError(dotted, "an override is section.key=value")
-        merged.setdefault(section, {})[key] = value
-    return merged
+    def check(self) -> None:
+        """Every section's rules, then those between sections; ``ConfigError`` names the key."""
+        for name in SECTIONS:
+            getattr(self, name).check()
+        p, s = self.planner, self.safety
+        if p.min_requests > self.intake.max_pending_requests:
+            raise ConfigError("planner.min_requests", f"{p.min_requests} can never be pending: "
+                              f"intake.max_pending_requests is {self.intake.max_pending_requests}")
+        if not s.rtl_battery_fraction < self.sortie.next_battery_fraction:
+            raise ConfigError("sortie.next_battery_fraction", f"must lie in (safety.rtl_battery_fraction = "
+                              f"{s.rtl_battery_fraction}, 1]: a sortie must not begin at the return threshold")
+        area, scenario = self.area(), self.scenario()
+        if scenario.dimensions != 2:
+            raise ConfigError("scenario.preset", "the service flies 2-D scenarios (one altitude)")
+        if scenario.area_side_m > area.side_m:
+            raise ConfigError("safety.area_side_m", f"the scenario's area ({scenario.area_side_m} m) exceeds the "
+                              f"safety area ({area.side_m} m)")
+        if not area.min_flight_altitude_m <= scenario.altitude_m <= area.max_altitude_m:
+            raise ConfigError("safety.max_altitude_m", f"the scenario's altitude {scenario.altitude_m} m is outside "
+                              f"[{area.min_flight_altitude_m}, {area.max_altitude_m}] m")
 
 
 def parse_overrides(items: list[str]) -> dict[str, str]:
     """``["zenoh.mode=client", ...]`` -> {"zenoh.mode": "client"}."""
     out: dict[str, str] = {}
     for item in items:
-        key, sep, value = item.partition("=")
-        if not sep or not key.strip():
-            raise ConfigError(item, "an override is section.key=value")
-        out[key.strip()] = value.strip()
+        try:
+            key, value = split_assignment(item)
+        except SettingError:
+            raise ConfigError(item, "an override is section.key=value") from None
+        out[key] = value
     return out
 
 
 def build_config(raw: Mapping[str, Any], overrides: Mapping[str, Any] | None = None) -> ServiceConfig:
-    """A validated ``ServiceConfig`` from parsed TOML and ``section.key`` overrides."""
-    for section, values in raw.items():
-        if section != "scenario" and section not in _SECTIONS:
-            raise ConfigError(section, f"unknown section; expected one of {sorted([*_SECTIONS, 'scenario'])}")
+    """A checked ``ServiceConfig`` from parsed TOML and ``section.key`` overrides (text or
+    values), every value read by its field's type."""
+    tables = sorted([*SECTIONS, "scenario"])
+    merged: dict[str, dict[str, Any]] = {}
+    for name, values in raw.items():
+        if name not in tables:
+            raise ConfigError(name, f"unknown section; expected one of {tables}")
         if not isinstance(values, dict):
-            raise ConfigError(section, "must be a table")
-    merged = _apply({k: v for k, v in raw.items()}, overrides or {})
-    sections: dict[str, Any] = {}
-    for name, cls in _SECTIONS.items():
-        values = merged.get(name, {})
-        defaults = cls()
-        known = {f.name for f in fields(cls)}
-        kwargs: dict[str, Any] = {}
-        for key, value in values.items():
-            if key not in known:
-                raise ConfigError(f"{name}.{key}", f"unknown key; expected one of {sorted(known)}")
-            kwargs[key] = _coerce(f"{name}.{key}", getattr(defaults, key), value)
-        sections[name] = dataclasses.replace(defaults, **kwargs)
-    for name in merged:
-        if name not in _SECTIONS and name != "scenario":
-            raise ConfigError(name, f"unknown section; expected one of {sorted([*_SECTIONS, 'scenario'])}")
-    # Live users' requests are data waiting (docs/PROTOCOL.md): the planner's futures keep
-    # their backlogs unless the configuration says otherwise (the paper's redraw).
-    scenario = {"task_model": "backlog", **merged.get("scenario", {})}
-    preset_name = scenario.pop("preset", "field")
-    if not isinstance(preset_name, str):
-        raise ConfigError("scenario.preset", "must be a string")
-    config = ServiceConfig(**sections, scenario_preset=preset_name,
-                           scenario_overrides=tuple(sorted(scenario.items())))
-    validate(config)
+            raise ConfigError(name, "must be a table")
+        merged[name] = dict(values)
+    for dotted, value in (overrides or {}).items():
+        name, _, key = dotted.partition(".")
+        if not key:
+            raise ConfigError(dotted, "an override is section.key=value")
+        if name not in tables:
+            raise ConfigError(name, f"unknown section; expected one of {tables}")
+        merged.setdefault(name, {})[key] = value
+    try:
+        sections = {name: cls(**read_fields(cls, merged.get(name, {}), lambda key, name=name: f"{name}.{key}"))
+                    for name, cls in SECTIONS.items()}
+        scenario = dict(merged.get("scenario", {}))
+        preset_name = read("scenario.preset", kinds(ServiceConfig)["scenario_preset"], scenario.pop("preset", "field"))
+        values = read_fields(Scenario, scenario, lambda key: f"scenario.{key}")
+    except SettingError as err:
+        raise ConfigError(err.name, err.message) from None
+    config = ServiceConfig(**sections, scenario_preset=preset_name,  # type: ignore[arg-type]
+                           scenario_overrides=tuple(sorted({**dict(SCENARIO_DEFAULTS), **values}.items())))
+    config.check()
     return config
 
 
@@ -329,87 +406,6 @@ def load_config(path: str | Path | None, overrides: Mapping[str, Any] | None = N
         except tomllib.TOMLDecodeError as err:
             raise ConfigError("config", f"{path} is not valid TOML: {err}") from None
     return build_config(raw, overrides)
-
-
-def validate(c: ServiceConfig) -> None:
-    """Refuse values the service could not run with; ``ConfigError`` names the key."""
-    z, m, p, s = c.zenoh, c.mavlink, c.planner, c.safety
-    if z.mode not in ZENOH_MODES:
-        raise ConfigError("zenoh.mode", f"{z.mode!r} is not one of {ZENOH_MODES}")
-    if z.mode == "client" and not z.connect:
-        raise ConfigError("zenoh.connect", "client mode needs at least one endpoint to connect to")
-    if not z.status_hz >= 1.0:
-        raise ConfigError("zenoh.status_hz", f"must be at least 1 Hz, got {z.status_hz}")
-    if z.max_queries_in_flight < 1:
-        raise ConfigError("zenoh.max_queries_in_flight", "must be at least 1")
-    if z.config_file and not Path(z.config_file).is_file():
-        raise ConfigError("zenoh.config_file", f"{z.config_file} is not a readable file")
-    for key in ("listen", "connect"):
-        for endpoint in getattr(z, key):
-            why = endpoint_problem(endpoint)
-            if why is not None:
-                raise ConfigError(f"zenoh.{key}", why)
-    i = c.intake
-    if i.max_pending_requests < 1 or i.max_users < 1:
-        raise ConfigError("intake", "max_pending_requests and max_users must be at least 1")
-    if not i.max_requests_per_s > 0:
-        raise ConfigError("intake.max_requests_per_s", "must be positive")
-    try:
-        c.keys()
-    except ProtocolError as err:
-        raise ConfigError(f"zenoh.{err.field}", err.message) from None
-    if m.backend not in BACKENDS:
-        raise ConfigError("mavlink.backend", f"{m.backend!r} is not one of {BACKENDS}")
-    why = mavlink_url_problem(m.url, m.backend)
-    if why is not None:
-        raise ConfigError("mavlink.url", why)
-    if m.flavour not in ("ardupilot", "px4"):
-        raise ConfigError("mavlink.flavour", f"{m.flavour!r} is not ardupilot or px4")
-    for key in ("item_timeout_s", "link_timeout_s"):
-        if not getattr(m, key) > 0:
-            raise ConfigError(f"mavlink.{key}", "must be positive")
-    if m.retries < 1:
-        raise ConfigError("mavlink.retries", "must be at least 1")
-    if not 3 <= m.max_mission_items <= 65535:  # home, takeoff and RTL; MISSION_COUNT is uint16
-        raise ConfigError("mavlink.max_mission_items", f"must lie in 3..65535, got {m.max_mission_items}")
-    _validate_signing(m)
-    if p.algo not in FLIGHT_ALGOS:
-        raise ConfigError("planner.algo", f"{p.algo!r} is not one of {FLIGHT_ALGOS}")
-    if not p.budget_ms > 0:
-        raise ConfigError("planner.budget_ms", "must be positive")
-    if p.iterations < 0 or p.min_requests < 1 or p.replan_min_interval_s < 0:
-        raise ConfigError("planner", "iterations >= 0, min_requests >= 1, replan_min_interval_s >= 0")
-    if p.min_requests > c.intake.max_pending_requests:
-        raise ConfigError("planner.min_requests", f"{p.min_requests} can never be pending: "
-                          f"intake.max_pending_requests is {c.intake.max_pending_requests}")
-    if c.journal.synchronous.upper() not in ("OFF", "NORMAL", "FULL", "EXTRA"):
-        raise ConfigError("journal.synchronous", "must be OFF, NORMAL, FULL or EXTRA")
-    if not s.energy_margin_j >= 0:
-        raise ConfigError("safety.energy_margin_j", "must not be negative")
-    if not 0.5 <= s.hold_radius_m <= 50.0:
-        raise ConfigError("safety.hold_radius_m", f"must lie in [0.5, 50] m, got {s.hold_radius_m}")
-    if not 0.0 <= s.hold_margin_s <= 30.0:
-        raise ConfigError("safety.hold_margin_s", f"must lie in [0, 30] s, got {s.hold_margin_s}")
-    if p.max_failures < 1:
-        raise ConfigError("planner.max_failures", "must be at least 1")
-    if not 0.0 <= s.rtl_battery_fraction < 1.0:
-        raise ConfigError("safety.rtl_battery_fraction", "must lie in [0, 1)")
-    if not s.rtl_battery_fraction < c.sortie.next_battery_fraction <= 1.0:
-        raise ConfigError("sortie.next_battery_fraction", f"must lie in (safety.rtl_battery_fraction = "
-                          f"{s.rtl_battery_fraction}, 1]: a sortie must not begin at the return threshold")
-    try:
-        area = c.area()
-        c.origin_point()
-    except (ProtocolError, ValueError) as err:
-        raise ConfigError("safety" if isinstance(err, ProtocolError) else "origin", str(err)) from None
-    scenario = c.scenario()
-    if scenario.dimensions != 2:
-        raise ConfigError("scenario.preset", "the service flies 2-D scenarios (one altitude)")
-    if scenario.area_side_m > area.side_m:
-        raise ConfigError("safety.area_side_m", f"the scenario's area ({scenario.area_side_m} m) exceeds the safety area ({area.side_m} m)")
-    if not area.min_flight_altitude_m <= scenario.altitude_m <= area.max_altitude_m:
-        raise ConfigError("safety.max_altitude_m", f"the scenario's altitude {scenario.altitude_m} m is outside "
-                          f"[{area.min_flight_altitude_m}, {area.max_altitude_m}] m")
 
 
 def mavlink_url_problem(url: str, backend: str) -> str | None:
@@ -456,47 +452,16 @@ def _serial_problem(url: str, device: str, baud: str) -> str | None:
     return None
 
 
-def _validate_signing(m: MavlinkConfig) -> None:
-    """The key must load (exists, 64 hex characters, owner-only) and the timestamp file's
-    folder be writable, so that a signing setup that cannot work is refused at start."""
-    if not m.signing_key_file:
-        if m.signing_timestamp_file:
-            raise ConfigError("mavlink.signing_timestamp_file", "set without mavlink.signing_key_file")
-        return
-    if m.backend != "pymavlink":
-        raise ConfigError("mavlink.backend", "signing needs the pymavlink backend: the mavsdk 4 binding has no MAVLink "
-                          "signing (mavlink.signing_key_file is set)")
-    try:
-        load_key(m.signing_key_file)
-    except SigningError as err:
-        raise ConfigError("mavlink.signing_key_file", str(err)) from None
-    stamps = m.signing_timestamp_file or str(default_timestamp_path(m.signing_key_file, "service"))
-    folder = os.path.dirname(stamps) or "."
-    if not os.access(folder, os.W_OK | os.X_OK):
-        raise ConfigError("mavlink.signing_timestamp_file", f"{stamps}: the folder {folder} is missing or not writable "
-                          "(the signing timestamp is stored there)")
-
-
 def to_toml(c: ServiceConfig) -> str:
     """The configuration as TOML (the demo writes the one it runs)."""
     lines: list[str] = []
-    for name in _SECTIONS:
+    for name in SECTIONS:
         lines.append(f"[{name}]")
         for f in fields(getattr(c, name)):
-            lines.append(f"{f.name} = {_toml_value(getattr(getattr(c, name), f.name))}")
+            lines.append(f"{f.name} = {toml_value(getattr(getattr(c, name), f.name))}")
         lines.append("")
     lines.append("[scenario]")
-    lines.append(f"preset = {_toml_value(c.scenario_preset)}")
+    lines.append(f"preset = {toml_value(c.scenario_preset)}")
     for key, value in c.scenario_overrides:
-        lines.append(f"{key} = {_toml_value(value)}")
+        lines.append(f"{key} = {toml_value(value)}")
     return "\n".join(lines) + "\n"
-
-
-def _toml_value(value: Any) -> str:
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if isinstance(value, str):
-        return '"' + value.replace("\\", "\\\\").replace('"', '\\"') + '"'
-    if isinstance(value, (tuple, list)):
-        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
-    return repr(value)

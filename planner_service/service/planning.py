@@ -42,7 +42,7 @@ from ..model.energy import flight_energy_j
 from ..model.interval import remaining_intervals, return_energy_j, served_user, user_outcome, within_budget
 from ..model.world import World, clone, evaluate, scene_of, step
 from ..policy import Decision
-from .config import FLIGHT_ALGOS
+from .config import FLIGHT_ALGOS, FlightAlgo
 from .errors import PlanningError
 from .journal import RequestRow, ServiceRow, UserRow
 
@@ -243,7 +243,7 @@ class Planner:
     """The chosen algorithm for the current set of users; rebuilt when that set grows."""
 
     def __init__(self, scenario: Scenario, config: MctsConfig, seed: int, max_points: int | None = None,
-                 algo: str = "mcts") -> None:
+                 algo: FlightAlgo = "mcts") -> None:
         if algo not in FLIGHT_ALGOS:
             raise PlanningError("algo", f"unknown algorithm {algo!r}; choose from {FLIGHT_ALGOS}")
         self.base = scenario

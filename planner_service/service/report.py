@@ -8,19 +8,8 @@ from collections import Counter
 from typing import Any
 
 from ..model import Scenario
+from ..model.fairness import fairness_violations
 from .journal import Journal
-
-
-def fairness_violations(scenario: Scenario, services: list[tuple[str, int]]) -> int:
-    """Services (user, tasks) in order that break rule (3) or the limit (9c)."""
-    counts: Counter[str] = Counter()
-    bad = 0
-    for user, tasks in services:
-        c = counts[user]
-        if tasks <= 0 or c >= scenario.max_services_per_user or (c >= 1 and tasks <= scenario.fairness_threshold_tasks):
-            bad += 1
-        counts[user] += 1
-    return bad
 
 
 def planned_requests(services: list[Any], missions: list[Any]) -> int:

@@ -16,7 +16,7 @@ from planner_service.model.energy import (
     hover_energy_j,
     rotary_wing_power_w,
 )
-from planner_service.model.fairness import is_eligible
+from planner_service.model.fairness import fairness_violations, is_eligible
 from planner_service.model.interval import served_user, service_outcome, within_budget
 from planner_service.model.mobility import draw_tasks, move_users
 from planner_service.model.reward import interval_reward
@@ -101,6 +101,16 @@ def test_reward_eq11():
 )
 def test_fairness_rule_eq3(tasks, served, expected, why):
     assert is_eligible(P, tasks, served) is expected, why
+
+
+def test_fairness_audit_counts_what_the_rule_refuses():
+    # The one audit (plan summary, service report, tests): each service judged by (3)/(9c) with
+    # the counts before it. a: 5 then 16 (> beta = 15) is fair, a third is past the limit;
+    # b: a repeat of 15 is not > beta; c: a service of no tasks is never fair.
+    services = [("a", 5), ("b", 3), ("a", 16), ("b", 15), ("c", 0), ("a", 20)]
+    assert fairness_violations(paper(), services) == 3
+    assert fairness_violations(paper(), services[:3]) == 0
+    assert fairness_violations(paper().replace(fairness_threshold_tasks=14), [("b", 3), ("b", 15)]) == 0
 
 
 class _ScriptedRng:

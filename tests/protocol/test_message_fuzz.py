@@ -16,11 +16,11 @@ from typing import Any, Callable
 
 import msgspec
 import pytest
-from hostile_payloads import Case, batches, field_root
 from hypothesis import HealthCheck, given, settings
 
 from protocol import (ErrorReply, Event, OperatorCommand, OperatorReply, Plan, ProtocolError, State, Status, TaskAck,
                       UserPlace, decode, decode_operator_command, decode_operator_reply, decode_reply, encode)
+from tests.support.hostile_payloads import Case, batches, field_root
 
 PAYLOADS = 10_000
 BATCH = 10

@@ -6,9 +6,9 @@ from __future__ import annotations
 import json
 
 import pytest
-from stack import Stack
 
 from protocol import ErrorReply, TaskAck
+from tests.support.stack import Stack
 
 
 def payload(**fields: object) -> bytes:

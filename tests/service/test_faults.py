@@ -1,7 +1,7 @@
 """The service survives a lossy MAVLink link, a vehicle restart mid-sortie and its own
 SIGKILL: whole sorties end to end (vehicle stub, lossy proxy, service, simulated users as
-real processes on loopback), checked as test_sortie.py checks a clean one and against the
-vehicle's own log (sortie_checks.py). Each prints its figures."""
+real processes on loopback), checked as test_one_sortie_end_to_end.py checks a clean one
+and against the vehicle's own log (tests/support/sortie_checks.py). Each prints its figures."""
 
 from __future__ import annotations
 
@@ -17,11 +17,9 @@ from planner_service.model import field
 from planner_service.service.processes import Child
 from protocol import Event
 from protocol.client import ClientError
-
-from sortie_checks import check_sortie  # (puts tests/sim_bridge on the path for gcs)
-from stack import Stack
-
-from gcs import M, GroundStation  # noqa: E402
+from tests.support.gcs import M, GroundStation
+from tests.support.sortie_checks import check_sortie
+from tests.support.stack import Stack
 
 SPEEDUP = "40"
 SERVICE = {"mavlink__start_mission": "true", "planner__min_requests": "5"}

@@ -1,5 +1,5 @@
 """Hostile payloads over a real zenoh session into a running service: a few hundred drawn
-from the fuzzing strategies (tests/protocol/hostile_payloads.py) on the request key and on
+from the fuzzing strategies (tests/support/hostile_payloads.py) on the request key and on
 the state key. Each request gets a decodable ErrorReply, each state query the same State;
 the service stays up, logs no traceback, leaves its journal as it was, and acks a valid
 request afterwards with the next request id."""
@@ -10,11 +10,11 @@ import json
 import time
 
 import pytest
-from hostile_payloads import Case, batches, valid_request
 from hypothesis import HealthCheck, given, settings
-from stack import Stack
 
 from protocol import ErrorReply, State, TaskAck, decode
+from tests.support.hostile_payloads import Case, batches, valid_request
+from tests.support.stack import Stack
 
 BATCH = 10
 WIRE = settings(max_examples=50, deadline=None, database=None, derandomize=True,

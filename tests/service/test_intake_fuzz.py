@@ -2,7 +2,7 @@
 queryable.
 
 Task requests into ``Intake.handle`` with a real journal: each gets an ack exactly when an
-independent oracle (tests/protocol/hostile_payloads.py) says it is a valid request, otherwise
+independent oracle (tests/support/hostile_payloads.py) says it is a valid request, otherwise
 an ``ErrorReply`` naming a field that a client can decode; nothing raises, and a refused
 payload leaves the journal unchanged (SQLite's ``data_version``, read on a second
 connection, moves on any commit; the tables are compared with the oracle's at the end).
@@ -22,7 +22,6 @@ from pathlib import Path
 from typing import Any
 
 import zenoh
-from hostile_payloads import REQUEST_FIELDS, Case, batches, field_root, valid_request
 from hypothesis import HealthCheck, given, settings
 
 from planner_service.service.app import Service, build_parts
@@ -30,6 +29,7 @@ from planner_service.service.config import IntakeConfig, build_config
 from planner_service.service.intake import Accepted, Intake, Rejected
 from planner_service.service.journal import Journal
 from protocol import Area, ErrorReply, State, TaskAck, decode, decode_reply, encode
+from tests.support.hostile_payloads import REQUEST_FIELDS, Case, batches, field_root, valid_request
 
 NOW = 1_732_312_000.5
 AREA = Area(500.0, 120.0, 10.0)

@@ -11,11 +11,11 @@ from typing import Any
 
 import pytest
 import zenoh
-from stack import Stack
 
 from planner_service.service.processes import free_port
 from protocol import ErrorReply, Keys, TaskAck, encode
 from protocol.client import ClientError, PlannerClient
+from tests.support.stack import Stack
 
 KEYS = Keys()
 

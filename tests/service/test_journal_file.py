@@ -29,6 +29,8 @@ from planner_service.service.journal import APPLICATION_ID, Journal
 from planner_service.service.processes import REPO
 
 ROLLBACK_NOISE = "no transaction is active"
+CHILD_ENV = dict(os.environ, PYTHONPATH=str(REPO) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+"""A child interpreter imports this checkout's packages, installed or not."""
 
 
 def digest(path: Path) -> str:
@@ -69,13 +71,12 @@ def test_the_lock_names_another_process_and_dies_with_it(tmp_path: Path) -> None
     path = tmp_path / "j.sqlite"
     holder = subprocess.Popen(
         [sys.executable, "-c", textwrap.dedent(f"""
-            import sys, time
-            sys.path.insert(0, {str(REPO)!r})
+            import time
             from planner_service.service.journal import Journal
             j = Journal({str(path)!r})
             print("ready", flush=True)
             time.sleep(60)
-        """)], stdout=subprocess.PIPE, text=True)
+        """)], stdout=subprocess.PIPE, text=True, env=CHILD_ENV)
     try:
         assert holder.stdout is not None and holder.stdout.readline().strip() == "ready"
         with pytest.raises(JournalError) as refused:
@@ -191,7 +192,6 @@ def test_a_full_database_fails_loud_and_stays_consistent(tmp_path: Path) -> None
 
 CHILD = """
 import json, os, resource, signal, sys, time
-sys.path.insert(0, {repo!r})
 from planner_service.service.journal import Journal
 from planner_service.service.errors import JournalError
 path, how = sys.argv[1], sys.argv[2]
@@ -233,9 +233,9 @@ print(json.dumps(out))
 
 def run_child(tmp_path: Path, how: str, prefix: list[str], path: Path) -> dict[str, object]:
     script = tmp_path / "child.py"
-    script.write_text(CHILD.format(repo=str(REPO)))
+    script.write_text(CHILD.format())
     done = subprocess.run([*prefix, sys.executable, str(script), str(path), how], capture_output=True, text=True,
-                          timeout=60)
+                          timeout=60, env=CHILD_ENV)
     assert done.returncode == 0, done.stderr
     return json.loads(done.stdout.strip().splitlines()[-1])
 

@@ -1,6 +1,6 @@
 """MAVLink garbage into the running service: a fake autopilot in the test (the service's
 link is ``udpout:`` to the test's socket) sends valid heartbeats and telemetry mixed with
-garbage (tests/protocol/mavlink_garbage.py, spoiling frames that would change what the
+garbage (tests/support/mavlink_garbage.py, spoiling frames that would change what the
 service shows: armed, airborne, moved, battery low, another mission item), and valid
 frames of another autopilot. The service keeps running with no traceback, its status (the
 zenoh state query) does not change, and it still uploads a mission to the fake, which
@@ -17,14 +17,15 @@ from typing import Any, Iterator
 
 import msgspec
 import pytest
-from mavlink_garbage import chunks, random_frames, telemetry_changing
-from stack import Stack
 
 from planner_service.service.processes import Child, free_port
 from protocol import Status, TaskAck
 
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink.dialects.v20 import ardupilotmega as M  # noqa: E402
+
+from tests.support.mavlink_garbage import chunks, random_frames, telemetry_changing  # noqa: E402
+from tests.support.stack import Stack  # noqa: E402
 
 HOME = (473977420, 85455940)  # the configured origin (PX4 SITL's home), degrees * 1e7
 

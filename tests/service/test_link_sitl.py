@@ -22,7 +22,7 @@ from planner_service.service.link import (Connected, Current, LinkEvent, LinkSet
 from protocol import GeoOrigin, HoverPoint, encode_path, global_to_local, replacement_items, same_mission
 
 from planner_service.service.processes import free_port
-from support.sitl import PtyBridge, Sitl, ports, set_param
+from tests.support.sitl import PtyBridge, Sitl, ports, set_param
 
 pytestmark = [pytest.mark.sitl, pytest.mark.timeout(150)]
 BACKENDS = ["pymavlink", "mavsdk"]

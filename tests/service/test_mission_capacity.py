@@ -8,12 +8,12 @@ from __future__ import annotations
 import time
 
 import pytest
-from stack import Stack
 
 from planner_service.service.config import build_config
 from planner_service.service.errors import ConfigError
 from protocol import Area, GeoOrigin, HoverPoint, encode_path, validate_mission
 from protocol.mission import max_points
+from tests.support.stack import Stack
 
 
 def test_the_capacity_is_checked_at_start() -> None:

@@ -15,12 +15,12 @@ from typing import Any
 
 import pytest
 import zenoh
-from stack import Stack
 
 from planner_service.service.processes import REPO, free_port
 from protocol import Keys, OperatorReply, PendingRequest, State, Status, encode
 from protocol.client import PlannerClient, client_config
 from protocol.zenoh_config import session_config
+from tests.support.stack import Stack
 
 
 def operator(endpoint: str, *args: str, timeout: float = 60) -> subprocess.CompletedProcess[str]:

@@ -4,7 +4,8 @@ continue, and the vehicle gets the resumed plan. SIGTERM stops the service clean
 from __future__ import annotations
 
 import pytest
-from stack import Stack
+
+from tests.support.stack import Stack
 
 
 @pytest.mark.timeout(90)

@@ -9,12 +9,12 @@ import time
 from pathlib import Path
 
 import pytest
-from stack import Stack
 
 from planner_service.service.config import build_config
 from planner_service.service.errors import ConfigError
 from planner_service.service.processes import free_port
 from protocol.signing import write_key
+from tests.support.stack import Stack
 
 
 def keys(tmp_path: Path, *names: str) -> list[Path]:

@@ -55,7 +55,7 @@ def test_a_bad_file_is_refused_naming_it(tmp_path: Path, text: str, words: str) 
 @pytest.mark.parametrize("override, key", [
     ("zenoh.max_queries_in_flight=0", "zenoh.max_queries_in_flight"),
     ("zenoh.config_file=/no/such/file.json5", "zenoh.config_file"),
-    ("intake.max_pending_requests=0", "intake"),
+    ("intake.max_pending_requests=0", "intake.max_pending_requests"),
     ("intake.max_requests_per_s=0", "intake.max_requests_per_s"),
     ("planner.min_requests=5", "planner.min_requests"),
 ])

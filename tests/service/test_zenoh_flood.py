@@ -14,10 +14,10 @@ from typing import Any
 
 import pytest
 import zenoh
-from stack import Stack
 
 from protocol import Keys
 from protocol.client import ClientError, client_config
+from tests.support.stack import Stack
 
 SESSIONS = 4
 PER_SESSION = 2500

@@ -12,11 +12,11 @@ import time
 from pathlib import Path
 
 import pytest
-from stack import Stack
-from test_zenoh_tls_acl import make_certs, shipped
 
 from planner_service.service.processes import REPO, free_port
 from protocol.client import ClientError, PlannerClient
+from tests.support.stack import Stack
+from tests.support.zenoh_tls import make_certs, shipped
 
 
 def operator(endpoint: str, conf: Path, *args: str) -> subprocess.CompletedProcess[str]:

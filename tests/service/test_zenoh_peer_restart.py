@@ -12,10 +12,10 @@ import threading
 import time
 
 import pytest
-from stack import Stack
 
 from planner_service.service.processes import Child, free_port
 from protocol.client import ClientError, PlannerClient
+from tests.support.stack import Stack
 
 RESTARTS = 2
 

@@ -23,33 +23,12 @@ from typing import Any
 
 import pytest
 import zenoh
-from stack import Stack
 
 from planner_service.service.processes import REPO, free_port
 from protocol import ErrorReply, Keys, Status, TaskAck, UserPlace, decode, decode_reply, encode
 from protocol.client import ClientError, PlannerClient, client_config
-
-DOCS = REPO / "docs" / "zenoh"
-SHIPPED_DIR = "/etc/uavmec/tls"
-MARKS = {"rules": "// more users' rules here", "subjects": "// more users' subjects here",
-         "policies": "// more users' policies here"}
-
-
-def make_certs(folder: Path, *args: str) -> str:
-    return subprocess.run(["sh", str(DOCS / "make-certs.sh"), str(folder), *args], check=True, capture_output=True,
-                          text=True).stdout
-
-
-def shipped(name: str, certs: Path, out: Path, **swap: str) -> Path:
-    """The shipped config with its certificate folder (and any other text) replaced."""
-    text = (DOCS / name).read_text()
-    assert SHIPPED_DIR in text
-    text = text.replace(SHIPPED_DIR, str(certs))
-    for old, new in swap.items():
-        assert old in text
-        text = text.replace(old, new)
-    out.write_text(text)
-    return out
+from tests.support.stack import Stack
+from tests.support.zenoh_tls import MARKS, make_certs, shipped
 
 
 def with_user(config: Path, printed: str) -> None:

@@ -9,7 +9,8 @@ import signal
 import time
 
 import pytest
-from stack import Stack
+
+from tests.support.stack import Stack
 
 KILLS = 5
 

@@ -11,13 +11,11 @@ from pathlib import Path
 from typing import Callable, Iterator
 
 import pytest
-from gcs import GroundStation
 
 from planner_service.service.processes import free_port
+from tests.support.gcs import GroundStation
 
 REPO = Path(__file__).resolve().parents[2]
-# MAVLink garbage (mavlink_garbage.py) lives beside the protocol tests; the service's tests use it too.
-sys.path.insert(0, str(REPO / "tests" / "protocol"))
 
 
 class Process:
@@ -84,7 +82,7 @@ def vehicle(spawn: Callable[..., Process]) -> Callable[..., tuple[Process, int]]
 
 @pytest.fixture
 def gcs_factory() -> Iterator[Callable[..., GroundStation]]:
-    """Ground stations (gcs.py) closed when the test ends."""
+    """Ground stations (tests/support/gcs.py) closed when the test ends."""
     stations: list[GroundStation] = []
 
     def make(url: str, **kwargs: object) -> GroundStation:

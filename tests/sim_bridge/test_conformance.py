@@ -28,11 +28,11 @@ from typing import Callable, Iterator
 
 import pytest
 
-from gcs import M, GroundStation
 from planner_service.service.processes import free_port
-from support.sitl import Sitl
 from protocol.geodesy import GeoOrigin
 from protocol.mission import MissionItem
+from tests.support.gcs import M, GroundStation
+from tests.support.sitl import Sitl
 
 REPO = Path(__file__).resolve().parents[2]
 ORIGIN = GeoOrigin()

@@ -10,10 +10,10 @@ import time
 import pytest
 
 from planner_service.service.processes import free_port
-from gcs import M, GroundStation, as_stored
 from protocol.geodesy import GeoOrigin
 from protocol.mission import HoverPoint, encode_path, same_items
 from sim_bridge.proxy import Impairment, LossyProxy, ProxyError
+from tests.support.gcs import M, GroundStation, as_stored
 
 
 @pytest.mark.timeout(60)

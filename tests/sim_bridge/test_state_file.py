@@ -9,7 +9,6 @@ from pathlib import Path
 
 import pytest
 
-from gcs import M, GroundStation
 from planner_service.model import preset
 from protocol.geodesy import GeoOrigin, global_to_local
 from protocol.mission import HoverPoint, encode_path
@@ -18,6 +17,7 @@ from sim_bridge.vehicle.events import Reached
 from sim_bridge.vehicle.flight import Flight
 from sim_bridge.vehicle.modes import Mode
 from sim_bridge.vehicle.state_file import load_state, parse_state, save_state
+from tests.support.gcs import M, GroundStation
 
 ORIGIN = GeoOrigin()
 

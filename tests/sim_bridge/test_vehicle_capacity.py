@@ -5,9 +5,9 @@ from __future__ import annotations
 
 import pytest
 
-from gcs import M, GroundStation, as_stored
 from protocol.geodesy import GeoOrigin
 from protocol.mission import HoverPoint, encode_path, same_items
+from tests.support.gcs import M, GroundStation, as_stored
 
 
 @pytest.mark.timeout(30)

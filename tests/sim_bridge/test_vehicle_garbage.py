@@ -1,4 +1,4 @@
-"""MAVLink garbage into the vehicle stub over UDP and TCP (tests/protocol/mavlink_garbage.py:
+"""MAVLink garbage into the vehicle stub over UDP and TCP (tests/support/mavlink_garbage.py:
 random bytes, truncated frames, flipped CRC, payload and header bytes, MAVLink 1 frames,
 frames for another system, oversized datagrams, valid frames with garbage between them):
 the stub stays up with no traceback, its state is what it was (the mission held, mode,
@@ -13,12 +13,12 @@ import time
 from typing import Any
 
 import pytest
-from mavlink_garbage import chunks, random_frames, read_only_frames
 
-from gcs import M, GroundStation, as_stored
 from planner_service.service.processes import free_port
 from protocol.geodesy import GeoOrigin
 from protocol.mission import HoverPoint, MissionItem, encode_path, same_items
+from tests.support.gcs import M, GroundStation, as_stored
+from tests.support.mavlink_garbage import chunks, random_frames, read_only_frames
 
 ORIGIN = GeoOrigin()
 SPOILED = 3000

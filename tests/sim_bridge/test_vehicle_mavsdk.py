@@ -21,9 +21,9 @@ from mavsdk.asyncio.plugins.mission_raw import MissionRawAsync
 from mavsdk.plugins.mission import MissionError, MissionItem, MissionPlan, MissionResult
 from mavsdk.plugins.mission_raw import MissionItem as RawItem
 
-from gcs import as_stored
 from protocol.geodesy import GeoOrigin, local_to_global
 from protocol.mission import HoverPoint, MissionItem as Item, encode_path
+from tests.support.gcs import as_stored
 
 ORIGIN = GeoOrigin()
 log = logging.getLogger("mavsdk")

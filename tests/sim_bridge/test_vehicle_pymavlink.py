@@ -7,21 +7,12 @@ import socket
 
 import pytest
 
-from gcs import M, as_stored
 from planner_service.service.processes import free_port
 from protocol.geodesy import GeoOrigin
 from protocol.mission import HoverPoint, MissionItem, encode_path, same_items
+from tests.support.gcs import M, as_stored, ten_items
 
 ORIGIN = GeoOrigin()
-
-
-def ten_items(flavour: str = "ardupilot") -> list[MissionItem]:
-    """A 10-item mission: (home), takeoff, waypoints with holds, return to launch."""
-    count = 8 if flavour == "ardupilot" else 9
-    points = [HoverPoint(30.0 + 50.0 * i, 450.0 - 45.0 * i, 60.0 + 5.0 * (i % 3), 4.0 + i) for i in range(count - 1)]
-    items = encode_path(points, ORIGIN, flavour)
-    assert len(items) == 10
-    return items
 
 
 @pytest.mark.timeout(60)

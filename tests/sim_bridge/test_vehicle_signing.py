@@ -12,11 +12,10 @@ import time
 from pathlib import Path
 
 import pytest
-from test_vehicle_pymavlink import ten_items
 
-from gcs import M, GcsError, GroundStation, as_stored
 from protocol.mission import same_items
 from protocol.signing import Signer, TimestampStore, load_key, write_key
+from tests.support.gcs import M, GcsError, GroundStation, as_stored, ten_items
 
 ARDUPILOT_GUIDED = 4
 ARDUPILOT_AUTO = 3

@@ -9,7 +9,7 @@ import time
 
 import pytest
 
-from gcs import M, GroundStation
+from tests.support.gcs import M, GroundStation
 
 EKF_STATUS_REPORT = 193
 

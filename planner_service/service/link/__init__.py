@@ -4,7 +4,7 @@ pure judgements both share (``telemetry``, ``streams``, ``state``)."""
 
 from __future__ import annotations
 
-from typing import Callable
+from typing import Callable, Literal
 
 from .base import LinkSettings, VehicleLink
 from .events import (EVENT_TYPES, Connected, Current, Landed, LinkEvent, Lost, ModeChanged, PositionChanged, Reached,
@@ -17,7 +17,8 @@ __all__ = ["Connected", "Current", "EVENT_TYPES", "HOLDING_MODES", "Landed", "Li
            "StatusText", "Telemetry", "TelemetryMissing", "VehicleLink", "mode_name", "open_link"]
 
 
-def open_link(backend: str, settings: LinkSettings, on_event: Callable[[LinkEvent], None]) -> VehicleLink:
+def open_link(backend: Literal["pymavlink", "mavsdk"], settings: LinkSettings,
+              on_event: Callable[[LinkEvent], None]) -> VehicleLink:
     """A link of the named backend (not yet connected)."""
     if backend == "mavsdk":
         from .mavsdk_link import MavsdkLink  # imported only when chosen: it loads a C++ library

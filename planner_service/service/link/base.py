@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 from typing import Callable, Sequence
 
 from protocol import MissionItem
+from protocol.mission import Flavour
 
 from .events import LinkEvent
 from .modes import HOLDING_MODES, MISSION_MODES, RETURNING_MODES, mode_name
@@ -36,7 +37,7 @@ class LinkSettings:
     """What every backend needs (from ``MavlinkConfig``)."""
 
     url: str
-    flavour: str
+    flavour: Flavour
     item_timeout_s: float = 0.5
     retries: int = 10
     link_timeout_s: float = 3.0

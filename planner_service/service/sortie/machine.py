@@ -33,7 +33,7 @@ import numpy as np
 
 from protocol import Area, GeoOrigin, HoverPoint, MissionItem, encode_path, replacement_items, same_mission, validate_mission
 from protocol.errors import MissionError
-from protocol.mission import MAX_HOLD_S, encoded_hold_s
+from protocol.mission import MAX_HOLD_S, Flavour, encoded_hold_s
 
 from ...model import Scenario, pack
 from ...model.reward import interval_reward
@@ -71,7 +71,7 @@ class Rules:
     scenario: Scenario
     origin: GeoOrigin
     area: Area
-    flavour: str = "ardupilot"
+    flavour: Flavour = "ardupilot"
     start_mission: bool = False
     min_requests: int = 1
     replan_min_interval_s: float = 1.0

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 from typing import Any, Iterable, Sequence
 
 from protocol import MissionItem
-from protocol.mission import NAV_RTL
+from protocol.mission import NAV_RTL, Flavour
 
 from ..planning import PlannedPoint
 
@@ -33,7 +33,7 @@ class HeldMission:
 
     @classmethod
     def fresh(cls, plan_id: int, items: Sequence[MissionItem], points: Sequence[PlannedPoint],
-              flavour: str) -> "HeldMission":
+              flavour: Flavour) -> "HeldMission":
         """A mission flown from its start: [home (ArduPilot)], takeoff, the points, RTL."""
         first = (1 if flavour == "ardupilot" else 0) + (1 if points else 0)
         return cls(plan_id, tuple(items), tuple((first + i, p) for i, p in enumerate(points)))
@@ -74,7 +74,7 @@ class HeldMission:
 
     @classmethod
     def from_journal(cls, plan_id: int, items: list[dict[str, Any]], points: list[dict[str, Any]],
-                     flavour: str) -> "HeldMission":
+                     flavour: Flavour) -> "HeldMission":
         """Back from the journal (rows written before seqs were kept are numbered as a fresh
         mission's)."""
         its = [item_from_dict(i) for i in items]

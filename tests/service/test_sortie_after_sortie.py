@@ -25,17 +25,16 @@ from typing import Any
 import pytest
 
 from planner_service.model import Scenario, field
+from planner_service.model.fairness import fairness_violations
 from planner_service.service.app import Service, build_parts
 from planner_service.service.config import build_config
 from planner_service.service.journal import Journal
 from planner_service.service.processes import Child
 from planner_service.service.sortie import item_dict, item_from_dict
-from planner_service.service.report import fairness_violations
 from protocol import Area, GeoOrigin, HoverPoint, encode_path, validate_mission
 from protocol.client import ClientError
 from protocol.mission import NAV_RTL
-
-from stack import Stack
+from tests.support.stack import Stack
 
 WAITING = "sortie over: waiting for the battery"
 

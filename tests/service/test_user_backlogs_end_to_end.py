@@ -12,9 +12,9 @@ import re
 import time
 
 import pytest
-from stack import Stack
 
 from protocol import Plan, UserPlace
+from tests.support.stack import Stack
 
 SPEEDUP = "40"
 SUMMARY = re.compile(r"^(user-\d+): (\d+) submitted, (\d+) acked, (\d+) refused; (\d+) tasks arrived, (\d+) lost "

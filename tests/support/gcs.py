@@ -10,7 +10,8 @@ from typing import Any, Callable, Sequence
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavutil  # noqa: E402
 
-from protocol.mission import MissionItem  # noqa: E402
+from protocol.geodesy import GeoOrigin  # noqa: E402
+from protocol.mission import HoverPoint, MissionItem, encode_path  # noqa: E402
 from protocol.signing import Signer  # noqa: E402
 from sim_bridge.vehicle.stored_items import ardupilot_stored  # noqa: E402
 
@@ -30,6 +31,15 @@ def as_stored(items: Sequence[MissionItem], flavour: str) -> list[MissionItem]:
     home = items[0]
     return [MissionItem(seq=0, frame=M.MAV_FRAME_GLOBAL, command=M.MAV_CMD_NAV_WAYPOINT, x=home.x, y=home.y,
                         z=home.z)] + [ardupilot_stored(item) for item in items[1:]]
+
+
+def ten_items(flavour: str = "ardupilot") -> list[MissionItem]:
+    """A 10-item mission: (home), takeoff, waypoints with holds, return to launch."""
+    count = 8 if flavour == "ardupilot" else 9
+    points = [HoverPoint(30.0 + 50.0 * i, 450.0 - 45.0 * i, 60.0 + 5.0 * (i % 3), 4.0 + i) for i in range(count - 1)]
+    items = encode_path(points, GeoOrigin(), flavour)
+    assert len(items) == 10
+    return items
 
 
 class GcsError(RuntimeError):

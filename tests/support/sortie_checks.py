@@ -1,5 +1,6 @@
-"""The checks of a whole sortie for the end-to-end fault tests (helper of test_faults.py; it
-repeats test_sortie.py's checks and adds): the journal against the vehicle stub's own log.
+"""The checks of a whole sortie flown end to end (tests/service/test_one_sortie_end_to_end.py,
+test_faults.py): every request accounted for, fairness, the energy reserve, the missions,
+and the journal against the vehicle stub's own log.
 
 The vehicle logs every mission it commits with its digest (``protocol.mission_digest``) and
 writes its own flight to a track file; from those and the journal the missions it really
@@ -9,22 +10,17 @@ from __future__ import annotations
 
 import json
 import re
-import sys
 from collections import Counter
 from dataclasses import dataclass
-from pathlib import Path
 
 from planner_service.model import Scenario
+from planner_service.model.fairness import fairness_violations
 from planner_service.service.sortie import item_from_dict
-from planner_service.service.report import fairness_violations
 from protocol import Area, GeoOrigin, mission_digest, validate_mission
 from protocol.mission import NAV_RTL
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "sim_bridge"))
-from gcs import GroundStation  # noqa: E402  (the vehicle tests' small ground station)
-from stack import Stack  # noqa: E402
-
-from tests.support.truth import false_services, recorded_services, stub_track  # noqa: E402
+from tests.support.gcs import GroundStation
+from tests.support.stack import Stack
+from tests.support.truth import false_services, recorded_services, stub_track
 
 HOLD_RADIUS_M = 5.0
 """The service's ``safety.hold_radius_m`` (its default)."""
@@ -61,7 +57,7 @@ def read_sortie(stack: Stack, vehicle_logs: list[str], flavour: str) -> Sortie:
 
 def check_sortie(stack: Stack, scenario: Scenario, flavour: str, vehicle_logs: list[str],
                  unjournaled_commits: int = 0) -> Sortie:
-    """Every check of test_sortie.py, and the journal against what the vehicle did:
+    """Every check of a clean sortie, and the journal against what the vehicle did:
     - every request closed (served, replaced, not_served with a reason);
     - fairness (3)/(9c) held in the journal, and no user served beyond the limit;
     - every service recorded is borne out by the vehicle's own flight log (``--track``): it

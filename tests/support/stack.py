@@ -1,6 +1,7 @@
-"""Real processes on loopback for the end-to-end tests (helper of conftest.py): the vehicle stub, the service and
-the simulated users, each on free ports, zenoh with multicast scouting off and explicit
-tcp/127.0.0.1 endpoints; every process is stopped when the test ends."""
+"""Real processes on loopback for the end-to-end tests (the ``stack`` fixture of
+tests/service/conftest.py): the vehicle stub, the service and the simulated users, each on
+free ports, zenoh with multicast scouting off and explicit tcp/127.0.0.1 endpoints; every
+process is stopped when the test ends."""
 
 from __future__ import annotations
 

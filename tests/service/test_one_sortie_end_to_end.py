@@ -10,10 +10,10 @@ those, and holds the last of them at the end."""
 from __future__ import annotations
 
 import pytest
-from sortie_checks import check_sortie
-from stack import Stack
 
 from planner_service.model import field
+from tests.support.sortie_checks import check_sortie
+from tests.support.stack import Stack
 
 SPEEDUP = "40"
 

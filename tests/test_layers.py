@@ -1,0 +1,94 @@
+"""The layers of docs/DESIGN.md ("Layers: what may import what"), read from the code: every
+import of every module (inside functions too) against the layers its own may use."""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+PACKAGES = ("protocol", "planner_service", "sim_bridge")
+SUBPACKAGES = ("model", "mcts", "baselines", "experiments", "service", "bench", "commands")
+
+MODEL, SETTINGS, POLICY = "planner_service.model", "planner_service.settings", "planner_service.policy"
+MCTS, BASELINES, SORTIE = "planner_service.mcts", "planner_service.baselines", "planner_service.sortie"
+EVERYTHING = None
+ALLOWED: dict[str, set[str] | None] = {
+    "protocol": set(),
+    SETTINGS: set(),
+    MODEL: {SETTINGS},
+    POLICY: {MODEL, MCTS, BASELINES},  # the registry imports the planners lazily
+    MCTS: {SETTINGS, MODEL, POLICY},
+    BASELINES: {SETTINGS, MODEL, POLICY},
+    SORTIE: {SETTINGS, MODEL, POLICY},
+    "planner_service.experiments": {SETTINGS, MODEL, POLICY, MCTS, SORTIE},
+    "planner_service.service": {"protocol", SETTINGS, MODEL, POLICY, MCTS},
+    "planner_service.bench": EVERYTHING,
+    "planner_service.commands": EVERYTHING,
+    "planner_service.cli": EVERYTHING,
+    "planner_service.operator_view": {"protocol"},
+    "planner_service.__main__": EVERYTHING,
+    "planner_service": EVERYTHING,
+    "sim_bridge": {"protocol", SETTINGS, MODEL},
+}
+EXCEPTIONS = {("planner_service.service.demo", "planner_service.bench")}
+"""(module, layer): the demo compares the flown sortie with the same one planned offline."""
+
+
+def layer(module: str) -> str | None:
+    """The layer of a dotted module name of this project, or None (another package)."""
+    parts = module.split(".")
+    if parts[0] in ("protocol", "sim_bridge"):
+        return parts[0]
+    if parts[0] != "planner_service":
+        return None
+    if len(parts) == 1:
+        return "planner_service"
+    return f"planner_service.{parts[1]}"
+
+
+def imports(source: str, module: str, is_package: bool = False) -> set[str]:
+    """The dotted modules the code of ``module`` imports, relative imports resolved."""
+    package = module if is_package else module.rsplit(".", 1)[0]
+    out: set[str] = set()
+    for node in ast.walk(ast.parse(source, module)):
+        if isinstance(node, ast.Import):
+            out.update(alias.name for alias in node.names)
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = package.split(".")[: len(package.split(".")) - node.level + 1]
+                target = ".".join(base + ([node.module] if node.module else []))
+            else:
+                target = node.module or ""
+            out.add(target)
+            out.update(f"{target}.{alias.name}" for alias in node.names)  # from pkg import module
+    return out
+
+
+def test_every_import_stays_within_its_layers() -> None:
+    bad = []
+    count = 0
+    for package in PACKAGES:
+        for path in sorted((REPO / package).rglob("*.py")):
+            module = ".".join(path.relative_to(REPO).with_suffix("").parts).removesuffix(".__init__")
+            own = layer(module)
+            assert own in ALLOWED, f"{module}: no layer in ALLOWED for {own}"
+            allowed = ALLOWED[own]
+            for target in imports(path.read_text(), module, path.name == "__init__.py"):
+                other = layer(target)
+                count += 1
+                if other is None or other == own or allowed is EVERYTHING or other in allowed:
+                    continue
+                if (module, other) in EXCEPTIONS:
+                    continue
+                bad.append(f"{module} imports {target} ({own} may import {sorted(allowed)})")
+    assert count > 300, count  # the walk did see the code
+    assert not bad, "\n".join(sorted(set(bad)))
+
+
+def test_the_reading_sees_a_forbidden_import() -> None:
+    # the model importing the service, even inside a function, is seen as such
+    source = "from . import scenario\ndef f():\n    from ..service import config\n    import protocol.mission\n"
+    found = {layer(t) for t in imports(source, "planner_service.model.probe")} - {None}
+    assert found == {"planner_service.service", "protocol", MODEL}
+    assert {"planner_service.service", "protocol"}.isdisjoint(ALLOWED[MODEL] or set())
