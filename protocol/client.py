@@ -8,7 +8,9 @@ request: the same ``client_ref`` and, for an ack, the same user. A reply that do
 queryable that is not the service, a misrouted answer) is refused with ``ClientError("reply",
 ...)``, as are two answers that disagree. A rogue queryable that reads the request can still
 echo both: only access control (no user may declare a queryable on the request keys) stops
-it (docs/PROTOCOL.md, "Who may do what").
+it (docs/PROTOCOL.md, "Who may do what"). Given ``served_seen`` (what the user knows was
+served to it in its sortie, from its last ack or ``user_place``), the request carries it,
+and the service never counts tasks already served in it (docs/PROTOCOL.md, "Requests").
 
 zenoh-python's API is synchronous (callbacks on zenoh's threads); so is this client. An
 asyncio program can run ``submit`` in a thread (``asyncio.to_thread``).
@@ -21,6 +23,7 @@ import time
 from pathlib import Path
 from typing import Any, Callable
 
+import msgspec
 import zenoh
 
 from .errors import ProtocolError
@@ -121,17 +124,33 @@ class PlannerClient:
         return decode_reply(data)
 
     def submit(self, user_id: str, x_m: float, y_m: float, tasks: int, z_m: float = 0.0,
-               client_ref: str | None = None, timeout_s: float | None = None) -> TaskAck:
+               client_ref: str | None = None, timeout_s: float | None = None, *,
+               served_seen: int | None = None, sortie: int | None = None) -> TaskAck:
         """Submit ``user_id``'s backlog (``tasks``: all it has waiting; 0: nothing more) and
         position on its own request key and await the ack. ``ClientError`` names the field if
-        refused, ``ClientError("reply", ...)`` if no reply answers this request."""
-        ref = new_client_ref() if client_ref is None else client_ref
-        request = TaskRequest(user_id=user_id, x_m=x_m, y_m=y_m, tasks=tasks, z_m=z_m, client_ref=ref)
-        key = self.keys.user_request(user_id)
+        refused, ``ClientError("reply", ...)`` if no reply answers this request.
+
+        ``served_seen``, when the user knows it: the tasks served to it in ``sortie`` (the
+        ``sortie`` and ``served_tasks`` of its last ack or ``user_place``) that ``tasks`` has
+        already taken off; the service then takes off what it served since, so a request
+        that crosses a service never asks for tasks already served. Not given (None): left
+        out of the request, which is then taken as it is (docs/PROTOCOL.md, "Requests").
+        ``request_for(...).counted_backlog(ack.sortie, ack.served_tasks)`` is the service's
+        count of the backlog this request left it."""
+        return self.submit_request(request_for(user_id, x_m, y_m, tasks, z_m, client_ref,
+                                               served_seen=served_seen, sortie=sortie), timeout_s)
+
+    def submit_request(self, request: TaskRequest, timeout_s: float | None = None) -> TaskAck:
+        """``submit`` of a request already made (``request_for``): sent on its user's own
+        key with its ``client_ref`` (a fresh one if it has none)."""
+        ref = new_client_ref() if request.client_ref is None else request.client_ref
+        if request.client_ref is None:
+            request = msgspec.structs.replace(request, client_ref=ref)
+        key = self.keys.user_request(request.user_id)
         replies = self._replies(key, encode(request), timeout_s)
         if not replies:
             raise ClientError("service", f"no reply on {key} within {timeout_s or self.timeout_s:g} s")
-        reply = answer(replies, user_id, ref)
+        reply = answer(replies, request.user_id, ref)
         if isinstance(reply, ErrorReply):
             raise ClientError(reply.field, reply.message)
         return reply
@@ -223,6 +242,20 @@ class PlannerClient:
                 return
             checked(place, self.keys.place_user(str(sample.key_expr)))
         self._subs.append(self.session.declare_subscriber(key, handler))
+
+
+def request_for(user_id: str, x_m: float, y_m: float, tasks: int, z_m: float = 0.0, client_ref: str | None = None,
+                *, served_seen: int | None = None, sortie: int | None = None) -> TaskRequest:
+    """The ``TaskRequest`` ``submit`` sends: ``served_seen`` and ``sortie`` only when given
+    (a request without them is the same bytes as from a client that knows nothing of them,
+    which a service of any version reads); ``sortie`` only with ``served_seen``, which it
+    qualifies."""
+    extra: dict[str, int] = {}
+    if served_seen is not None:
+        extra["served_seen"] = served_seen
+        if sortie is not None:
+            extra["sortie"] = sortie
+    return TaskRequest(user_id=user_id, x_m=x_m, y_m=y_m, tasks=tasks, z_m=z_m, client_ref=client_ref, **extra)
 
 
 def answer(replies: list[bytes], user_id: str, client_ref: str) -> TaskAck | ErrorReply:

@@ -12,6 +12,12 @@ Layouts are versioned one message type at a time (``LAYOUT``): a type whose fiel
 in a way an older decoder refuses (a new field, as every decoder forbids unknown ones) gets
 the next number, the others keep theirs. A decoder takes only its own version, so an old
 client refuses a new ``status`` naming ``schema`` instead of misreading it.
+
+One exception, for the one message the service decodes from clients it does not update:
+``task_request`` gained two optional fields (``served_seen``, ``sortie``) in layout 1.
+They are left out of the payload when not given, so a request that does not use them is
+the same bytes as before; the service reads requests with and without them (old clients
+keep working), and an older service refuses one that carries them, naming the field.
 """
 
 from __future__ import annotations
@@ -42,6 +48,9 @@ MAX_PAYLOAD_BYTES = 4096
 MAX_TASKS = 1000
 """Upper bound of a request's task count (the model's u_max is 20; this is a sanity cap)."""
 MAX_PLAN_POINTS = 200
+MAX_COUNTER = 2 ** 31 - 1
+"""Upper bound of a request's ``sortie`` and ``served_seen``: far beyond any real count,
+and an integer every JSON reader and SQLite hold exactly."""
 
 # \A...\Z, not ^...$: msgspec matches with re.search, where "$" also matches before a
 # trailing newline, so "u-1\n" would pass as a user id.
@@ -82,7 +91,15 @@ class _Message(
 class TaskRequest(_Message, tag="task_request"):
     """A ground user's data waiting to be offloaded: ``tasks`` is its whole backlog now (not
     an increment), ``x_m``/``y_m``/``z_m`` where it stands. Its newest request is the one in
-    force; ``tasks`` 0 means nothing (more) to offload (docs/PROTOCOL.md, "Requests")."""
+    force; ``tasks`` 0 means nothing (more) to offload (docs/PROTOCOL.md, "Requests").
+
+    ``served_seen`` says which services ``tasks`` already reflects: the tasks served to this
+    user in ``sortie`` that it has taken off its count (its last news of ``served_tasks``,
+    from an ack or its ``user_place``). The service then takes off ``tasks`` whatever it
+    served beyond that (``counted_backlog``), so a request that crossed a service on the
+    wire never asks for tasks already served. Both are optional and left out of the payload
+    when not given (``UNSET``; ``null`` is read as not given): a request without
+    ``served_seen`` (an older client's) is taken as it is."""
 
     user_id: UserId
     x_m: float
@@ -91,6 +108,29 @@ class TaskRequest(_Message, tag="task_request"):
     z_m: float = 0.0
     client_ref: Annotated[str, msgspec.Meta(max_length=64)] | None = None
     """The client's own correlation id, echoed in the reply."""
+    served_seen: Annotated[int, msgspec.Meta(ge=0, le=MAX_COUNTER)] | None | msgspec.UnsetType = msgspec.UNSET
+    """Tasks served to this user in ``sortie`` that ``tasks`` has already taken off."""
+    sortie: Annotated[int, msgspec.Meta(ge=1, le=MAX_COUNTER)] | None | msgspec.UnsetType = msgspec.UNSET
+    """The sortie ``served_seen`` counts in (the ``sortie`` of the news it came from); not
+    given: the service's current sortie."""
+
+    def seen_in(self, sortie: int) -> int | None:
+        """The tasks served to this user in ``sortie`` that ``tasks`` has taken off: its
+        ``served_seen`` if that counts in ``sortie``, 0 if it counts in another sortie (the
+        user has heard of none of this one's services), None if it did not say."""
+        if not isinstance(self.served_seen, int):
+            return None
+        return self.served_seen if self.sortie in (msgspec.UNSET, None, sortie) else 0
+
+    def counted_backlog(self, sortie: int, served_tasks: int) -> int:
+        """The backlog the service counts for this request when it arrives in ``sortie``,
+        with ``served_tasks`` of this user served there: ``tasks`` less what was served that
+        the user had not taken off (``served_tasks - served_seen``, never below 0); ``tasks``
+        as it is without ``served_seen``. A client can hold it against the ack's ``sortie``
+        and ``served_tasks``: it is the service's count of its backlog."""
+        seen = self.seen_in(sortie)
+        unseen = 0 if seen is None else max(served_tasks - seen, 0)
+        return max(self.tasks - unseen, 0)
 
 
 class TaskAck(_Message, tag="task_ack"):

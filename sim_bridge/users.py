@@ -10,18 +10,22 @@ two laws (``TaskParams.law``), both the model's (one physics with the planner's 
   interval after it, new tasks arrive (``draw_arrivals``: Poisson of the scenario's
   ``task_arrival_mean``), added to the backlog, capped at ``backlog_max``; what the service
   serves is taken off.
-  The user sends its whole backlog and position when the service's count of it differs from
-  its own (new tasks, a service it learnt of, a request that crossed a service on the
-  wire), when it has moved ``resend_m`` since its last request, and at least once an
-  interval while it has tasks; a backlog of 0 is sent only to end a wait the service still
-  counts ("nothing more to offload").
+  The user sends its whole backlog and position, with what it knows was served
+  (``served_seen`` and its ``sortie``: the service takes off what it served since, so a
+  request that crosses a service on the wire asks for nothing already served), when the
+  service's count of it differs from its own (new tasks, a service it learnt of), when it
+  has moved ``resend_m`` since its last request, and at least once an interval while it
+  has tasks; a backlog of 0 is sent only to end a wait the service still counts ("nothing
+  more to offload").
 - ``redraw`` (the paper's experiments): a draw (``draw_tasks``) replaces the task count
-  every interval and is sent then, whatever was served.
+  every interval and is sent then, whatever was served (without ``served_seen``: the draw
+  is taken as it is).
 
 A user learns what was served from its ack (``served_tasks`` in its ``sortie``) and from its
 ``user_place`` publication (which also says the service's count of its backlog); counts are
-per sortie. The walk and the task law are pure (functions of a ``Walker``, the time and an
-explicit generator); ``run_users`` adds the clock and the zenoh client.
+per sortie. Until its first news it knows of no service and sends no ``served_seen``. The
+walk and the task law are pure (functions of a ``Walker``, the time and an explicit
+generator); ``run_users`` adds the clock and the zenoh client.
 """
 
 from __future__ import annotations
@@ -38,8 +42,8 @@ import numpy as np
 
 from planner_service.model import Scenario, pack, user_rows
 from planner_service.model.mobility import draw_arrivals, draw_tasks
-from protocol import ProtocolError, TaskAck, UserPlace, printable
-from protocol.client import ClientError, PlannerClient
+from protocol import ProtocolError, TaskAck, TaskRequest, UserPlace, printable
+from protocol.client import ClientError, PlannerClient, request_for
 
 log = logging.getLogger("sim_bridge.users")
 ONE_SORTIE = "flies one sortie"
@@ -193,14 +197,19 @@ def learn_served(w: Walker, sortie: int | None, served_tasks: int | None) -> Non
     w.backlog = max(w.backlog - new, 0)
 
 
-def on_ack(w: Walker, ack: TaskAck, sent: int) -> None:
-    """The service took the request of ``sent`` tasks: that is its count now (services it
-    recorded before are not taken off it: if there were new ones, ``learn_served`` takes
-    them off our backlog, the counts differ and the user sends again)."""
+def on_ack(w: Walker, ack: TaskAck, request: TaskRequest) -> None:
+    """The service took ``request``: its count now is the request's less what it served
+    that the request had not taken off (``counted_backlog``, from the ack's ``sortie`` and
+    ``served_tasks``, which ``learn_served`` takes off our backlog too: the counts agree).
+    Without them in the ack, or without ``served_seen`` in the request, its count is the
+    request's tasks (if the ack shows services the request did not know of, the counts
+    differ and the user sends again)."""
     w.acked += 1
     w.request_id = ack.request_id
     learn_served(w, ack.sortie, ack.served_tasks)
-    w.view, w.view_request = sent, ack.request_id
+    counted = request.tasks if ack.sortie is None or ack.served_tasks is None else \
+        request.counted_backlog(ack.sortie, ack.served_tasks)
+    w.view, w.view_request = counted, ack.request_id
 
 
 def on_place(w: Walker, place: UserPlace) -> None:
@@ -245,6 +254,17 @@ def sent(w: Walker, now_s: float) -> int:
     return w.backlog
 
 
+def request_of(w: Walker, now_s: float, tp: TaskParams, params: WalkParams) -> TaskRequest:
+    """The request the user sends now (noted by ``sent``): its backlog, where it stands
+    (in the area, to 0.1 m) and, under the ``backlog`` law once it has heard of its sortie,
+    the tasks served to it there that its backlog has taken off (``served_seen``)."""
+    x, y = (float(round(v, 1)) for v in np.clip(w.xy, 0.0, params.side_m))
+    tasks = sent(w, now_s)
+    knows = tp.law == "backlog" and w.sortie is not None
+    return request_for(w.user_id, x, y, tasks, client_ref=f"{w.user_id}#{w.submitted}",
+                       served_seen=w.served_seen if knows else None, sortie=w.sortie if knows else None)
+
+
 def run_users(client: PlannerClient, scenario: Scenario, count: int, tp: TaskParams, speedup: float,
               seed: int, stop: threading.Event, duration_s: float | None = None) -> list[Walker]:
     """Walk, let tasks arrive and submit until ``stop`` is set, ``duration_s`` (wall) passes,
@@ -285,11 +305,12 @@ def run_users(client: PlannerClient, scenario: Scenario, count: int, tp: TaskPar
 
 
 def submit(client: PlannerClient, w: Walker, now_s: float, tp: TaskParams, params: WalkParams) -> None:
-    """Send the user's backlog and position; take in the ack or the refusal."""
-    x, y = (float(round(v, 1)) for v in np.clip(w.xy, 0.0, params.side_m))
-    tasks = sent(w, now_s)
+    """Send the user's backlog, position and what it knows was served; take in the ack or
+    the refusal."""
+    request = request_of(w, now_s, tp, params)
+    x, y, tasks = request.x_m, request.y_m, request.tasks
     try:
-        ack = client.submit(w.user_id, x, y, tasks, client_ref=f"{w.user_id}#{w.submitted}")
+        ack = client.submit_request(request)
     except ClientError as err:
         on_refused(w, now_s, tp, f"{err.field}: {err.message}")
         log.info("%s refused: %s", w.user_id, printable(w.last_refusal))
@@ -300,7 +321,7 @@ def submit(client: PlannerClient, w: Walker, now_s: float, tp: TaskParams, param
         on_refused(w, now_s, tp, str(err))
         log.info("%s: %s", w.user_id, printable(w.last_refusal))
         return
-    on_ack(w, ack, tasks)
+    on_ack(w, ack, request)
     where = "" if ack.place is None else f", place {ack.place} in about {ack.eta_s or 0.0:.0f} s"
     log.info("%s at (%.0f, %.0f): backlog %d -> request %d (served %d so far%s)", w.user_id, x, y, tasks,
              ack.request_id, w.served, where)

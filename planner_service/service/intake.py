@@ -3,7 +3,11 @@ gives it the payload bytes, the query's key and clocks, and sends back the reply
 
 A request is a user's data waiting (docs/PROTOCOL.md, "Requests"): its newest request is
 its request in force (the journal keeps the older ones, ``replaced``); a request of no tasks
-says it has nothing (more) to offload and closes as it arrives. A bad request gets an
+says it has nothing (more) to offload and closes as it arrives. A request that says
+``served_seen`` is counted less what was served to its user since it counted
+(``TaskRequest.counted_backlog``; the journal keeps doing so as services are recorded), so
+one that crossed a service on the wire asks for nothing already served; the fairness rule,
+the pending bound and ``Accepted.backlog`` judge that count. A bad request gets an
 ``ErrorReply`` naming the field and changes nothing. A good one is in the journal before
 the ack exists.
 
@@ -83,16 +87,30 @@ class Accepted:
     unservable: str | None = None
     """Why this request cannot be served in this sortie (it holds no pending place); None
     if it can."""
+    backlog: int | None = None
+    """The backlog the service counts for it: ``tasks`` less the tasks served since the
+    user counted them (``TaskRequest.counted_backlog``); None: ``tasks``."""
+    served_seen: int | None = None
+    """What the request said was served that its count had taken off, in this sortie."""
+
+    @property
+    def left(self) -> int:
+        """The backlog the service counts (``backlog``, else ``tasks``)."""
+        return self.tasks if self.backlog is None else self.backlog
 
     @property
     def done(self) -> bool:
-        """The user has nothing (more) to offload: its wait ends; if it is being served, its
-        upload is done (the loop may end the hold)."""
-        return self.tasks == 0
+        """The user has nothing (more) to offload (none stated, or all of it served since it
+        counted): its wait ends; if it is being served, its upload is done (the loop may end
+        the hold)."""
+        return self.left == 0
 
     def describe(self) -> str:
         """One line for a log or an event, wire text escaped."""
-        text = f"{self.tasks} tasks" + (f"; replaces {list(self.replaced)}" if self.replaced else "")
+        text = f"{self.tasks} tasks"
+        if self.served_seen is not None:
+            text += f" ({self.served_seen} served seen; {self.left} left)"
+        text += f"; replaces {list(self.replaced)}" if self.replaced else ""
         if self.unservable:
             text += f"; cannot be served in this sortie: {self.unservable}"
         if self.reply.client_ref is not None:
@@ -173,27 +191,31 @@ class Intake:
         try:
             services = self.journal.service_counts()
             pending = self.journal.pending()
+            served = self.journal.served_tasks(request.user_id)
         except JournalError as err:
             return Rejected(ErrorReply(field="journal", message=_sendable(str(err)), client_ref=request.client_ref))
-        why_not = self.unservable(request.tasks, services.get(request.user_id, 0))
+        sortie = self.journal.sortie
+        seen = request.seen_in(sortie)
+        backlog = request.counted_backlog(sortie, served)
+        why_not = self.unservable(backlog, services.get(request.user_id, 0))
         refusal = self._over_limit(request.user_id, why_not is None, pending, services)
         if refusal is not None:
             return Rejected(ErrorReply(field="service", message=refusal, client_ref=request.client_ref))
         now = self.clock()
         try:
             request_id, replaced = self.journal.accept(
-                request.user_id, request.x_m, request.y_m, request.z_m, request.tasks, request.client_ref, now)
+                request.user_id, request.x_m, request.y_m, request.z_m, request.tasks, request.client_ref, now,
+                served_seen=seen)
             position = next((i for i, r in enumerate(self.journal.pending(), 1) if r.request_id == request_id), 0)
-            served = self.journal.served_tasks(request.user_id)
         except JournalError as err:
             return Rejected(ErrorReply(field="journal", message=_sendable(str(err)), client_ref=request.client_ref))
         self._users.add(request.user_id)
         place = self.places.get(request.user_id)
         ack = TaskAck(request_id=request_id, user_id=request.user_id, accepted_at_s=now, queue_position=position,
-                      client_ref=request.client_ref, sortie=self.journal.sortie, served_tasks=served,
+                      client_ref=request.client_ref, sortie=sortie, served_tasks=served,
                       place=None if place is None else place.place, eta_s=None if place is None else place.eta_s,
                       note="" if why_not is None else f"cannot be served in this sortie: {why_not}"[:256])
-        return Accepted(request_id, request.user_id, request.tasks, tuple(replaced), ack, why_not)
+        return Accepted(request_id, request.user_id, request.tasks, tuple(replaced), ack, why_not, backlog, seen)
 
     def _over_limit(self, user_id: str, servable: bool, pending: list[RequestRow],
                     services: dict[str, int]) -> str | None:

@@ -8,17 +8,27 @@ are still pending, service counts (the fairness rule) and the last mission are k
 Requests are data waiting (docs/PROTOCOL.md, "Requests"): each request a user sends is a
 row, the statement of its whole backlog then, and its newest row is the request in force;
 the ack's request id names that row, and the older rows stay as the history. Request life:
-``pending`` (waiting; ``tasks`` less the tasks of the services that name it is the backlog
-left) -> ``served`` (services consumed all of it, or the sortie ended after a service of
-part of it; ``reason`` says what was left), ``replaced`` (the user's newer request took
-its place; ``reason`` names it) or ``not_served`` (a request of no tasks, closed as it
-arrives, or the sortie ended without serving it; ``reason`` says why). Nothing is ever
-deleted.
+``pending`` (waiting; ``RequestRow.backlog`` is what is left of it) -> ``served`` (services
+consumed all of it, or the sortie ended after a service of part of it; ``reason`` says what
+was left), ``replaced`` (the user's newer request took its place; ``reason`` names it) or
+``not_served`` (a request of no tasks, or of none left, closed as it arrives, or the sortie
+ended without serving it; ``reason`` says why). Nothing is ever deleted.
 
 A service names the request in force when its hold began (the loop binds to it); it
 consumes its tasks from that request's backlog while the request is in force. A newer
 request from the user is its whole backlog as the user knows it then, and replaces the
 older one's backlog as it stands.
+
+What a request's backlog is (``RequestRow.backlog``): a request that says ``served_seen``
+(the tasks of the user served in this sortie that its count had already taken off) states
+that the user had ``tasks + served_seen`` in the sortie, so what is left of it is that
+less every task served to the user in the sortie (``tasks - (user_served - served_seen)``),
+whichever request the services named and whenever they were recorded: a service recorded
+after the user counted (one that crossed its request on the wire, or a hold that ended
+after it) is never counted twice. A request that does not say it (an older client's) is
+taken as it is: its tasks less those of the services naming it. Either way a request
+never gives back what services naming it consumed, and a service that empties the user's
+request in force, whichever request it named, closes it ``served``.
 
 Sorties: one file holds every sortie of a service's life. ``sorties`` has a row per sortie
 (number, started, ended, why); requests, services and missions carry the sortie they
@@ -28,8 +38,10 @@ decision stay bounded however many sorties the file holds. Fairness counts are p
 (the paper's rule (3), (9c) is per sortie). Plan and request ids run on across sorties.
 
 Schema versions (``meta.schema_version``): 1, one sortie per file (no version row);
-2, sorties. A version-1 file is migrated in place on open (its rows become sortie 1,
-ended if its meta said ``sortie_over``); a file from a newer version is refused.
+2, sorties; 3, ``requests.served_seen``. An older file is migrated in place on open (a
+version-1 file's rows become sortie 1, ended if its meta said ``sortie_over``; the
+requests of a version-2 file said no ``served_seen``: NULL); a file from a newer version
+is refused.
 
 The file (this module's own guarantees, apart from what the rows mean):
 
@@ -42,7 +54,7 @@ The file (this module's own guarantees, apart from what the rows mean):
 - **Only a journal is a journal.** A path that does not exist is created fresh, atomically
   (built as ``PATH.new``, then linked into place: a crash leaves no half-made journal). An
   existing file must be an SQLite database carrying ``APPLICATION_ID`` (or, from before
-  the id, the tables of layout 1 or 2: it is then stamped): an empty file, a file that is
+  the id, the tables every layout has had: it is then stamped): an empty file, a file that is
   not SQLite, another application's database, or an SQLite file without our tables is
   refused, never taken as fresh, never written.
 - **Fail loud.** A write that fails (disk or database full, I/O error, read-only file) is
@@ -72,7 +84,7 @@ from typing import Any, Iterable, Iterator
 
 from .errors import JournalError
 
-SCHEMA_VERSION = 2
+SCHEMA_VERSION = 3
 """The layout this module writes (``meta.schema_version``)."""
 APPLICATION_ID = int.from_bytes(b"uavj", "big")
 """SQLite's ``PRAGMA application_id`` of a journal (0x7561766a, "uavj" in the header at
@@ -107,7 +119,8 @@ CREATE TABLE IF NOT EXISTS requests (
         CHECK (status IN ('pending', 'served', 'replaced', 'not_served')),
     reason TEXT NOT NULL DEFAULT '',
     closed_at_s REAL,
-    sortie INTEGER NOT NULL DEFAULT 1
+    sortie INTEGER NOT NULL DEFAULT 1,
+    served_seen INTEGER
 );
 CREATE TABLE IF NOT EXISTS services (
     service_id INTEGER PRIMARY KEY AUTOINCREMENT,
@@ -156,12 +169,20 @@ MIGRATE_1_TO_2 = [
     "ALTER TABLE missions ADD COLUMN sortie INTEGER NOT NULL DEFAULT 1",
 ]
 """Version 1 had one sortie per file: every row belongs to sortie 1."""
+MIGRATE_2_TO_3 = [
+    "ALTER TABLE requests ADD COLUMN served_seen INTEGER",
+]
+"""Version 2's requests said nothing of what their users knew was served: NULL, taken as
+they are (``RequestRow.backlog``)."""
 
 
 @dataclass(frozen=True)
 class RequestRow:
-    """One request as the user sent it (``tasks``: its backlog then) and what became of it:
-    ``served_tasks`` of it were served (by services naming it), ``backlog`` are left."""
+    """One request as the user sent it (``tasks``: its backlog then; ``served_seen``: the
+    tasks of the user served in the sortie that this count had taken off, None if it did
+    not say) and what became of it: ``served_tasks`` of it were served (by services naming
+    it), ``user_served`` to its user in its sortie (by any request), ``backlog`` are left.
+    The served counts are as of the reading (``Journal.request_in_force``: as of a moment)."""
 
     request_id: int
     user_id: str
@@ -174,11 +195,22 @@ class RequestRow:
     status: str
     reason: str
     served_tasks: int = 0
+    served_seen: int | None = None
+    user_served: int = 0
+
+    @property
+    def served_unseen(self) -> int:
+        """Tasks served to the user in the sortie that this count had not taken off: all
+        beyond ``served_seen`` (0 when it did not say: an older client's count is taken as
+        it is)."""
+        return 0 if self.served_seen is None else max(self.user_served - self.served_seen, 0)
 
     @property
     def backlog(self) -> int:
-        """Tasks of this request not yet served."""
-        return max(self.tasks - self.served_tasks, 0)
+        """Tasks of this request not yet served: its count less what was served that the
+        count did not know of (at least the services naming it: a stale or false
+        ``served_seen`` gives nothing back)."""
+        return max(self.tasks - max(self.served_tasks, self.served_unseen), 0)
 
 
 @dataclass(frozen=True)
@@ -380,7 +412,7 @@ class Journal:
             raise JournalError(f"the journal {self.path} has schema version {row[0]!r}, not a number") from None
 
     def _open_schema(self, now_s: float) -> None:
-        """Create, migrate (1 -> 2) or check the layout, in one transaction."""
+        """Create, migrate (1 -> 2 -> 3) or check the layout, in one transaction."""
         version = self._schema_version()
         if version > SCHEMA_VERSION:
             raise JournalError(f"the journal {self.path} has schema version {version}; this service reads "
@@ -400,6 +432,9 @@ class Journal:
                     (now_s if started is None else started,
                      None if over is None else (now_s if ended is None else ended), "" if over is None else over[0]))
                 self._db.execute("DELETE FROM meta WHERE key = 'sortie_over'")  # now sorties.why
+            if version in (1, 2):
+                for statement in MIGRATE_2_TO_3:
+                    self._db.execute(statement)
             elif version == 0:
                 self._db.execute("INSERT INTO sorties (number, started_at_s) VALUES (1, ?)", (now_s,))
             self._db.execute("INSERT OR REPLACE INTO meta (key, value) VALUES ('schema_version', ?)",
@@ -497,26 +532,33 @@ class Journal:
         return target, f"its rows were copied to {target}"
 
     def accept(self, user_id: str, x_m: float, y_m: float, z_m: float, tasks: int,
-               client_ref: str | None, now_s: float) -> tuple[int, list[int]]:
+               client_ref: str | None, now_s: float, served_seen: int | None = None) -> tuple[int, list[int]]:
         """Journal a validated request in the current sortie: it becomes the user's request
-        in force and its pending requests become ``replaced``. A request of no tasks closes
-        as it arrives (``not_served``, "no tasks to offload"): nothing is waiting. Returns
-        (the new request id, the ids it replaced)."""
+        in force and its pending requests become ``replaced``. ``served_seen``: the tasks of
+        the user served in this sortie that ``tasks`` has already taken off (None: not said;
+        ``RequestRow.backlog``). A request with no tasks left (none stated, or all of them
+        served since the user counted) closes as it arrives (``not_served``, "no tasks to
+        offload"): nothing is waiting. Returns (the new request id, the ids it replaced)."""
         if self.current_sortie().over:
             raise JournalError(f"accept: sortie {self.sortie} is over; no request joins it")
         older = [int(r[0]) for r in self._rows(
             "SELECT request_id FROM requests WHERE sortie = ? AND user_id = ? AND status = 'pending'",
             (self.sortie, user_id))]
+        left = RequestRow(0, user_id, x_m, y_m, z_m, tasks, client_ref, now_s, "pending", "", 0, served_seen,
+                          self.served_tasks(user_id) if served_seen is not None else 0)
         try:
             with self._transaction():  # the replaced rows name the new id: not one _write
                 request_id = int(self._db.execute(
-                    "INSERT INTO requests (user_id, x_m, y_m, z_m, tasks, client_ref, accepted_at_s, sortie) "
-                    "VALUES (?, ?, ?, ?, ?, ?, ?, ?)",
-                    (user_id, x_m, y_m, z_m, tasks, client_ref, now_s, self.sortie)).lastrowid)
-                if tasks <= 0:
+                    "INSERT INTO requests (user_id, x_m, y_m, z_m, tasks, client_ref, accepted_at_s, sortie, "
+                    "served_seen) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                    (user_id, x_m, y_m, z_m, tasks, client_ref, now_s, self.sortie, served_seen)).lastrowid)
+                if left.backlog <= 0:
+                    why = NO_TASKS if tasks <= 0 else (
+                        f"{NO_TASKS}: its {tasks} tasks were served before it arrived ({left.user_served} served to "
+                        f"the user in this sortie, {served_seen} of them taken off its count)")
                     self._db.execute(
                         "UPDATE requests SET status = 'not_served', reason = ?, closed_at_s = ? WHERE request_id = ?",
-                        (NO_TASKS, now_s, request_id))
+                        (why, now_s, request_id))
                 for rid in older:
                     self._db.execute(
                         "UPDATE requests SET status = 'replaced', reason = ?, closed_at_s = ? "
@@ -532,7 +574,10 @@ class Journal:
         request's backlog: if it is still in force (pending) and nothing is left it becomes
         ``served``, else it stays pending with the rest. If the user sent a newer request
         meanwhile (it is ``replaced``), the service is recorded against the request it was
-        bound to and the newer one, the user's own count, is left as it is."""
+        bound to; the newer one, the user's own count, loses these tasks too if it said
+        ``served_seen`` (it counted them: they were served after it counted), and is left as
+        it is if it did not (``RequestRow.backlog``). Either way, the user's request in force
+        closes ``served`` if nothing is left of it."""
         rows = self._rows(f"SELECT {_REQ}, sortie FROM requests WHERE request_id = ?", (request_id,))
         if not rows or rows[0][-1] != self.sortie:
             raise JournalError(f"record_service: request {request_id} is not a request of sortie {self.sortie}")
@@ -543,24 +588,48 @@ class Journal:
         if not 1 <= tasks <= row.backlog:
             raise JournalError(f"record_service: {tasks} tasks served of request {request_id}, whose backlog is "
                                f"{row.backlog} ({row.served_tasks} of its {row.tasks} already served)")
-        done = row.status == "pending" and tasks == row.backlog
-        service_id, *_ = self._write("record_service", [
-            ("INSERT INTO services (request_id, user_id, tasks, bits, hover_index, x_m, y_m, z_m, reward, "
-             "battery_j, time_s, sortie) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
-             (request_id, row.user_id, tasks, bits, hover_index, *xyz, reward, battery_j, now_s, self.sortie)),
-            *([("UPDATE requests SET status = 'served', closed_at_s = ? WHERE request_id = ?", (now_s, request_id))]
-              if done else []),
-        ])
+        try:
+            with self._transaction():  # which requests it empties is read after the insert
+                service_id = int(self._db.execute(
+                    "INSERT INTO services (request_id, user_id, tasks, bits, hover_index, x_m, y_m, z_m, reward, "
+                    "battery_j, time_s, sortie) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                    (request_id, row.user_id, tasks, bits, hover_index, *xyz, reward, battery_j, now_s,
+                     self.sortie)).lastrowid)
+                for r in self._db.execute(f"SELECT {_REQ} FROM requests WHERE sortie = ? AND user_id = ? AND "
+                                          "status = 'pending'", (self.sortie, row.user_id)).fetchall():
+                    left = RequestRow(*r)
+                    if left.backlog <= 0:
+                        self._db.execute(
+                            "UPDATE requests SET status = 'served', reason = ?, closed_at_s = ? WHERE request_id = ?",
+                            ("" if left.request_id == request_id else
+                             f"its tasks were served under request {request_id}", now_s, left.request_id))
+        except sqlite3.Error as err:
+            raise self._failure("record_service", err) from None
         return service_id
+
+    def _closing(self, reasons: dict[int, str], now_s: float) -> list[tuple[str, tuple[Any, ...]]]:
+        """Pending requests closed with their reasons: ``served`` if a service consumed part of
+        one (the reason says how much was left), else ``not_served``. (Read before the
+        transaction that writes them: the journal has one writer, on one thread.)"""
+        out: list[tuple[str, tuple[Any, ...]]] = []
+        for rid, reason in reasons.items():
+            row = self.request(rid)
+            if row is None or row.status != "pending":
+                continue
+            status, text = ("served", f"{row.backlog} of {row.tasks} tasks left: {reason}") if row.served_tasks \
+                else ("not_served", reason)
+            out.append(("UPDATE requests SET status = ?, reason = ?, closed_at_s = ? WHERE request_id = ? AND "
+                        "status = 'pending'", (status, text, now_s, rid)))
+        return out
 
     def close_pending(self, reasons: dict[int, str], now_s: float) -> None:
         """Pending requests the sortie will not serve, each with its reason."""
-        self._write("close_pending", _closing(reasons, now_s))
+        self._write("close_pending", self._closing(reasons, now_s))
 
     def end_sortie(self, why: str, reasons: dict[int, str], now_s: float) -> None:
         """End the current sortie: its pending requests closed with their reasons, the
         sortie row marked ended, in one transaction."""
-        self._write("end_sortie", [*_closing(reasons, now_s), (
+        self._write("end_sortie", [*self._closing(reasons, now_s), (
             "UPDATE sorties SET ended_at_s = ?, why = ? WHERE number = ? AND ended_at_s IS NULL",
             (now_s, why, self.sortie))])
 
@@ -619,24 +688,28 @@ class Journal:
         tasks in force means the user has nothing to offload."""
         until = math.inf if at_s is None else at_s
         rows = self._rows(
-            f"SELECT {_REQ_COLUMNS}, (SELECT COALESCE(SUM(s.tasks), 0) FROM services s "
-            "WHERE s.request_id = requests.request_id AND s.time_s <= ?) FROM requests "
+            f"SELECT {_req_columns(' AND s.time_s <= ?')} FROM requests "
             "WHERE sortie = ? AND user_id = ? AND accepted_at_s <= ? ORDER BY request_id DESC LIMIT 1",
-            (until, self.sortie, user_id, until))
+            (until, until, self.sortie, user_id, until))
         return RequestRow(*rows[0]) if rows else None
 
     def user_backlogs(self) -> list[UserBacklog]:
         """Every user of the current sortie, in order of first request: its request in force,
-        the backlog left on it, its services and the tasks they served."""
+        the backlog left on it (``RequestRow.backlog``; 0 once it is closed), its services and
+        the tasks they served."""
         rows = self._rows(
-            "SELECT r.user_id, r.request_id, CASE WHEN r.status = 'pending' THEN MAX(r.tasks - "
-            "(SELECT COALESCE(SUM(s.tasks), 0) FROM services s WHERE s.request_id = r.request_id), 0) ELSE 0 END, "
+            f"SELECT {_req_columns(table='r')}, "
             "(SELECT COUNT(*) FROM services s WHERE s.sortie = ? AND s.user_id = r.user_id), "
             "(SELECT COALESCE(SUM(s.tasks), 0) FROM services s WHERE s.sortie = ? AND s.user_id = r.user_id) "
             "FROM requests r JOIN (SELECT user_id, MIN(request_id) AS first, MAX(request_id) AS last "
             "FROM requests WHERE sortie = ? GROUP BY user_id) u ON r.request_id = u.last ORDER BY u.first",
             (self.sortie, self.sortie, self.sortie))
-        return [UserBacklog(*r) for r in rows]
+        out = []
+        for r in rows:
+            row = RequestRow(*r[:-2])
+            out.append(UserBacklog(row.user_id, row.request_id, row.backlog if row.status == "pending" else 0,
+                                   int(r[-2]), int(r[-1])))
+        return out
 
     def served_tasks(self, user_id: str) -> int:
         """The tasks of ``user_id`` served in the current sortie."""
@@ -822,24 +895,25 @@ def _sync_folder(path: str) -> None:
         os.close(fd)
 
 
-_REQ_COLUMNS = "request_id, user_id, x_m, y_m, z_m, tasks, client_ref, accepted_at_s, status, reason"
-_REQ = (f"{_REQ_COLUMNS}, (SELECT COALESCE(SUM(s.tasks), 0) FROM services s "
-        "WHERE s.request_id = requests.request_id)")
-"""The columns of a ``RequestRow``, ``served_tasks`` counted from the services naming it."""
+def _req_columns(services_until: str = "", table: str = "requests") -> str:
+    """The columns of a ``RequestRow`` read from ``table``: ``served_tasks`` counted from the
+    services naming it, ``user_served`` from every service of its user in its sortie (only
+    for a request that says ``served_seen``: the others do not need it), both restricted by
+    ``services_until``, a condition on the services ``s`` (its parameters are bound twice,
+    before any of the caller's)."""
+    t = table
+    return (f"{t}.request_id, {t}.user_id, {t}.x_m, {t}.y_m, {t}.z_m, {t}.tasks, {t}.client_ref, "
+            f"{t}.accepted_at_s, {t}.status, {t}.reason, "
+            f"(SELECT COALESCE(SUM(s.tasks), 0) FROM services s WHERE s.request_id = {t}.request_id{services_until}), "
+            f"{t}.served_seen, CASE WHEN {t}.served_seen IS NULL THEN 0 ELSE (SELECT COALESCE(SUM(s.tasks), 0) "
+            f"FROM services s WHERE s.sortie = {t}.sortie AND s.user_id = {t}.user_id{services_until}) END")
+
+
+_REQ = _req_columns()
+"""The columns of a ``RequestRow``, as the journal stands."""
 NO_TASKS = "no tasks to offload"
 """The reason of a request of no tasks (closed as it arrives)."""
 
 
 def _mission(r: tuple[Any, ...]) -> MissionRow:
     return MissionRow(r[0], r[1], r[2], r[3], json.loads(r[4]), json.loads(r[5]))
-
-
-def _closing(reasons: dict[int, str], now_s: float) -> list[tuple[str, tuple[Any, ...]]]:
-    """Pending requests closed with their reasons: ``served`` if a service consumed part of
-    one (the reason says how much was left), else ``not_served``."""
-    return [("UPDATE requests SET status = CASE WHEN EXISTS (SELECT 1 FROM services s WHERE s.request_id = "
-             "requests.request_id) THEN 'served' ELSE 'not_served' END, reason = CASE WHEN EXISTS (SELECT 1 FROM "
-             "services s WHERE s.request_id = requests.request_id) THEN (tasks - (SELECT SUM(s.tasks) FROM services s "
-             "WHERE s.request_id = requests.request_id)) || ' of ' || tasks || ' tasks left: ' || ? ELSE ? END, "
-             "closed_at_s = ? WHERE request_id = ? AND status = 'pending'", (reason, reason, now_s, rid))
-            for rid, reason in reasons.items()]

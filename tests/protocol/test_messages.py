@@ -160,3 +160,51 @@ def test_per_user_keys() -> None:
             keys.user(bad_user)
     assert keys.place_user("uavmec/uav7/users/u:1") == "u:1"
     assert keys.place_user("uavmec/uav7/users/*") is None and keys.place_user("uavmec/uav7/status") is None
+
+
+# --- a request says what it knew was served (served_seen, sortie) ----------------------------------
+def test_served_seen_and_its_sortie_are_left_out_unless_given() -> None:
+    import msgspec
+
+    from protocol.client import request_for
+
+    plain = request_for("u-7", 120.5, 30.0, 12, client_ref="r")
+    assert plain.served_seen is msgspec.UNSET and plain.sortie is msgspec.UNSET
+    # the same bytes as a client that knows nothing of them: a service of any version reads it
+    assert json.loads(encode(plain)) == {"kind": "task_request", "schema": 1, "user_id": "u-7", "x_m": 120.5,
+                                         "y_m": 30.0, "tasks": 12, "z_m": 0.0, "client_ref": "r"}
+    said = request_for("u-7", 120.5, 30.0, 12, client_ref="r", served_seen=8, sortie=2)
+    assert {k: v for k, v in json.loads(encode(said)).items() if k in ("served_seen", "sortie")} == \
+        {"served_seen": 8, "sortie": 2}
+    assert decode_request(encode(said), AREA) == said and decode_request(encode(plain), AREA) == plain
+    assert "sortie" not in json.loads(encode(request_for("u-7", 1.0, 1.0, 1, sortie=2)))  # it qualifies served_seen
+    nulls = decode_request(request(served_seen=None, sortie=None), AREA)  # null: not given
+    assert (nulls.seen_in(1), nulls.counted_backlog(1, 30)) == (None, 12)
+
+
+@pytest.mark.parametrize("fields, sortie, served, seen, counted", [
+    ({}, 1, 30, None, 12),  # not said (an older client): taken as it is
+    ({"served_seen": 20}, 1, 20, 20, 12),  # nothing served since the user counted
+    ({"served_seen": 20}, 1, 26, 20, 6),  # 6 served since: taken off
+    ({"served_seen": 20, "sortie": 1}, 1, 26, 20, 6),
+    ({"served_seen": 0}, 1, 40, 0, 0),  # more served since than it counted: nothing left
+    ({"served_seen": 20, "sortie": 1}, 2, 5, 0, 7),  # its news is of sortie 1: none of sortie 2's known
+    ({"served_seen": 50}, 1, 10, 50, 12),  # beyond what was served (stale, false): nothing taken off
+])
+def test_the_backlog_the_service_counts(fields: dict, sortie: int, served: int, seen: int | None,
+                                        counted: int) -> None:
+    msg = decode_request(request(**fields), AREA)
+    assert (msg.seen_in(sortie), msg.counted_backlog(sortie, served)) == (seen, counted)
+
+
+@pytest.mark.parametrize("payload, field", [
+    (request(served_seen=-1), "served_seen"),
+    (request(served_seen=2 ** 31), "served_seen"),
+    (request(served_seen=True), "served_seen"),
+    (request(served_seen=1.0), "served_seen"),
+    (request(sortie=0), "sortie"),
+    (request(sortie="1"), "sortie"),
+    (request(sortie=2 ** 63), "sortie"),
+])
+def test_bad_served_seen_or_sortie_is_named(payload: bytes, field: str) -> None:
+    assert refused(payload).field == field

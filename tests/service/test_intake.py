@@ -48,6 +48,12 @@ def test_accept_then_ack(tmp_path: Path) -> None:
     (request(extra=1), "extra"),
     (request(schema=2), "schema"),
     (request(user_id=None), "user_id"),
+    (request(served_seen=-1), "served_seen"),
+    (request(served_seen=2 ** 31), "served_seen"),
+    (request(served_seen=1.5), "served_seen"),
+    (request(served_seen="3"), "served_seen"),
+    (request(served_seen=3, sortie=0), "sortie"),
+    (request(served_seen=3, sortie=True), "sortie"),
     (b'{"kind": "task_request", "user_id": "u", "x_m": NaN, "y_m": 1, "tasks": 1}', "x_m"),
     (b"{" + b" " * 5000 + b"}", "payload"),
     (None, "payload"),
@@ -149,3 +155,52 @@ def test_wire_text_is_described_without_control_characters(tmp_path: Path) -> No
         assert not any(c in line for c in "\n\r\x1b\u2028"), line
     assert "client_ref x\\x0a2026-01-01" in accepted.describe()
     assert refused.describe().startswith("bad\\x0afield\\x1b: ") and refused.describe().endswith("(client_ref r\\x0d\\x0a)")
+
+
+# --- a request that crossed a service on the wire: ``served_seen`` ---------------------------------
+def test_a_request_is_counted_less_what_was_served_since_the_user_counted(tmp_path: Path) -> None:
+    from planner_service.model import field
+    from planner_service.service.intake import fairness_rule
+
+    journal = Journal(tmp_path / "j.sqlite")
+    intake = Intake(journal, Area(500.0, 120.0, 10.0), clock=lambda: NOW, unservable=fairness_rule(field()))
+    first = intake.handle(request(tasks=20, served_seen=0, sortie=1))
+    assert isinstance(first, Accepted) and (first.backlog, first.served_seen) == (20, 0)
+    journal.record_service(first.request_id, 3, (1.0, 2.0, 100.0), 12, 1.2e6, 0.3, 9e4, NOW)
+    # counted before the user heard of the 12 served: 20 + 2 new = 22, of which 12 went
+    crossed = intake.handle(request(tasks=22, served_seen=0, sortie=1, client_ref="b"))
+    assert isinstance(crossed, Accepted) and (crossed.tasks, crossed.backlog, crossed.done) == (22, 10, False)
+    assert (crossed.reply.sortie, crossed.reply.served_tasks) == (1, 12)
+    assert "22 tasks (0 served seen; 10 left)" in crossed.describe()
+    assert journal.request_in_force("u-7").backlog == 10  # type: ignore[union-attr]
+    # the fairness rule judges the count, not the statement: a repeat of 22 would be
+    # eligible, one of 10 is not (rule (3), (9c): more than the threshold, 15 in this preset)
+    threshold = field().fairness_threshold_tasks
+    assert 10 <= threshold < 22 and crossed.unservable == f"fairness: a repeat needs more than {threshold:g} tasks, asked 10"
+    # all of it served since the user counted: nothing left, the wait ends
+    journal.record_service(crossed.request_id, 4, (1.0, 2.0, 100.0), 10, 1e6, 0.3, 9e4, NOW)
+    late = intake.handle(request(tasks=10, served_seen=12, sortie=1, client_ref="c"))
+    assert isinstance(late, Accepted) and late.backlog == 0 and late.done and late.reply.queue_position == 0
+    assert late.reply.note.startswith("cannot be served in this sortie: no tasks to offload")
+    assert journal.pending() == []
+
+
+def test_a_served_seen_of_another_sortie_takes_off_everything_served_in_this_one(tmp_path: Path) -> None:
+    # The user's news is of sortie 1 (it never heard an ack of sortie 2): none of sortie 2's
+    # services are off its count. Without ``sortie``, ``served_seen`` counts in the current
+    # sortie; without ``served_seen`` the request is taken as it is (an older client).
+    intake, journal = make(tmp_path)
+    journal.end_sortie("the vehicle landed", {}, NOW)
+    journal.begin_sortie(NOW)
+    intake.new_sortie()
+    first = intake.handle(request(tasks=8))
+    assert isinstance(first, Accepted)
+    journal.record_service(first.request_id, 3, (1.0, 2.0, 100.0), 5, 5e5, 0.3, 9e4, NOW)
+    stale = intake.handle(request(tasks=9, served_seen=40, sortie=1))
+    assert isinstance(stale, Accepted) and (stale.backlog, stale.served_seen) == (4, 0)
+    assert journal.request(stale.request_id).served_seen == 0  # type: ignore[union-attr]
+    current = intake.handle(request(tasks=9, served_seen=3))
+    assert isinstance(current, Accepted) and current.backlog == 7
+    old = intake.handle(request(tasks=9))
+    assert isinstance(old, Accepted) and (old.backlog, old.served_seen) == (9, None)
+    assert journal.request(old.request_id).served_seen is None  # type: ignore[union-attr]

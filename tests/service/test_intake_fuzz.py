@@ -74,7 +74,7 @@ def test_hostile_requests_are_refused_naming_a_field_and_change_nothing(tmp_path
     intake = Intake(journal, AREA, clock=lambda: NOW, limits=unbounded)
     watcher = sqlite3.connect(tmp_path / "journal.sqlite")
     expected: list[dict[str, Any]] = []
-    seen = {"payloads": 0, "accepted": 0, "undecidable": 0}
+    seen = {"payloads": 0, "accepted": 0, "undecidable": 0, "served_seen": 0}
 
     def version() -> int:
         return int(watcher.execute("PRAGMA data_version").fetchone()[0])
@@ -98,7 +98,7 @@ def test_hostile_requests_are_refused_naming_a_field_and_change_nothing(tmp_path
                     row = journal.request(outcome.request_id)
                     assert row is not None
                     expected.append({"user_id": row.user_id, "x_m": row.x_m, "y_m": row.y_m, "z_m": row.z_m,
-                                     "tasks": row.tasks, "client_ref": row.client_ref})
+                                     "tasks": row.tasks, "client_ref": row.client_ref, "seen": row.served_seen})
                 continue
             if valid is None:
                 assert isinstance(outcome, Rejected), (case, outcome)
@@ -110,21 +110,26 @@ def test_hostile_requests_are_refused_naming_a_field_and_change_nothing(tmp_path
                 ack = outcome.reply
                 assert isinstance(ack, TaskAck) and decode_reply(encode(ack)) == ack
                 assert (ack.user_id, ack.client_ref, ack.accepted_at_s) == (valid["user_id"], valid["client_ref"], NOW)
-                expected.append(valid)
+                # what the journal keeps of served_seen: as said if it counts in this sortie
+                # (1, or not said), 0 if in another (none of this sortie's services known)
+                said, sortie = valid["served_seen"], valid["sortie"]
+                expected.append({**valid, "seen": None if said is None else said if sortie in (None, 1) else 0})
                 seen["accepted"] += 1
+                seen["served_seen"] += said is not None
 
     t0 = time.perf_counter()
     check()
     elapsed = time.perf_counter() - t0
-    print(f"\nintake: {seen['payloads']} payloads ({seen['accepted']} valid, {seen['undecidable']} with "
-          f"duplicate keys) in {elapsed:.1f} s")
+    print(f"\nintake: {seen['payloads']} payloads ({seen['accepted']} valid, {seen['served_seen']} of them with "
+          f"served_seen; {seen['undecidable']} with duplicate keys) in {elapsed:.1f} s")
     assert seen["payloads"] >= PAYLOADS
     assert seen["accepted"] >= 100, "the strategies should also produce valid requests"
+    assert seen["served_seen"] >= 20, "and valid requests that say served_seen"
     # The journal holds exactly the oracle's valid requests, each user's newest pending
     # (closed at once if it has no tasks: nothing is waiting), the older ones replaced.
     rows = journal.requests()
-    assert [(r.user_id, r.x_m, r.y_m, r.z_m, r.tasks, r.client_ref) for r in rows] == \
-        [(e["user_id"], e["x_m"], e["y_m"], e["z_m"], e["tasks"], e["client_ref"]) for e in expected]
+    assert [(r.user_id, r.x_m, r.y_m, r.z_m, r.tasks, r.client_ref, r.served_seen) for r in rows] == \
+        [(e["user_id"], e["x_m"], e["y_m"], e["z_m"], e["tasks"], e["client_ref"], e["seen"]) for e in expected]
     newest = {r.user_id: r.request_id for r in rows}
     assert all(r.status == ("not_served" if r.tasks == 0 else "pending" if newest[r.user_id] == r.request_id
                             else "replaced") for r in rows)

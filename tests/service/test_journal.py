@@ -118,26 +118,56 @@ def test_a_version_1_journal_is_migrated(tmp_path: Path, landed: bool) -> None:
     db.executescript(V1_SCHEMA + ("INSERT INTO meta VALUES ('sortie_over', 'the vehicle landed');" if landed else ""))
     db.close()
     j = Journal(path, now_s=500.0)
-    assert j.get_meta("schema_version") == "2" and j.get_meta("sortie_over") is None
+    assert j.get_meta("schema_version") == "3" and j.get_meta("sortie_over") is None
     assert j.sortie == 1
     if landed:  # ended when its last request was closed, for the reason it gave
         assert j.current_sortie() == SortieRow(1, 100.0, 110.0, "the vehicle landed")
     else:
         assert j.current_sortie() == SortieRow(1, 100.0, None, "")
-    assert [r.request_id for r in j.pending()] == [2]
+    assert [(r.request_id, r.served_seen, r.backlog) for r in j.pending()] == [(2, None, 6)]
     assert [(u.user_id, u.services) for u in j.users()] == [("u1", 1), ("u2", 0)]
     last = j.last_mission()
     assert last is not None and last.plan_id == 7 and j.last_plan_id() == 7
     j.close()
-    assert Journal(path).get_meta("schema_version") == "2"  # opening again changes nothing
+    assert Journal(path).get_meta("schema_version") == "3"  # opening again changes nothing
+
+
+# Version 2 (sorties, before ``requests.served_seen``), as the previous service wrote it.
+V2_SCHEMA = V1_SCHEMA + """
+ALTER TABLE requests ADD COLUMN sortie INTEGER NOT NULL DEFAULT 1;
+ALTER TABLE services ADD COLUMN sortie INTEGER NOT NULL DEFAULT 1;
+ALTER TABLE missions ADD COLUMN sortie INTEGER NOT NULL DEFAULT 1;
+CREATE TABLE sorties (number INTEGER PRIMARY KEY, started_at_s REAL NOT NULL, ended_at_s REAL,
+    why TEXT NOT NULL DEFAULT '');
+INSERT INTO sorties (number, started_at_s) VALUES (1, 100.0);
+INSERT INTO meta VALUES ('schema_version', '2');
+PRAGMA application_id = 1969321578;
+"""
+
+
+def test_a_version_2_journal_is_migrated_its_requests_taken_as_they_are(tmp_path: Path) -> None:
+    path = tmp_path / "v2.sqlite"
+    db = sqlite3.connect(path)
+    db.executescript(V2_SCHEMA)
+    db.close()
+    j = Journal(path, now_s=500.0)
+    assert j.get_meta("schema_version") == "3" and j.sortie == 1
+    assert [(r.request_id, r.status, r.served_seen, r.backlog) for r in j.requests()] == [
+        (1, "served", None, 0), (2, "pending", None, 6)]
+    # an old request said nothing of what its user knew: it is taken as it is, whatever was served
+    j.record_service(2, 4, (1.0, 2.0, 100.0), 2, 2e5, 0.1, 9e4, 120.0)
+    assert [(b.user_id, b.backlog) for b in j.user_backlogs()] == [("u1", 0), ("u2", 4)]
+    rid, _ = j.accept("u2", 3.0, 4.0, 0.0, 6, None, 130.0, served_seen=0)  # a new one does say
+    assert j.request(rid) is not None and j.request(rid).backlog == 4  # type: ignore[union-attr]
+    j.close()
 
 
 def test_a_newer_or_foreign_journal_is_refused(tmp_path: Path) -> None:
     path = tmp_path / "j.sqlite"
     j = Journal(path)
-    j.set_meta("schema_version", "3")
+    j.set_meta("schema_version", "4")
     j.close()
-    with pytest.raises(JournalError, match="schema version 3; this service reads versions up to 2"):
+    with pytest.raises(JournalError, match="schema version 4; this service reads versions up to 3"):
         Journal(path)
     junk = tmp_path / "junk.sqlite"
     junk.write_bytes(b"not a database at all" * 100)

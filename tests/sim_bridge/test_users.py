@@ -5,9 +5,9 @@ whole walk against the real intake and journal (no zenoh), whose counts must agr
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
+import msgspec
 import numpy as np
 import pytest
 
@@ -15,9 +15,9 @@ from planner_service.model import field, pack, preset
 from planner_service.model.mobility import draw_arrivals, draw_tasks
 from planner_service.service.intake import Accepted, Intake, fairness_rule
 from planner_service.service.journal import Journal
-from protocol import Area, TaskAck, UserPlace
+from protocol import Area, TaskAck, UserPlace, encode
 from sim_bridge.users import (TaskParams, WalkParams, Walker, arrive, learn_served, new_walkers, on_ack, on_place,
-                              on_refused, sent, step, wants_to_send)
+                              on_refused, request_of, sent, step, wants_to_send)
 
 SCENARIO = field()
 P = pack(SCENARIO)
@@ -79,16 +79,16 @@ def test_when_a_user_speaks() -> None:
     assert not wants_to_send(w, 0.0, tp)  # nothing to offload, nothing in force
     w.backlog = 12
     assert wants_to_send(w, 0.0, tp)
-    on_ack(w, TaskAck(request_id=1, user_id="u", sortie=1, served_tasks=0), sent(w, 0.0))
+    on_ack(w, TaskAck(request_id=1, user_id="u", sortie=1, served_tasks=0), request_of(w, 0.0, tp, WALK))
     assert not wants_to_send(w, 39.0, tp)  # the service counts what it has
     w.backlog = 15  # new tasks
     assert wants_to_send(w, 1.0, tp)
-    on_ack(w, TaskAck(request_id=2, user_id="u", sortie=1, served_tasks=0), sent(w, 1.0))
+    on_ack(w, TaskAck(request_id=2, user_id="u", sortie=1, served_tasks=0), request_of(w, 1.0, tp, WALK))
     step(w, 30.0, WALK, np.random.default_rng(0))  # 30 m at 1 m/s: not far enough
     assert not wants_to_send(w, 31.0, tp)
     step(w, 25.0, WALK, np.random.default_rng(0))
     assert wants_to_send(w, 56.0, tp)  # moved 55 m
-    on_ack(w, TaskAck(request_id=3, user_id="u", sortie=1, served_tasks=0), sent(w, 56.0))
+    on_ack(w, TaskAck(request_id=3, user_id="u", sortie=1, served_tasks=0), request_of(w, 56.0, tp, WALK))
     assert not wants_to_send(w, 95.0, tp) and wants_to_send(w, 96.0, tp)  # at least once an interval
     on_refused(w, 96.0, tp, "service: busy: ...")
     assert not wants_to_send(w, 135.0, tp) and wants_to_send(w, 136.0, tp)
@@ -98,25 +98,37 @@ def test_what_a_user_learns_of_its_services() -> None:
     tp = TaskParams()
     w = walker()
     w.backlog = 20
-    on_ack(w, TaskAck(request_id=4, user_id="u", sortie=2, served_tasks=8), sent(w, 0.0))
-    assert (w.backlog, w.served, w.sortie) == (20, 0, 2)  # the first news is the baseline
+    first = request_of(w, 0.0, tp, WALK)
+    assert first.served_seen is msgspec.UNSET and b"served_seen" not in encode(first)  # it knows no sortie yet
+    on_ack(w, TaskAck(request_id=4, user_id="u", sortie=2, served_tasks=8), first)
+    assert (w.backlog, w.served, w.sortie, w.view) == (20, 0, 2, 20)  # the first news is the baseline
     # the service served 12 of request 4 and published the place: backlog 8 left, as ours
     on_place(w, UserPlace(user_id="u", sortie=2, request_id=4, backlog=8, served_tasks=20, services=2))
     assert (w.backlog, w.view, w.served) == (8, 8, 12) and not wants_to_send(w, 1.0, tp)
-    # a request that crossed a service on the wire: the ack shows the service, the counts
-    # differ (the service does not take it off a newer request), the user sends again
+    # a request that crossed a service on the wire: it says it had taken 20 served off its
+    # 18; the ack shows 26 served, so the service counted 18 - 6 = 12, as the user does now
     w.backlog += 10
-    on_ack(w, TaskAck(request_id=5, user_id="u", sortie=2, served_tasks=26), sent(w, 2.0))
-    assert (w.backlog, w.view) == (12, 18) and wants_to_send(w, 2.1, tp)
-    on_ack(w, TaskAck(request_id=6, user_id="u", sortie=2, served_tasks=26), sent(w, 2.1))
-    assert not wants_to_send(w, 2.2, tp)
+    crossed = request_of(w, 2.0, tp, WALK)
+    assert (crossed.tasks, crossed.served_seen, crossed.sortie) == (18, 20, 2)
+    on_ack(w, TaskAck(request_id=5, user_id="u", sortie=2, served_tasks=26), crossed)
+    assert (w.backlog, w.view, w.served) == (12, 12, 18) and not wants_to_send(w, 2.1, tp)
+    # an ack without the counts (an older service's): its count is what was sent; if the
+    # user then learns of a service the request crossed, the counts differ: it sends again
+    w.backlog += 2
+    old = request_of(w, 2.2, tp, WALK)
+    on_ack(w, TaskAck(request_id=6, user_id="u"), old)
+    assert (w.backlog, w.view) == (14, 14) and not wants_to_send(w, 2.3, tp)
+    on_place(w, UserPlace(user_id="u", sortie=2, request_id=6, backlog=14, served_tasks=28))
+    assert (w.backlog, w.view) == (12, 14) and wants_to_send(w, 2.4, tp)
+    on_ack(w, TaskAck(request_id=7, user_id="u", sortie=2, served_tasks=28), request_of(w, 2.4, tp, WALK))
+    assert (w.backlog, w.view) == (12, 12) and not wants_to_send(w, 2.5, tp)
     # stale news changes nothing: an older place, an earlier sortie, a smaller count
-    on_place(w, UserPlace(user_id="u", sortie=2, request_id=5, backlog=1, served_tasks=26))
+    on_place(w, UserPlace(user_id="u", sortie=2, request_id=6, backlog=1, served_tasks=26))
     learn_served(w, 1, 99)
     learn_served(w, 2, 20)
-    assert (w.backlog, w.view, w.served) == (12, 12, 18)
+    assert (w.backlog, w.view, w.served) == (12, 12, 20)
     # everything served: the service's count is 0 too, nothing to say
-    on_place(w, UserPlace(user_id="u", sortie=2, request_id=6, backlog=0, served_tasks=38))
+    on_place(w, UserPlace(user_id="u", sortie=2, request_id=7, backlog=0, served_tasks=40))
     assert (w.backlog, w.view) == (0, 0) and not wants_to_send(w, 100.0, tp)
     # a new sortie counts from zero; nothing of ours is in force in it
     on_place(w, UserPlace(user_id="u", sortie=3, request_id=None, served_tasks=0))
@@ -126,7 +138,7 @@ def test_what_a_user_learns_of_its_services() -> None:
 def test_a_user_whose_backlog_is_all_served_during_its_request_says_it_is_done() -> None:
     w = walker()
     w.backlog = 6
-    on_ack(w, TaskAck(request_id=1, user_id="u", sortie=1, served_tasks=0), sent(w, 0.0))
+    on_ack(w, TaskAck(request_id=1, user_id="u", sortie=1, served_tasks=0), request_of(w, 0.0, TaskParams(), WALK))
     w.backlog = 0  # it uploaded everything itself (a real user knows)
     assert wants_to_send(w, 1.0, TaskParams())  # tasks 0: nothing more, the wait ends
 
@@ -145,6 +157,7 @@ def test_a_whole_walk_against_the_intake_and_journal_keeps_the_counts_right(tmp_
     rng, serve_rng = np.random.default_rng(11), np.random.default_rng(12)
     walkers = new_walkers(10, SCENARIO, WALK, rng, 10.0)
     served_total = dict.fromkeys((w.user_id for w in walkers), 0)
+    crossed = 0
     for tick in range(1, 60 * 8 + 1):
         now = tick * 5.0
         clock["t"] = now
@@ -152,16 +165,17 @@ def test_a_whole_walk_against_the_intake_and_journal_keeps_the_counts_right(tmp_
             step(w, 5.0, WALK, rng)
             arrive(w, now, BUSY, tp, rng)
             if wants_to_send(w, now, tp):
-                x, y = (float(v) for v in np.clip(w.xy, 0.0, WALK.side_m))
-                tasks = sent(w, now)
-                out = intake.handle(json.dumps({"kind": "task_request", "user_id": w.user_id, "x_m": x, "y_m": y,
-                                                "tasks": tasks, "client_ref": f"{w.user_id}#{w.submitted}"}).encode())
+                request = request_of(w, now, tp, WALK)  # what the simulated user sends
+                x, y = request.x_m, request.y_m
+                out = intake.handle(encode(request))
                 assert isinstance(out, Accepted), out
-                on_ack(w, out.reply, tasks)
+                seen = request.seen_in(1)
+                crossed += seen is not None and out.reply.served_tasks is not None and out.reply.served_tasks > seen
+                on_ack(w, out.reply, request)
         # A user's backlog is its arrivals less what it learnt was served; what it has not
         # learnt yet is all that separates it from the truth. Unless it is about to send
-        # again (it learnt of a service its last request crossed), the service counts the
-        # truth.
+        # again (new tasks, or a service it learnt of since), the service counts the truth,
+        # even after a request that crossed a service (``served_seen``).
         counts = {b.user_id: b.backlog for b in journal.user_backlogs()}
         for w in walkers:
             truth = w.arrived - served_total[w.user_id]
@@ -187,8 +201,10 @@ def test_a_whole_walk_against_the_intake_and_journal_keeps_the_counts_right(tmp_
         assert w.served <= served_total[w.user_id]
         assert w.served_seen == w.served
     learnt = sum(w.served for w in walkers)
-    print(f"\n{sum(w.submitted for w in walkers)} requests, {learnt} of {sum(served_total.values())} served tasks learnt")
+    print(f"\n{sum(w.submitted for w in walkers)} requests ({crossed} crossed a service they had not heard of), "
+          f"{learnt} of {sum(served_total.values())} served tasks learnt")
     assert learnt >= 0.9 * sum(served_total.values())
+    assert crossed > 0  # the race this walk is about happened, and was counted right
 
 
 @pytest.mark.parametrize("law", ["backlog", "redraw"])
@@ -202,6 +218,7 @@ def test_the_same_seed_walks_the_same(law: str) -> None:
                 step(w, 1.0, WALK, rng)
                 arrive(w, float(k), P, tp, rng)
                 if wants_to_send(w, float(k), tp):
-                    on_ack(w, TaskAck(request_id=k + 1, user_id=w.user_id, sortie=1, served_tasks=0), sent(w, float(k)))
+                    on_ack(w, TaskAck(request_id=k + 1, user_id=w.user_id, sortie=1, served_tasks=0),
+                           request_of(w, float(k), tp, WALK))
         return [h for w in ws for h in w.history]
     assert run(5) == run(5) and run(5) != run(6)

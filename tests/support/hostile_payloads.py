@@ -26,6 +26,8 @@ from hypothesis import strategies as st
 from protocol.messages import EventKind, Phase
 
 MAX_PAYLOAD_BYTES = 4096
+MAX_COUNTER = 2 ** 31 - 1
+"""The largest ``sortie`` and ``served_seen`` of a request (docs/PROTOCOL.md)."""
 ID_CHARS = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789_.:-"
 KINDS = ("task_request", "task_ack", "error", "status", "plan", "event", "state", "user_place", "operator_command",
          "operator_reply")
@@ -169,7 +171,10 @@ def valid_message(kind: str, rng: random.Random, side_m: float = 500.0, max_alt_
     if kind == "task_request":
         f.update(user_id=_id(rng), x_m=_float(rng, 0.0, side_m), y_m=_float(rng, 0.0, side_m), tasks=_count(rng, 1000))
         return _optional(rng, f, {"z_m": lambda: _float(rng, 0.0, max_alt_m),
-                                  "client_ref": lambda: rng.choice(["null", _text(rng, 64), _id(rng)])})
+                                  "client_ref": lambda: rng.choice(["null", _text(rng, 64), _id(rng)]),
+                                  "served_seen": lambda: rng.choice(["null", _count(rng, MAX_COUNTER)]),
+                                  "sortie": lambda: rng.choice(["null", dump(rng.randint(1, 10)),
+                                                                dump(MAX_COUNTER)])})
     if kind == "task_ack":
         f.update(request_id=dump(rng.randint(1, 10 ** 9)), user_id=_id(rng))
         return _optional(rng, f, {"accepted_at_s": lambda: _float(rng), "queue_position": lambda: _count(rng),
@@ -321,7 +326,8 @@ def batches(kind: str, size: int) -> st.SearchStrategy[list[Case]]:
 
 # --- the oracle -----------------------------------------------------------------------------------
 _USER_ID = re.compile(r"[A-Za-z0-9_.:\-]{1,64}")
-REQUEST_FIELDS = frozenset({"kind", "schema", "user_id", "x_m", "y_m", "tasks", "z_m", "client_ref"})
+REQUEST_FIELDS = frozenset({"kind", "schema", "user_id", "x_m", "y_m", "tasks", "z_m", "client_ref", "served_seen",
+                            "sortie"})
 
 
 def _within(value: Any, hi: float) -> bool:
@@ -389,8 +395,15 @@ def valid_request(payload: bytes, side_m: float, max_alt_m: float) -> dict[str, 
     ref = data.get("client_ref")
     if ref is not None and (not isinstance(ref, str) or len(ref) > 64 or not _unicode(ref)):
         return None
+    counters = {}
+    for name, lo in (("served_seen", 0), ("sortie", 1)):  # optional; null is not given
+        value = data.get(name)
+        if value is not None and (not isinstance(value, int) or isinstance(value, bool)
+                                  or not lo <= value <= MAX_COUNTER):
+            return None
+        counters[name] = value
     return {"user_id": user, "x_m": float(data["x_m"]), "y_m": float(data["y_m"]),
-            "z_m": float(data.get("z_m", 0.0)), "tasks": tasks, "client_ref": ref}
+            "z_m": float(data.get("z_m", 0.0)), "tasks": tasks, "client_ref": ref, **counters}
 
 
 def field_root(path: str) -> str:
