@@ -1,5 +1,8 @@
 """The demo sortie: vehicle stub, users and service as real processes on loopback, watched
-over zenoh; then the summary, the trajectory figure and the mission file."""
+over zenoh; then the summary, the trajectory figure and the mission file. With ``mavlink``
+the service flies an external autopilot at that address (ArduCopter SITL, a real one)
+instead of the stub; ``config`` is a service configuration to start from (its scenario,
+safety margins and planner settings: docs/sitl-copter.toml for ArduCopter SITL)."""
 
 from __future__ import annotations
 
@@ -7,6 +10,7 @@ import json
 import socket
 import threading
 import time
+import tomllib
 from pathlib import Path
 from typing import Any, Callable
 
@@ -27,34 +31,48 @@ class DemoError(ServiceError):
 
 def run_demo(out: Path, *, users: int = 10, speedup: float = 25.0, budget_ms: float = 150.0,
              backend: str = "pymavlink", flavour: str = "ardupilot", seed: int = 1, timeout_s: float = 180.0,
+             mavlink: str | None = None, config: Path | None = None,
              echo: Callable[[str], None] = print) -> dict[str, Any]:
-    """Fly one sortie; returns the summary (also written to ``out/summary.json``)."""
+    """Fly one sortie; returns the summary (also written to ``out/summary.json``). With
+    ``mavlink`` no stub is started: the service flies the autopilot at that address, and
+    ``speedup`` must be that autopilot's (the users' clock runs at it)."""
     out.mkdir(parents=True, exist_ok=True)
     journal_path = out / "journal.sqlite"
     for stale in (journal_path, out / "journal.sqlite-wal", out / "journal.sqlite-shm"):
         stale.unlink(missing_ok=True)
     zenoh_port, mav_port = free_port(), free_port(socket.SOCK_DGRAM)
     endpoint = f"tcp/127.0.0.1:{zenoh_port}"
-    config = build_config({}, {
-        "zenoh.listen": endpoint, "mavlink.url": f"udpout:127.0.0.1:{mav_port}", "mavlink.backend": backend,
-        "mavlink.flavour": flavour, "mavlink.start_mission": "true", "planner.budget_ms": str(budget_ms),
-        "planner.seed": str(seed), "journal.path": str(journal_path),
-        "planner.min_requests": str(users),  # the first plan sees every user
-    })
-    (out / "planner.toml").write_text(to_toml(config))
-    scenario = config.scenario()
+    try:
+        base = _read_toml(config) if config is not None else {}
+        service_config = build_config(base, {
+            "zenoh.listen": endpoint, "mavlink.url": mavlink or f"udpout:127.0.0.1:{mav_port}",
+            "mavlink.backend": backend, "mavlink.flavour": flavour, "mavlink.start_mission": "true",
+            "planner.budget_ms": str(budget_ms), "planner.seed": str(seed), "journal.path": str(journal_path),
+            "planner.min_requests": str(users),  # the first plan sees every user
+        })
+    except ServiceError as err:  # ConfigError: names the key
+        raise DemoError(f"configuration: {err}") from None
+    config_path = out / "planner.toml"
+    config_path.write_text(to_toml(service_config))
+    scenario = service_config.scenario()
+    scenario_args = service_config.scenario_arguments()  # the users draw from the service's model
     children: list[Child] = []
     statuses: list[Status] = []
     events: list[Event] = []
     landed = threading.Event()
     start = time.monotonic()
     try:
-        echo(f"demo: vehicle stub ({flavour}, x{speedup:g}), service ({backend}, {budget_ms:g} ms), {users} users; "
-             f"logs in {out}")
-        start_vehicle_and_service(
-            out, ["--mavlink", f"udpin:127.0.0.1:{mav_port}", "--flavour", flavour, "--speedup", str(speedup)], children
-        )
-        with PlannerClient([endpoint], config.keys()) as client:
+        vehicle = f"the autopilot at {mavlink}" if mavlink else f"vehicle stub ({flavour}, x{speedup:g})"
+        echo(f"demo: {vehicle}, service ({backend}, {budget_ms:g} ms), {users} users at x{speedup:g}; logs in {out}")
+        if mavlink:
+            service = Child("planner_service", ["serve", "--config", str(config_path)], out / "service.log")
+            children.append(service)
+            service.wait_ready("ready:", 60.0)
+        else:
+            start_vehicle_and_service(
+                out, ["--mavlink", f"udpin:127.0.0.1:{mav_port}", "--flavour", flavour, "--speedup", str(speedup)],
+                children)
+        with PlannerClient([endpoint], service_config.keys()) as client:
             if not client.wait_for_service(20.0):
                 raise DemoError("the service's liveliness token never appeared")
 
@@ -70,7 +88,8 @@ def run_demo(out: Path, *, users: int = 10, speedup: float = 25.0, budget_ms: fl
             client.follow_events(on_event)
             client.follow_status(statuses.append)
             children.append(Child("sim_bridge", ["users", "--count", str(users), "--speedup", str(speedup),
-                                                 "--seed", str(seed), "--connect", endpoint], out / "users.log"))
+                                                 "--seed", str(seed), "--connect", endpoint, *scenario_args],
+                                  out / "users.log"))
             last_print = 0.0
             while not landed.wait(0.2):
                 now = time.monotonic()
@@ -96,11 +115,11 @@ def run_demo(out: Path, *, users: int = 10, speedup: float = 25.0, budget_ms: fl
         summary = sortie_summary(journal, scenario, final_battery)
         summary.update(preset=scenario.name, algo="mcts", backend=backend, flavour=flavour, users=users,
                        speedup=speedup, budget_ms=budget_ms, seed=seed, wall_s=wall, scenario=scenario.as_dict(),
-                       config=str(out / "planner.toml"))
+                       config=str(config_path), autopilot=mavlink or "stub")
         missions = [m for m in journal.missions() if m.result == "accepted" and m.points]
         if missions:
             items = [item_from_dict(i) for i in missions[0].items]
-            (out / "mission.plan").write_text(write_plan(items, flavour, config.origin_point()))  # type: ignore[arg-type]
+            (out / "mission.plan").write_text(write_plan(items, flavour, service_config.origin_point()))  # type: ignore[arg-type]
         requests = journal.requests()
         services = journal.services()
     finally:
@@ -108,6 +127,16 @@ def run_demo(out: Path, *, users: int = 10, speedup: float = 25.0, budget_ms: fl
     (out / "summary.json").write_text(json.dumps(summary, indent=1))
     plot_trajectory(out / "trajectory.png", scenario, statuses, requests, services, summary)
     return summary
+
+
+def _read_toml(path: Path) -> dict[str, Any]:
+    try:
+        with open(path, "rb") as handle:
+            return tomllib.load(handle)
+    except OSError as err:
+        raise DemoError(f"cannot read the configuration {path}: {err.strerror or err}") from None
+    except tomllib.TOMLDecodeError as err:
+        raise DemoError(f"{path} is not valid TOML: {err}") from None
 
 
 def _progress_line(s: Status, events: list[Event], wall_s: float) -> str:
