@@ -54,8 +54,10 @@ def fly(algo: str, seed: int, users: int, speedup: float, budget_ms: float,
     return summary
 
 
-def plan_offline(algo: str, seed: int, users: int, budget_ms: float, echo: Callable[[str], None]) -> dict[str, Any]:
-    scenario = offline_scenario(users)
+def plan_offline(algo: str, seed: int, users: int, budget_ms: float, echo: Callable[[str], None],
+                 scenario: Any = None) -> dict[str, Any]:
+    """The sortie planned offline on ``scenario`` (default: the demo's, ``offline_scenario``)."""
+    scenario = offline_scenario(users) if scenario is None else scenario.replace(num_users=users)
     with contextlib.redirect_stdout(io.StringIO()):
         summary = run_sortie(scenario, algo, seed, PolicySpec(iterations=None, budget_ms=budget_ms))
     echo(f"  offline {algo:7s} seed {seed}: {summary['intervals']} intervals, "

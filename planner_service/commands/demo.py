@@ -2,7 +2,9 @@
 service on loopback, one sortie flown with the stub's speed-up. Progress (served users,
 battery, throughput) on the terminal; summary.json, trajectory.png and mission.plan (the
 first complete mission, QGroundControl format) in --out, with the logs and the journal.
-Every process it starts is stopped, also on error or Ctrl-C."""
+With --mavlink URL no stub is started: the service flies the autopilot there (ArduCopter
+SITL: README, "Flying ArduCopter SITL"). Every process it starts is stopped, also on error
+or Ctrl-C."""
 
 from __future__ import annotations
 
@@ -23,14 +25,18 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--speedup", type=positive_float, default=25.0, help="simulated seconds per wall second (default 25)")
     parser.add_argument("--budget-ms", type=positive_float, default=150.0, help="planner budget per decision (default 150)")
     parser.add_argument("--backend", default="pymavlink", choices=["pymavlink", "mavsdk"], help="MAVLink library")
-    parser.add_argument("--flavour", default="ardupilot", choices=["ardupilot", "px4"], help="autopilot the stub imitates")
+    parser.add_argument("--flavour", default="ardupilot", choices=["ardupilot", "px4"], help="autopilot the stub imitates (with --mavlink: the autopilot's)")
     parser.add_argument("--seed", type=int, default=1, help="seed of the users and the planner (default 1)")
     parser.add_argument("--timeout", type=positive_float, default=180.0, help="give up after this many wall seconds (default 180)")
     parser.add_argument("--algo", default="mcts", choices=("mcts", "greedy", "random", "ts-mcts", "mcts-paper"),
                         help="the planner the service flies (planner.algo; default mcts)")
     parser.add_argument("--mavlink", default=None, metavar="URL", type=_mavlink_url,
                         help="fly the autopilot at this connection string (e.g. tcp:127.0.0.1:5760 for ArduCopter "
-                             "SITL) instead of starting the stub; --speedup is then the autopilot's speed-up")
+                             "SITL) instead of starting the stub; --speedup must be its speed-up")
+    parser.add_argument("--config", default=None, metavar="FILE",
+                        help="service configuration to start from (its [scenario], [safety], [planner]; e.g. "
+                             "docs/sitl-copter.toml for ArduCopter SITL); the demo sets zenoh, the journal and the "
+                             "MAVLink link")
 
 
 def _mavlink_url(text: str) -> str:
@@ -48,8 +54,8 @@ def run(args: argparse.Namespace) -> int:
     out = Path(args.out)
     try:
         summary = run_demo(out, users=args.users, speedup=args.speedup, budget_ms=args.budget_ms, backend=args.backend,
-                           flavour=args.flavour, seed=args.seed, timeout_s=args.timeout, mavlink=args.mavlink, algo=args.algo,
-                           echo=_echo)
+                           flavour=args.flavour, seed=args.seed, timeout_s=args.timeout, mavlink=args.mavlink,
+                           algo=args.algo, config=Path(args.config) if args.config else None, echo=_echo)
     except DemoError as err:
         print(f"demo failed: {err}", file=sys.stderr)
         return 1

@@ -319,6 +319,14 @@ class ServiceConfig:
         except ScenarioError as err:
             raise ConfigError(f"scenario.{err.field}", str(err)) from None
 
+    def scenario_arguments(self) -> list[str]:
+        """The scenario as ``sim_bridge users`` takes it: ``--preset NAME`` and a
+        ``--set NAME=VALUE`` for each override (so the users draw from the same model)."""
+        out = ["--preset", self.scenario_preset]
+        for name, value in self.scenario_overrides:
+            out += ["--set", f"{name}={value if isinstance(value, str) else _text(value)}"]
+        return out
+
     def area(self) -> Area:
         return self.safety.area()
 

@@ -1,5 +1,8 @@
 """The demo sortie: vehicle stub, users and service as real processes on loopback, watched
-over zenoh; then the summary, the trajectory figure and the mission file."""
+over zenoh; then the summary, the trajectory figure and the mission file. With ``mavlink``
+the service flies an external autopilot at that address (ArduCopter SITL, a real one)
+instead of the stub; ``config`` is a service configuration to start from (its scenario,
+safety margins and planner settings: docs/sitl-copter.toml for ArduCopter SITL)."""
 
 from __future__ import annotations
 
@@ -7,6 +10,7 @@ import json
 import socket
 import threading
 import time
+import tomllib
 from pathlib import Path
 from typing import Any, Callable
 
@@ -27,28 +31,34 @@ class DemoError(ServiceError):
 
 def run_demo(out: Path, *, users: int = 10, speedup: float = 25.0, budget_ms: float = 150.0,
              backend: str = "pymavlink", flavour: str = "ardupilot", seed: int = 1, timeout_s: float = 180.0,
-             mavlink: str | None = None, algo: str = "mcts", offline: bool = True,
+             mavlink: str | None = None, config: Path | None = None, algo: str = "mcts", offline: bool = True,
              echo: Callable[[str], None] = print) -> dict[str, Any]:
     """Fly one sortie; returns the summary (also written to ``out/summary.json``). With
-    ``mavlink`` (a connection string) the service flies the autopilot there (SITL or a real
-    one) instead of starting the stub; ``speedup`` is then that autopilot's, for the users'
-    clock. With ``offline`` the same scenario and seed are also planned offline (the model
-    alone, ``bench --flight``'s other half) and the summary says how the flown sortie compares."""
+    ``mavlink`` (a connection string) no stub is started: the service flies the autopilot there
+    (SITL or a real one), and ``speedup`` must be that autopilot's (the users' clock runs at it).
+    With ``offline`` the same scenario and seed are also planned offline (the model alone,
+    ``bench --flight``'s other half) and the summary says how the flown sortie compares."""
     out.mkdir(parents=True, exist_ok=True)
     journal_path = out / "journal.sqlite"
     for stale in (journal_path, out / "journal.sqlite-wal", out / "journal.sqlite-shm"):
         stale.unlink(missing_ok=True)
     zenoh_port, mav_port = free_port(), free_port(socket.SOCK_DGRAM)
     endpoint = f"tcp/127.0.0.1:{zenoh_port}"
-    config = build_config({}, {
-        "zenoh.listen": endpoint, "mavlink.url": mavlink or f"udpout:127.0.0.1:{mav_port}", "mavlink.backend": backend,
-        "mavlink.flavour": flavour, "mavlink.start_mission": "true", "planner.budget_ms": str(budget_ms),
-        "planner.algo": algo,
-        "planner.seed": str(seed), "journal.path": str(journal_path),
-        "planner.min_requests": str(users),  # the first plan sees every user
-    })
-    (out / "planner.toml").write_text(to_toml(config))
-    scenario = config.scenario()
+    try:
+        base = _read_toml(config) if config is not None else {}
+        service_config = build_config(base, {
+            "zenoh.listen": endpoint, "mavlink.url": mavlink or f"udpout:127.0.0.1:{mav_port}",
+            "mavlink.backend": backend, "mavlink.flavour": flavour, "mavlink.start_mission": "true",
+            "planner.budget_ms": str(budget_ms), "planner.algo": algo, "planner.seed": str(seed),
+            "journal.path": str(journal_path),
+            "planner.min_requests": str(users),  # the first plan sees every user
+        })
+    except ServiceError as err:  # ConfigError: names the key
+        raise DemoError(f"configuration: {err}") from None
+    config_path = out / "planner.toml"
+    config_path.write_text(to_toml(service_config))
+    scenario = service_config.scenario()
+    scenario_args = service_config.scenario_arguments()  # the users draw from the service's model
     children: list[Child] = []
     statuses: list[Status] = []
     events: list[Event] = []
@@ -56,11 +66,11 @@ def run_demo(out: Path, *, users: int = 10, speedup: float = 25.0, budget_ms: fl
     start = time.monotonic()
     try:
         vehicle = f"the autopilot at {mavlink}" if mavlink else f"vehicle stub ({flavour}, x{speedup:g})"
-        echo(f"demo: {vehicle}, service ({backend}, {budget_ms:g} ms), {users} users; logs in {out}")
+        echo(f"demo: {vehicle}, service ({backend}, {budget_ms:g} ms), {users} users at x{speedup:g}; logs in {out}")
         stub = None if mavlink else ["--mavlink", f"udpin:127.0.0.1:{mav_port}", "--flavour", flavour,
                                      "--speedup", str(speedup)]
         start_vehicle_and_service(out, stub, children)
-        with PlannerClient([endpoint], config.keys()) as client:
+        with PlannerClient([endpoint], service_config.keys()) as client:
             if not client.wait_for_service(20.0):
                 raise DemoError("the service's liveliness token never appeared")
 
@@ -76,7 +86,8 @@ def run_demo(out: Path, *, users: int = 10, speedup: float = 25.0, budget_ms: fl
             client.follow_events(on_event)
             client.follow_status(statuses.append)
             children.append(Child("sim_bridge", ["users", "--count", str(users), "--speedup", str(speedup),
-                                                 "--seed", str(seed), "--connect", endpoint], out / "users.log"))
+                                                 "--seed", str(seed), "--connect", endpoint, *scenario_args],
+                                  out / "users.log"))
             last_print = 0.0
             while not landed.wait(0.2):
                 now = time.monotonic()
@@ -102,11 +113,11 @@ def run_demo(out: Path, *, users: int = 10, speedup: float = 25.0, budget_ms: fl
         summary = sortie_summary(journal, scenario, final_battery)
         summary.update(preset=scenario.name, algo=algo, backend=backend, flavour=flavour, users=users,
                        speedup=speedup, budget_ms=budget_ms, seed=seed, wall_s=wall, scenario=scenario.as_dict(),
-                       config=str(out / "planner.toml"))
+                       config=str(config_path), autopilot=mavlink or "stub")
         missions = [m for m in journal.missions() if m.result == "accepted" and m.points]
         if missions:
             items = [item_from_dict(i) for i in missions[0].items]
-            (out / "mission.plan").write_text(write_plan(items, flavour, config.origin_point()))  # type: ignore[arg-type]
+            (out / "mission.plan").write_text(write_plan(items, flavour, service_config.origin_point()))  # type: ignore[arg-type]
         requests = journal.requests()
         services = journal.services()
     finally:
@@ -114,7 +125,7 @@ def run_demo(out: Path, *, users: int = 10, speedup: float = 25.0, budget_ms: fl
     if offline:
         from ..bench.flight import plan_offline
 
-        planned = plan_offline(algo, seed, users, budget_ms, lambda _: None)
+        planned = plan_offline(algo, seed, users, budget_ms, lambda _: None, scenario)
         summary["offline"] = {k: planned[k] for k in ("intervals", "throughput_tasks_per_interval", "average_reward",
                                                       "total_tasks")}
         summary["flown_to_offline"] = (summary["throughput_tasks_per_interval"] / planned["throughput_tasks_per_interval"]
@@ -122,6 +133,16 @@ def run_demo(out: Path, *, users: int = 10, speedup: float = 25.0, budget_ms: fl
     (out / "summary.json").write_text(json.dumps(summary, indent=1))
     plot_trajectory(out / "trajectory.png", scenario, statuses, requests, services, summary)
     return summary
+
+
+def _read_toml(path: Path) -> dict[str, Any]:
+    try:
+        with open(path, "rb") as handle:
+            return tomllib.load(handle)
+    except OSError as err:
+        raise DemoError(f"cannot read the configuration {path}: {err.strerror or err}") from None
+    except tomllib.TOMLDecodeError as err:
+        raise DemoError(f"{path} is not valid TOML: {err}") from None
 
 
 def _progress_line(s: Status, events: list[Event], wall_s: float) -> str:

@@ -1,17 +1,22 @@
 """The checker that holds the journal against the vehicle's own log must be able to fail:
-a service longer than the stay, at a point never visited, or a second service on one stay."""
+a service longer than the stay, at a point never visited, or a second service on one stay;
+SITL's dataflash POS records read as the same track, in time order across restarts."""
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 
 from planner_service.model import pack, preset
 from planner_service.service.planning import hold_time_s
-from tests.support.truth import Fix, Recorded, false_services, stays
+from protocol import GeoOrigin, local_to_global
+from tests.support.truth import Fix, Recorded, false_services, sitl_track, stays
 
 SCENARIO = preset("field")
 P = (120.0, 200.0, 100.0)
 USER = (130.0, 190.0, 0.0)
+ORIGIN = GeoOrigin()
 
 
 def track() -> list[Fix]:
@@ -43,3 +48,29 @@ def test_what_the_log_bears_out_and_what_it_does_not() -> None:
     assert "never came" in why
     twice = [ok, Recorded(3, "a", 1, P, USER)]
     assert len(false_services(twice, track(), SCENARIO, 5.0, 1.0)) == 1, "one stay, one service"
+
+
+def pos(time_us: int, xyz: tuple[float, float, float]) -> dict[str, object]:
+    """A dataflash POS record as ``Sitl.read_log`` gives it, at local ``xyz`` of the origin."""
+    lat, lon, alt = local_to_global(ORIGIN, *xyz)
+    return {"mavpackettype": "POS", "TimeUS": time_us, "Lat": lat, "Lng": lon, "Alt": alt,
+            "RelHomeAlt": xyz[2], "RelOriginAlt": xyz[2]}
+
+
+def test_sitl_track_reads_pos_in_local_metres_and_keeps_time_going_across_a_restart() -> None:
+    """Two boots (the second log's clock starts again): the fixes stay in time order, so a
+    stay before the restart cannot bear out a service after it, nor the other way round."""
+    first = [pos(int(t * 1e6), (120.0 + 10 * min(t - 10, 0), 200.0, 100.0)) for t in range(0, 41)]
+    second = [pos(int(t * 1e6), (0.0, 0.0, 0.0)) for t in range(2, 20)]
+    log = [*first, {"mavpackettype": "MSG", "TimeUS": 5, "Message": "x"}, *second]
+    fixes = sitl_track(log, ORIGIN)
+    assert len(fixes) == len(first) + len(second)
+    assert all(b.time_s > a.time_s for a, b in zip(fixes, fixes[1:]))
+    assert math.dist(fixes[0].xyz, (20.0, 200.0, 100.0)) < 1e-3 and fixes[0].time_s == 0.0
+    assert math.dist(fixes[25].xyz, P) < 1e-3 and fixes[25].time_s == 25.0
+    assert stays(fixes, P, 5.0) == [(10.0, 40.0)]
+    assert stays(fixes, (0.0, 0.0, 0.0), 1.0)[0][0] > 40.0  # the second boot comes after
+    ok = Recorded(1, "a", tasks_for(29.0), P, USER)
+    assert false_services([ok], fixes, SCENARIO, 5.0, 1.0) == []
+    at_home = Recorded(2, "b", 1, (0.0, 0.0, 0.0), USER)
+    assert false_services([at_home, ok], fixes, SCENARIO, 5.0, 1.0), "order kept: home was after P"

@@ -6,8 +6,9 @@ Where the binary is: ``ARDUPILOT_SITL`` in the environment, else
 without it. Each SITL runs in its own temporary folder (it writes ``eeprom.bin`` and
 ``logs/`` where it starts) with its own instance number (``-I N``: its TCP ports are
 5760 + 10 N for SERIAL0, 5762 + 10 N for SERIAL1, 5763 + 10 N for SERIAL2), on loopback
-only, started from ``copter.parm`` beside the binary with ``--home`` at the service's
-default ``[origin]``, and always stopped with SIGTERM (SIGKILL if it lingers).
+only, started from ``copter.parm`` beside the binary (then any ``defaults`` files, e.g.
+docs/sitl-copter.parm) with ``--home`` at the service's default ``[origin]``, and always
+stopped with SIGTERM (SIGKILL if it lingers).
 
 SITL runs only once something connects to SERIAL0: the harness keeps a monitor connection
 there (source 254/191; it sends a heartbeat a second, since ArduPilot sends STATUSTEXT only
@@ -38,7 +39,8 @@ ENV = "ARDUPILOT_SITL"
 HOME = "47.397742,8.545594,488,0"
 """The service's default [origin] (protocol.geodesy), heading north."""
 INSTANCES = range(10, 20)
-"""Instance numbers for these tests (other suites use other ranges)."""
+"""Instance numbers for these tests (other suites use other ranges: the whole sorties of
+tests/service/test_sortie_sitl.py take 30..39)."""
 SPEEDUP = 10
 READY_TEXT = re.compile(r"EKF3 IMU0 is using GPS")
 
@@ -74,13 +76,13 @@ def _free(port: int) -> bool:
     return True
 
 
-def free_instance() -> int:
-    """An instance number in ``INSTANCES`` whose ports 5760..5763 + 10 N are all free."""
-    for instance in INSTANCES:
+def free_instance(instances: range = INSTANCES) -> int:
+    """An instance number in ``instances`` whose ports 5760..5763 + 10 N are all free."""
+    for instance in instances:
         base = ports(instance)[0]
         if all(_free(p) for p in range(base, base + 4)):
             return instance
-    raise RuntimeError(f"no free SITL instance in {INSTANCES.start}..{INSTANCES.stop - 1}")
+    raise RuntimeError(f"no free SITL instance in {instances.start}..{instances.stop - 1}")
 
 
 @dataclass
@@ -93,6 +95,8 @@ class Sitl:
     speedup: int = SPEEDUP
     serials: dict[int, str] = field(default_factory=dict)
     """SITL's ``--serialN`` devices, e.g. {1: "udpclient:127.0.0.1:14550"} (default: TCP)."""
+    defaults: tuple[Path, ...] = ()
+    """Parameter files loaded after ``copter.parm`` (e.g. docs/sitl-copter.parm)."""
     proc: subprocess.Popen[bytes] | None = None
     texts: list[tuple[float, str]] = field(default_factory=list)
     _stop: threading.Event = field(default_factory=threading.Event)
@@ -114,8 +118,10 @@ class Sitl:
         defaults = self.binary.parent / "copter.parm"
         args = [str(self.binary), "--model", "+", "--speedup", str(self.speedup), "--home", HOME,
                 "-I", str(self.instance)]
-        if defaults.is_file():
-            args += ["--defaults", str(defaults)]
+        files = [str(defaults)] if defaults.is_file() else []
+        files += [str(path) for path in self.defaults]
+        if files:
+            args += ["--defaults", ",".join(files)]  # SITL loads them in this order
         for number, device in sorted(self.serials.items()):
             args += [f"--serial{number}", device]
         self._boots += 1

@@ -1,8 +1,8 @@
 """What the vehicle really flew against what the service recorded: a service counts only if
-the vehicle's own position log (the stub's ``--track``, SITL's dataflash POS) shows it
-within ``radius_m`` of the service's hovering point for as long as the upload recorded
-needs, less a stated tolerance (the service judges holds from position reports a reporting
-gap apart, and ArduPilot holds whole seconds).
+the vehicle's own position log (the stub's ``--track``, ``stub_track``; SITL's dataflash POS
+messages, ``sitl_track``) shows it within ``radius_m`` of the service's hovering point for
+as long as the upload recorded needs, less a stated tolerance (the service judges holds from
+position reports a reporting gap apart, and ArduPilot holds whole seconds).
 
 ``false_services`` returns a line for each service the log does not bear out; an empty
 list is the pass. Services are matched in order to the vehicle's stays at their points, one
@@ -14,12 +14,13 @@ import math
 import sqlite3
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Iterable, Sequence
+from typing import Any, Iterable, Mapping, Sequence
 
 import numpy as np
 
 from planner_service.model import Scenario, pack
 from planner_service.service.planning import hold_time_s
+from protocol import GeoOrigin, global_to_local
 
 
 @dataclass(frozen=True)
@@ -100,3 +101,25 @@ def stub_track(path: Path) -> list[Fix]:
     from sim_bridge.vehicle.track import read_track
 
     return [Fix(p.time_s, p.xyz) for p in read_track(path)]
+
+
+def sitl_track(log_messages: Iterable[Mapping[str, Any]], origin: GeoOrigin) -> list[Fix]:
+    """ArduPilot's own flight from its dataflash POS messages (``Sitl.read_log``, oldest
+    first; other kinds are skipped), local metres from ``origin`` (the service's, which is
+    SITL's ``--home``), the height above home as the service takes it (RelHomeAlt, as
+    GLOBAL_POSITION_INT's relative altitude). Times are the autopilot's clock (TimeUS); a
+    restarted autopilot counts from 0 again in a new log, so each boot's times are moved
+    on past the last one's (``false_services`` matches services to stays in time order)."""
+    fixes: list[Fix] = []
+    offset = 0.0
+    last = -math.inf
+    for m in log_messages:
+        if m.get("mavpackettype") != "POS":
+            continue
+        t = m["TimeUS"] / 1e6 + offset
+        if t < last:  # a new boot: its clock starts again
+            offset = last + 1.0 - m["TimeUS"] / 1e6
+            t = last + 1.0
+        last = t
+        fixes.append(Fix(t, global_to_local(origin, m["Lat"], m["Lng"], origin.alt_m + m["RelHomeAlt"])))
+    return fixes
