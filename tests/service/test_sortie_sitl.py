@@ -43,19 +43,19 @@ from typing import Any, Callable
 
 import numpy as np
 import pytest
-from stack import Stack
+from tests.support.stack import Stack
 
 from planner_service.mcts import MctsConfig
 from planner_service.model import Scenario
 from planner_service.policy import PolicySpec
 from planner_service.service.config import ServiceConfig, load_config
 from planner_service.service.planning import Planner
-from planner_service.service.report import fairness_violations
+from planner_service.model.fairness import fairness_violations
 from planner_service.service.sortie import item_from_dict
 from planner_service.sortie import run_sortie
 from protocol import validate_mission
 from protocol.mission import NAV_RTL, max_points
-from support.sitl import Sitl, free_instance, read_dataflash
+from tests.support.sitl import Sitl, free_instance, read_dataflash
 from tests.support.truth import false_services, recorded_services, sitl_track
 
 pytestmark = [pytest.mark.sitl, pytest.mark.timeout(300)]
