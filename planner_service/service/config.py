@@ -324,7 +324,7 @@ class ServiceConfig:
         ``--set NAME=VALUE`` for each override (so the users draw from the same model)."""
         out = ["--preset", self.scenario_preset]
         for name, value in self.scenario_overrides:
-            out += ["--set", f"{name}={value if isinstance(value, str) else _text(value)}"]
+            out += ["--set", f"{name}={value if isinstance(value, str) else toml_value(value)}"]
         return out
 
     def area(self) -> Area:

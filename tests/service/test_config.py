@@ -125,6 +125,20 @@ def test_scenario_overrides_are_values_of_their_fields_type() -> None:
     assert err.value.key == "scenario.task_model"
 
 
+def test_the_users_draw_from_the_services_scenario() -> None:
+    # ``sim_bridge users`` is given the service's scenario as --preset and --set texts: read back,
+    # they are the scenario the service plans on, field for field.
+    from planner_service.model import preset
+
+    c = build_config({"scenario": {"speed_mps": 12.5, "allow_stay": True, "hover_power_w": 354}},
+                     {"scenario.num_users": "4"})
+    args = c.scenario_arguments()
+    assert args[:2] == ["--preset", c.scenario_preset]
+    sets = [args[i + 1] for i in range(2, len(args), 2) if args[i] == "--set"]
+    assert len(sets) == len(c.scenario_overrides)
+    assert preset(args[1]).with_overrides(sets) == c.scenario()
+
+
 @pytest.mark.parametrize("text, value", [("true", True), ("Yes", True), ("on", True), ("1", True),
                                          ("false", False), ("no", False), ("OFF", False), ("0", False)])
 def test_the_same_booleans_for_the_service_and_the_scenario(text: str, value: bool) -> None:
