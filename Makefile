@@ -3,6 +3,8 @@ PYTHON ?= python3
 VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
+# Test processes (pytest-xdist); each test file runs whole in one of them.
+JOBS ?= 2
 
 .PHONY: demo test bench venv clean
 
@@ -18,7 +20,7 @@ demo: $(STAMP)
 	$(PY) -m planner_service demo --out demo-out
 
 test: $(STAMP)
-	$(PY) -m pytest -q
+	$(PY) -m pytest -q -n $(JOBS) --dist loadfile
 
 bench: $(STAMP)
 	$(PY) -m planner_service bench

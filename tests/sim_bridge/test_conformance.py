@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import math
 import os
-import socket
 import subprocess
 import sys
 import time
@@ -32,12 +31,12 @@ from planner_service.service.processes import free_port
 from protocol.geodesy import GeoOrigin
 from protocol.mission import MissionItem
 from tests.support.gcs import M, GroundStation
-from tests.support.sitl import Sitl
+from tests.support.sitl import Sitl, free_instance
 
 REPO = Path(__file__).resolve().parents[2]
 ORIGIN = GeoOrigin()
 SPEEDUP = 10
-SITL_INSTANCES = tuple(range(22, 30))
+SITL_INSTANCES = range(22, 30)
 """This file's SITL instance numbers (ports 5980-6050): the first free one is used."""
 TARGETS = ["stub", pytest.param("sitl", marks=pytest.mark.sitl)]
 STREAMED = {"GLOBAL_POSITION_INT", "LOCAL_POSITION_NED", "SYS_STATUS", "ATTITUDE", "GPS_RAW_INT",
@@ -45,18 +44,6 @@ STREAMED = {"GLOBAL_POSITION_INT", "LOCAL_POSITION_NED", "SYS_STATUS", "ATTITUDE
 DLAT = 1e7 / 111_132.0
 DLON = 1e7 / (111_320.0 * math.cos(math.radians(ORIGIN.lat_deg)))
 LAT, LON = round(ORIGIN.lat_deg * 1e7), round(ORIGIN.lon_deg * 1e7)
-
-
-def port_free(port: int) -> bool:
-    """Nothing listens on ``port`` (a port in TIME_WAIT after the last SITL counts as free:
-    SITL binds with SO_REUSEADDR)."""
-    with socket.socket() as sock:
-        sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-        try:
-            sock.bind(("127.0.0.1", port))
-        except OSError:
-            return False
-    return True
 
 
 @dataclass
@@ -93,11 +80,7 @@ def start_stub(tmp: Path) -> Autopilot:
 def start_sitl(make_sitl: Callable[..., Sitl], speedup: int) -> Autopilot:
     """SITL from the shared harness (tests/support/sitl.py: its own folder, SIGTERM at the
     end), on one of this file's instance numbers; the ground station uses SERIAL1."""
-    instance = next((i for i in SITL_INSTANCES if all(port_free(p) for p in range(5760 + 10 * i, 5764 + 10 * i))),
-                    None)
-    if instance is None:
-        pytest.skip(f"SITL instances {SITL_INSTANCES} all busy")
-    sitl = make_sitl(instance=instance, speedup=speedup)
+    sitl = make_sitl(instance=free_instance(SITL_INSTANCES), speedup=speedup)
     return Autopilot("sitl", sitl.url(1), lambda: None)  # make_sitl stops it
 
 

@@ -20,11 +20,13 @@ so a test can hold what the link reported against where the vehicle really was.
 
 from __future__ import annotations
 
+import fcntl
 import os
 import re
 import signal
 import socket
 import subprocess
+import tempfile
 import threading
 import time
 from dataclasses import dataclass, field
@@ -67,22 +69,44 @@ def ports(instance: int) -> tuple[int, int, int]:
 
 
 def _free(port: int) -> bool:
+    """Nothing is bound to ``port`` (TCP or UDP). A TCP port in TIME_WAIT after the last SITL
+    counts as free: SITL binds with SO_REUSEADDR."""
     for kind in (socket.SOCK_STREAM, socket.SOCK_DGRAM):
         with socket.socket(socket.AF_INET, kind) as sock:
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
             try:
-                sock.bind(("0.0.0.0", port))
+                sock.bind(("127.0.0.1", port))
             except OSError:
                 return False
     return True
 
 
+_RESERVED: dict[int, Any] = {}
+"""Instances this process holds (an open, locked file each): a test run split over
+processes (pytest-xdist) never hands one instance to two SITLs started at the same time."""
+
+
 def free_instance(instances: range = INSTANCES) -> int:
-    """An instance number in ``instances`` whose ports 5760..5763 + 10 N are all free."""
+    """An instance number in ``instances`` whose ports 5760..5763 + 10 N are all free and
+    that no other process of the test run holds (it stays this process's until it exits)."""
     for instance in instances:
+        if instance not in _RESERVED and not _reserve(instance):
+            continue
         base = ports(instance)[0]
         if all(_free(p) for p in range(base, base + 4)):
             return instance
     raise RuntimeError(f"no free SITL instance in {instances.start}..{instances.stop - 1}")
+
+
+def _reserve(instance: int) -> bool:
+    handle = open(Path(tempfile.gettempdir()) / f"uav-planner-sitl-{instance}.lock", "w")
+    try:
+        fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError:
+        handle.close()
+        return False
+    _RESERVED[instance] = handle
+    return True
 
 
 @dataclass
