@@ -43,7 +43,6 @@ from typing import Any, Callable
 
 import numpy as np
 import pytest
-from tests.support.stack import Stack
 
 from planner_service.mcts import MctsConfig
 from planner_service.model import Scenario
@@ -55,7 +54,9 @@ from planner_service.service.sortie import item_from_dict
 from planner_service.sortie import run_sortie
 from protocol import validate_mission
 from protocol.mission import NAV_RTL, max_points
+from tests.support.gcs import M, GroundStation
 from tests.support.sitl import Sitl, free_instance, read_dataflash
+from tests.support.stack import Stack
 from tests.support.truth import false_services, recorded_services, sitl_track
 
 pytestmark = [pytest.mark.sitl, pytest.mark.timeout(300)]
@@ -77,6 +78,8 @@ autopilot's clock, and recorded whole when it came within 0.5 s of what the requ
 (sortie/machine.py ``_judge``): a stay that short of the need by up to 0.7 s is the
 service's rounding, not a false service."""
 FAILSAFE = re.compile(r"(?i)failsafe|Battery \d is (low|critical)")
+LOITER, LAND = 5, 9
+"""ArduCopter's custom modes."""
 LOG_TIME = re.compile(r"^(\d{4}-\d\d-\d\d \d\d:\d\d:\d\d,\d{3}) ")
 
 
@@ -301,3 +304,50 @@ def test_sitl_killed_and_restarted_mid_flight(copter: Sitl, stack: Stack, backen
           f"{since(read_at)}, sortie 1 over ({why}) {since(over_at)}, position {since(position_at)}, sortie 2 begun "
           f"{since(begun_at)}, its first upload {since(upload_at)}, its first service {since(served_at)}; "
           f"{services} services in both sorties, 0 false; the cut hold recorded as {cut or 'nothing'}")
+
+
+def test_a_pilots_loiter_ends_the_authority_and_after_the_pilots_landing_nothing_arms(copter: Sitl,
+                                                                                       stack: Stack) -> None:
+    """The pilot always wins on the real autopilot (tests/service/test_pilot_wins.py on the
+    stub): in a sortie the service started, a pilot on SERIAL2 switches SITL to LOITER; the
+    service's authority ends, it commands no mode while the users go on asking; the pilot
+    lands, and the service arms nothing. SITL's own log is the judge: after the
+    pilot's LOITER its modes are the pilot's LOITER and LAND alone, it is armed no more,
+    and every service recorded was flown."""
+    sitl = copter
+    config = fly(stack, sitl, "pymavlink")
+    client = stack.client
+    assert client is not None
+    stack.wait_event(lambda e: e.event == "user_served", 150.0, "a first service")
+    assert client.state().status.authority == "operator"
+    gcs = GroundStation(sitl.url(2))
+    try:
+        gcs.wait_vehicle()
+        assert gcs.set_mode(LOITER) == M.MAV_RESULT_ACCEPTED
+        revoked = stack.wait_event(lambda e: e.event == "authority_revoked", 15.0, "the end of the authority")
+        assert "LOITER" in revoked.detail and "not commanded by the service" in revoked.detail, revoked.detail
+        assert client.state().status.authority == "revoked"
+        time.sleep(3.0)  # 30 s of SITL's time: the users go on asking, the service goes on planning
+        assert gcs.set_mode(LAND) == M.MAV_RESULT_ACCEPTED
+    finally:
+        gcs.close()
+    landed = stack.wait_event(lambda e: e.event == "landed", 120.0, "the pilot's landing")
+    assert "sortie 1" in landed.detail, landed.detail
+    time.sleep(3.0)  # the users go on asking: no arming, no command
+    status = client.state().status  # on the ground until a fresh battery; then a sortie without authority
+    assert status.phase == "landed" and status.authority == "revoked", status
+    assert "the operator's start is awaited" in status.authority_detail, status
+    for child in reversed(stack.children):
+        assert child.stop() == 0, f"{child.name}: {child.log()[-2000:]}"
+    sitl.stop()  # flushes the dataflash log
+
+    log = sitl.read_log(("MODE", "ARM"))
+    modes = [m["Mode"] for m in log if m["mavpackettype"] == "MODE"]
+    took_over = max(i for i, m in enumerate(log) if m["mavpackettype"] == "MODE" and m["Mode"] == LOITER)
+    after = log[took_over:]
+    assert [m["Mode"] for m in after if m["mavpackettype"] == "MODE"] == [LOITER, LAND], modes
+    assert [m["ArmState"] for m in after if m["mavpackettype"] == "ARM"] == [0], log
+    services, _ = check_truth(stack, sitl, config)
+    assert services >= 1
+    print(f"\npilot on SITL: modes {modes}, authority ended by {revoked.detail!r}; {services} services, 0 false; "
+          "no command of the service after the pilot's LOITER")

@@ -1,0 +1,79 @@
+"""The pilot always wins, with real processes on loopback: mid-sortie a pilot on a second
+ground station switches the vehicle to LOITER. The service's authority ends at once (an
+``authority_revoked`` event naming the mode, status ``revoked``), and from then on it
+commands no mode and no arming while the users go on asking; the pilot lands, and the
+service arms nothing (the next sortie, once the battery is fresh, begins without authority:
+``test_sortie_logic.py``). The vehicle's own log
+is the judge (its mode changes and arming, its track against the services recorded); the
+same test on ArduCopter SITL is in ``test_sortie_sitl.py``."""
+
+from __future__ import annotations
+
+import re
+import time
+
+import pytest
+
+from planner_service.service.config import load_config
+from tests.support.gcs import M, GroundStation
+from tests.support.sortie_checks import HOLD_RADIUS_M, TOLERANCE_S
+from tests.support.stack import Stack
+from tests.support.truth import false_services, recorded_services, stub_track
+
+SPEEDUP = "25"
+LOITER, LAND = 5, 9
+"""ArduCopter's custom modes (the stub's ArduPilot flavour)."""
+MODE = re.compile(r"\bmode (\w+)")
+"""The stub's mode: logged on each change and after each command it accepts."""
+COMMAND = re.compile(r"command (\d+) (?:accepted|refused)")
+ARMED = re.compile(r"(?<!dis)armed at t=")
+
+
+def flight_commands(text: str) -> list[str]:
+    """The commands the stub took, but the telemetry requests a link sends on every
+    connection (SET_MESSAGE_INTERVAL 511, REQUEST_MESSAGE 512)."""
+    return [c for c in COMMAND.findall(text) if c not in ("511", "512")]
+
+
+@pytest.mark.timeout(180)
+@pytest.mark.parametrize("backend", ["pymavlink", "mavsdk"])
+def test_a_pilots_loiter_ends_the_authority_and_after_the_pilots_landing_nothing_arms(stack: Stack,
+                                                                                       backend: str) -> None:
+    vehicle = stack.vehicle("--speedup", SPEEDUP)
+    stack.service(mavlink__start_mission="true", mavlink__backend=backend, planner__min_requests="5")
+    stack.users("--count", "10", "--speedup", SPEEDUP, "--seed", "1")
+    client = stack.client
+    assert client is not None
+    stack.wait_event(lambda e: e.event == "user_served", 90.0, "a first service")
+    assert client.state().status.authority == "operator"
+
+    gcs = GroundStation(f"udpout:127.0.0.1:{stack.mav_port}")
+    try:
+        gcs.wait_vehicle()
+        assert gcs.set_mode(LOITER) == M.MAV_RESULT_ACCEPTED
+        revoked = stack.wait_event(lambda e: e.event == "authority_revoked", 10.0, "the end of the authority")
+        assert "LOITER" in revoked.detail and "not commanded by the service" in revoked.detail, revoked.detail
+        assert client.state().status.authority == "revoked"
+        time.sleep(3.0)  # 75 s of the vehicle's time: the users go on asking, the service goes on planning
+        assert gcs.set_mode(LAND) == M.MAV_RESULT_ACCEPTED
+    finally:
+        gcs.close()
+    landed = stack.wait_event(lambda e: e.event == "landed", 60.0, "the pilot's landing")
+    assert "sortie 1" in landed.detail, landed.detail
+    time.sleep(3.0)  # the users go on asking: no arming, no command
+
+    log = vehicle.log()
+    after = log[log.rindex("command 176 accepted; mode LOITER"):]  # the pilot's
+    assert flight_commands(after) == ["176", "176"], after[-3000:]  # the pilot's LOITER and LAND, no other
+    assert MODE.findall(after) == ["LOITER", "LAND"], after[-3000:]
+    assert re.search(r"disarmed \(\w+\) at", after), after[-3000:]
+    assert not ARMED.search(after), after[-3000:]
+    status = client.state().status  # on the ground until a fresh battery; then a sortie without authority
+    assert status.phase == "landed" and status.authority == "revoked", status
+    assert "the operator's start is awaited" in status.authority_detail, status
+
+    # What was recorded before the pilot took over was flown, the hold the LOITER cut included.
+    recorded = recorded_services(stack.journal_path)
+    assert recorded
+    false = false_services(recorded, stub_track(stack.track), load_config(stack.tmp / "planner.toml").scenario(), HOLD_RADIUS_M, TOLERANCE_S)
+    assert not false, "\n".join(false)
