@@ -67,10 +67,11 @@ class WalkParams:
 class TaskParams:
     """How tasks arrive and when a user speaks (simulated seconds, metres)."""
 
-    interval_s: float = 90.0
-    """One interval of the model, in simulated seconds: about what a flown interval of the
-    field preset lasts (a flight between hovering points and a hold); the longest silence
-    of a user with tasks."""
+    interval_s: float = 55.0
+    """One interval of the model, in simulated seconds, so that tasks arrive in time as the
+    planner's futures have them arrive per interval: the field preset's interval lasts 55.5 s
+    on average as the model flies it (a hold and a flight; mcts, seeds 1-6, docs/MODEL.md
+    "Task models"). Also the longest silence of a user with tasks."""
     law: Law = "backlog"
     backlog_max: int = 20
     """The most tasks a user holds (``backlog``); arrivals beyond it are lost."""

@@ -24,10 +24,10 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--count", type=positive_int, default=10, help="number of users (default 10)")
     parser.add_argument("--preset", default="field", help="scenario preset: area, layout and task draws (default field)")
     parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE", help="override a scenario field")
-    parser.add_argument("--interval", type=positive_float, default=90.0,
-                        help="simulated seconds of one interval of the model (about a flown interval of the field "
-                             "preset: a flight and a hold), and the longest a user with tasks stays silent "
-                             "(default 90)")
+    parser.add_argument("--interval", type=positive_float, default=55.0,
+                        help="simulated seconds of one interval of the model: arrivals come once an interval "
+                             "(the field preset's interval lasts about 55 s: a hold and a flight), and a user "
+                             "with tasks speaks at least this often (default 55)")
     parser.add_argument("--tasks", choices=("backlog", "redraw"), default="backlog",
                         help="backlog (default; the model's task_model = backlog): a first backlog drawn N(mean, "
                              "phi^2), then each interval Poisson(task_arrival_mean) new tasks (capped at "
