@@ -13,6 +13,8 @@ Both backends share ``state.VehicleState`` (trust, telemetry, the judgements) an
 from __future__ import annotations
 
 import abc
+import asyncio
+import time
 from dataclasses import dataclass, field
 from typing import Callable, Sequence
 
@@ -59,6 +61,28 @@ class VehicleLink(abc.ABC):
         self.state = VehicleState(settings.flavour, self._emit, link_timeout_s=settings.link_timeout_s)
         self.generation = 0
         """Which mission the vehicle holds, as far as this link knows (see ``events``)."""
+        self._current: tuple[int, int] | None = None
+        """(generation, seq) of the latest MISSION_CURRENT about the mission held."""
+        self._current_moved = asyncio.Event()
+        """Set by the backend on each MISSION_CURRENT it records in ``_current``."""
+
+    async def _wait_current(self, timeout_s: float, want: int | None = None) -> int | None:
+        """The vehicle's current item of the mission held, as its next MISSION_CURRENT (or
+        the latest already heard of this generation, unless ``want`` is not it yet) says
+        within ``timeout_s``; None when none came."""
+        deadline = time.monotonic() + timeout_s
+        while True:
+            seen = self._current
+            if seen is not None and seen[0] == self.generation and (want is None or seen[1] == want):
+                return seen[1]
+            remaining = deadline - time.monotonic()
+            if remaining <= 0:
+                return seen[1] if seen is not None and seen[0] == self.generation else None
+            self._current_moved.clear()
+            try:
+                await asyncio.wait_for(self._current_moved.wait(), remaining)
+            except TimeoutError:
+                pass
 
     def _emit(self, event: LinkEvent) -> None:
         self.on_event(event)

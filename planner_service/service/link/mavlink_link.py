@@ -112,9 +112,6 @@ class PymavlinkLink(VehicleLink):
         self._unsorted: list[Any] = []
         """Progress reports that came while ``_commit_possible``: sorted when the upload ends."""
         self._generation_on_download = True
-        self._current: tuple[int, int] | None = None
-        """(generation, seq) of the latest MISSION_CURRENT about the mission held."""
-        self._current_moved = asyncio.Event()
         self._acks: dict[int, asyncio.Future[int]] = {}
         self._mission_lock = asyncio.Lock()
         self._command_lock = asyncio.Lock()
@@ -551,24 +548,6 @@ class PymavlinkLink(VehicleLink):
         async with self._mission_lock:
             self._check_link("set_current()")
             await self._ensure_current(seq, wait_for_report=False)
-
-    async def _wait_current(self, timeout_s: float, want: int | None = None) -> int | None:
-        """The vehicle's current item of the mission held, as its next MISSION_CURRENT (or
-        the latest already heard of this generation, unless ``want`` is not it yet) says
-        within ``timeout_s``; None when none came."""
-        deadline = time.monotonic() + timeout_s
-        while True:
-            seen = self._current
-            if seen is not None and seen[0] == self.generation and (want is None or seen[1] == want):
-                return seen[1]
-            remaining = deadline - time.monotonic()
-            if remaining <= 0:
-                return seen[1] if seen is not None and seen[0] == self.generation else None
-            self._current_moved.clear()
-            try:
-                await asyncio.wait_for(self._current_moved.wait(), remaining)
-            except TimeoutError:
-                pass
 
     async def _ensure_current(self, seq: int, *, wait_for_report: bool, restart: bool = False) -> None:
         """Make the vehicle fly ``seq``: nothing when its MISSION_CURRENT already says so (a

@@ -112,8 +112,6 @@ class MavsdkLink(VehicleLink):
         self._upload_lock = asyncio.Lock()
         self._expect_total: int | None = None
         """After an upload: the mission's size, which a MISSION_CURRENT about it reports."""
-        self._current: tuple[int, int] | None = None
-        self._current_moved = asyncio.Event()
         self._connected = asyncio.Event()
         self._inflight: set[asyncio.Future[Any]] = set()
         """MAVSDK calls running in executor threads: a cancelled task leaves them running, and
@@ -332,21 +330,6 @@ class MavsdkLink(VehicleLink):
         async with self._upload_lock:
             self._check_link("set_current()")
             await self._ensure_current(seq, wait_for_report=False)
-
-    async def _wait_current(self, timeout_s: float, want: int | None = None) -> int | None:
-        deadline = time.monotonic() + timeout_s
-        while True:
-            seen = self._current
-            if seen is not None and seen[0] == self.generation and (want is None or seen[1] == want):
-                return seen[1]
-            remaining = deadline - time.monotonic()
-            if remaining <= 0:
-                return seen[1] if seen is not None and seen[0] == self.generation else None
-            self._current_moved.clear()
-            try:
-                await asyncio.wait_for(self._current_moved.wait(), remaining)
-            except TimeoutError:
-                pass
 
     async def _ensure_current(self, seq: int, *, wait_for_report: bool, restart: bool = False) -> None:
         """As the pymavlink backend: nothing when MISSION_CURRENT already says ``seq``, else
