@@ -44,7 +44,12 @@ EVENT_SCHEMA_VERSION = 2
 """``event``'s layout: 2 added the kinds of the sortie logic (waypoint_skipped,
 upload_abandoned, command_failed, authority_*, degraded)."""
 MAX_PAYLOAD_BYTES = 4096
-"""A request is a few hundred bytes; anything larger is refused before parsing."""
+"""A request is a few hundred bytes; anything larger is refused before parsing. The bound
+of every message but the two with lists (``MAX_BYTES`` of each type)."""
+MAX_PLAN_BYTES = 64 * 1024
+"""A plan of ``MAX_PLAN_POINTS`` points with the longest user ids: 34 123 bytes."""
+MAX_STATE_BYTES = 4 * 1024 * 1024
+"""A state of 10 000 pending requests (its list's bound) and the longest plan: 1.85 MB."""
 MAX_TASKS = 1000
 """Upper bound of a request's task count (the model's u_max is 20; this is a sanity cap)."""
 MAX_PLAN_POINTS = 200
@@ -84,6 +89,8 @@ class _Message(
 ):
     LAYOUT: ClassVar[int] = SCHEMA_VERSION
     """The layout version this type writes and reads."""
+    MAX_BYTES: ClassVar[int] = MAX_PAYLOAD_BYTES
+    """The largest payload ``decode`` reads as this type (refused before parsing)."""
     schema: int = SCHEMA_VERSION
     """Layout version; a payload without it is read as the receiver's version of its type."""
 
@@ -228,6 +235,8 @@ class PlanPoint(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
 class Plan(_Message, tag="plan"):
     """The current plan: hovering points in flying order, then return to launch."""
 
+    MAX_BYTES: ClassVar[int] = MAX_PLAN_BYTES
+
     plan_id: Count = 0
     time_s: float = 0.0
     points: Annotated[list[PlanPoint], msgspec.Meta(max_length=MAX_PLAN_POINTS)] = []
@@ -262,6 +271,7 @@ class State(_Message, tag="state"):
     """The reply of the state queryable: status, plan and what is still pending."""
 
     LAYOUT: ClassVar[int] = STATUS_SCHEMA_VERSION
+    MAX_BYTES: ClassVar[int] = MAX_STATE_BYTES
     schema: int = STATUS_SCHEMA_VERSION
     status: Status = Status()
     plan: Plan | None = None
@@ -331,8 +341,9 @@ def decode(payload: bytes | bytearray | memoryview | str, kind: Any, area: Area 
         except UnicodeEncodeError:
             raise ProtocolError("payload", "is not valid Unicode (a lone surrogate)") from None
     data = bytes(payload)
-    if len(data) > MAX_PAYLOAD_BYTES:
-        raise ProtocolError("payload", f"{len(data)} bytes exceeds the limit of {MAX_PAYLOAD_BYTES}")
+    limit = kind.MAX_BYTES if isinstance(kind, type) and issubclass(kind, _Message) else MAX_PAYLOAD_BYTES
+    if len(data) > limit:
+        raise ProtocolError("payload", f"{len(data)} bytes exceeds the limit of {limit}")
     tagged = Union[kind, _NoMessage] if isinstance(kind, type) and issubclass(kind, _Message) else kind
     try:
         message = msgspec.json.decode(data, type=tagged)

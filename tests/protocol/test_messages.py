@@ -10,7 +10,8 @@ from protocol import (
     MAX_PAYLOAD_BYTES, Area, ErrorReply, Event, Keys, Plan, PlanPoint, ProtocolError, State, Status,
     TaskAck, TaskRequest, UserPlace, decode, decode_reply, decode_request, encode,
 )
-from protocol.messages import MAX_TASKS
+from protocol import PendingRequest
+from protocol.messages import MAX_PLAN_BYTES, MAX_PLAN_POINTS, MAX_STATE_BYTES, MAX_TASKS
 
 AREA = Area(side_m=500.0, max_altitude_m=150.0)
 
@@ -77,6 +78,23 @@ def test_bad_requests_name_the_field(payload: bytes, field: str) -> None:
 def test_oversize_payload_is_refused_before_parsing() -> None:
     payload = request(client_ref="x" * MAX_PAYLOAD_BYTES)
     assert refused(payload).field == "payload"
+
+
+def test_a_state_and_a_plan_have_room_for_their_lists() -> None:
+    # A state answering with the 40 requests a flood left pending is over 4096 bytes (the
+    # flood test met it): the service's replies with lists are bounded by those lists.
+    pending = [PendingRequest(request_id=i + 1, user_id=f"user-{i:04d}", x_m=120.0, y_m=130.0, z_m=0.0, tasks=6)
+               for i in range(100)]
+    points = [PlanPoint(x_m=100.0 + i, y_m=200.0, z_m=100.0, hold_s=46.0, user_id=f"user-{i:04d}")
+              for i in range(MAX_PLAN_POINTS)]
+    state = State(status=Status(authority_detail="x" * 256), plan=Plan(points=points), pending=pending)
+    wire = encode(state)
+    assert len(wire) > MAX_PAYLOAD_BYTES and len(encode(Plan(points=points))) > MAX_PAYLOAD_BYTES
+    assert decode(wire, State) == state
+    assert decode(encode(Plan(points=points)), Plan) == Plan(points=points)
+    assert refused(b" " * (MAX_STATE_BYTES + 1), State).field == "payload"
+    assert refused(b" " * (MAX_PLAN_BYTES + 1), Plan).field == "payload"
+    assert refused(b" " * (MAX_PAYLOAD_BYTES + 1), Status).field == "payload"
 
 
 def test_malformed_json_and_non_objects() -> None:
