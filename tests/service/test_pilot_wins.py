@@ -75,5 +75,6 @@ def test_a_pilots_loiter_ends_the_authority_and_after_the_pilots_landing_nothing
     # What was recorded before the pilot took over was flown, the hold the LOITER cut included.
     recorded = recorded_services(stack.journal_path)
     assert recorded
-    false = false_services(recorded, stub_track(stack.track), load_config(stack.tmp / "planner.toml").scenario(), HOLD_RADIUS_M, TOLERANCE_S)
+    scenario = load_config(stack.tmp / "planner.toml").scenario()
+    false = false_services(recorded, stub_track(stack.track), scenario, HOLD_RADIUS_M, TOLERANCE_S)
     assert not false, "\n".join(false)
