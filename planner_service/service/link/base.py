@@ -18,11 +18,13 @@ import time
 from dataclasses import dataclass, field
 from typing import Callable, Sequence
 
+from pymavlink.dialects.v20 import ardupilotmega as M
+
 from protocol import MissionItem
 from protocol.mission import Flavour
 
 from .events import LinkEvent
-from .modes import HOLDING_MODES, MISSION_MODES, RETURNING_MODES, mode_name
+from .modes import HOLDING_MODES, MISSION_MODES, RETURNING_MODES, mode_name, mode_number
 from .state import VehicleState
 from .telemetry import ClockRate, Telemetry
 
@@ -130,18 +132,40 @@ class VehicleLink(abc.ABC):
         raises ``LinkError`` naming the autopilot's refusal."""
 
     @abc.abstractmethod
+    async def command(self, command: int, *params: float, what: str) -> None:
+        """A COMMAND_LONG that must be accepted: ``LinkError`` names the result and what
+        the autopilot said about it."""
+
+    @abc.abstractmethod
+    def _check_link(self, operation: str) -> None:
+        """``LinkError`` naming ``operation`` unless the autopilot is connected."""
+
+    async def _set_mode(self, name: str) -> None:
+        main, sub = mode_number(self.settings.flavour, name)
+        self.state.expect_mode(name)
+        await self.command(M.MAV_CMD_DO_SET_MODE, M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, main, sub,
+                           what=f"set_mode({name})")
+
     async def resume(self) -> None:
         """Fly the mission held from its current item again, already armed and airborne
         (mode AUTO / AUTO.MISSION and MISSION_START): after the autopilot restarted in the
         air."""
+        self._check_link("resume()")
+        await self._resume()
 
-    @abc.abstractmethod
+    async def _resume(self) -> None:
+        await self._set_mode("AUTO.MISSION" if self.settings.flavour == "px4" else "AUTO")
+        await self.command(M.MAV_CMD_MISSION_START, 0, 0, what="start_mission()")
+
     async def return_to_launch(self) -> None:
         """Command return to launch now."""
+        self.state.expect_mode("AUTO.RTL" if self.settings.flavour == "px4" else "RTL")
+        await self.command(M.MAV_CMD_NAV_RETURN_TO_LAUNCH, what="return_to_launch()")
 
-    @abc.abstractmethod
     async def hold(self) -> None:
         """Hold position where the vehicle is (LOITER, PX4's AUTO.LOITER): the operator's hold."""
+        self._check_link("hold()")
+        await self._set_mode("AUTO.LOITER" if self.settings.flavour == "px4" else "LOITER")
 
     @abc.abstractmethod
     async def close(self) -> None:

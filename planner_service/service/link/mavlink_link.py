@@ -57,7 +57,6 @@ from protocol.signing import Signer, TimestampStore, default_timestamp_path, loa
 from ..errors import LinkError  # noqa: E402
 from .base import CURRENT_WAIT_S, LinkSettings, VehicleLink  # noqa: E402
 from .events import Current, LinkEvent, Reached  # noqa: E402
-from .modes import mode_number  # noqa: E402
 from .rtt import RetryTimer  # noqa: E402
 from .streams import INTERVAL_CMD, Request  # noqa: E402
 from .upload import MissionDownload, MissionUpload, cancel_message  # noqa: E402
@@ -642,12 +641,6 @@ class PymavlinkLink(VehicleLink):
             raise LinkError(what, f"NO_ANSWER after {self.settings.retries} tries{self.signing_hint()}")
         raise LinkError(what, result + await self._refusal_texts(sent_at))
 
-    async def _set_mode(self, name: str) -> None:
-        main, sub = mode_number(self.settings.flavour, name)
-        self.state.expect_mode(name)
-        await self.command(M.MAV_CMD_DO_SET_MODE, M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, main, sub,
-                           what=f"set_mode({name})")
-
     async def start(self) -> None:
         t = self.telemetry
         self._check_link("start()")
@@ -677,21 +670,6 @@ class PymavlinkLink(VehicleLink):
         except LinkError as err:
             log.error("start failed (%s) and disarming failed too: %s", why, err)
 
-    async def resume(self) -> None:
-        self._check_link("resume()")
-        await self._resume()
-
-    async def _resume(self) -> None:
-        await self._set_mode("AUTO.MISSION" if self.settings.flavour == "px4" else "AUTO")
-        await self.command(M.MAV_CMD_MISSION_START, 0, 0, what="start_mission()")
-
-    async def hold(self) -> None:
-        self._check_link("hold()")
-        await self._set_mode("AUTO.LOITER" if self.settings.flavour == "px4" else "LOITER")
-
-    async def return_to_launch(self) -> None:
-        self.state.expect_mode("AUTO.RTL" if self.settings.flavour == "px4" else "RTL")
-        await self.command(M.MAV_CMD_NAV_RETURN_TO_LAUNCH, what="return_to_launch()")
 
 
 def _close_quietly(conn: Any) -> None:

@@ -41,7 +41,6 @@ from protocol import MissionItem
 from ..errors import LinkError
 from .base import CURRENT_WAIT_S, LinkSettings, VehicleLink
 from .events import Current, LinkEvent, Reached
-from .modes import mode_number
 from .streams import INTERVAL_CMD, Request
 
 _log = logging.getLogger("mavsdk")
@@ -288,12 +287,6 @@ class MavsdkLink(VehicleLink):
         if result != "MAV_RESULT_ACCEPTED":
             raise LinkError(what, result + await self._refusal_texts(sent_at))
 
-    async def _set_mode(self, name: str) -> None:
-        main, sub = mode_number(self.settings.flavour, name)
-        self.state.expect_mode(name)
-        await self.command(M.MAV_CMD_DO_SET_MODE, M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, main, sub,
-                           what=f"set_mode({name})")
-
     def _check_link(self, operation: str) -> None:
         if not self._connected.is_set() or self.state.lost:
             raise LinkError(operation, "NO_LINK: the autopilot is not connected")
@@ -391,19 +384,3 @@ class MavsdkLink(VehicleLink):
                 except LinkError as disarm:
                     log.error("start failed (%s) and disarming failed too: %s", err, disarm)
             raise
-
-    async def resume(self) -> None:
-        self._check_link("resume()")
-        await self._resume()
-
-    async def _resume(self) -> None:
-        await self._set_mode("AUTO.MISSION" if self.settings.flavour == "px4" else "AUTO")
-        await self.command(M.MAV_CMD_MISSION_START, 0, 0, what="start_mission()")
-
-    async def hold(self) -> None:
-        self._check_link("hold()")
-        await self._set_mode("AUTO.LOITER" if self.settings.flavour == "px4" else "LOITER")
-
-    async def return_to_launch(self) -> None:
-        self.state.expect_mode("AUTO.RTL" if self.settings.flavour == "px4" else "RTL")
-        await self.command(M.MAV_CMD_NAV_RETURN_TO_LAUNCH, what="return_to_launch()")
