@@ -127,6 +127,29 @@ def test_every_message_is_asked_for_and_a_refusal_falls_back() -> None:
     assert streams.due() == []  # not again before REREQUEST_S
 
 
+def test_messages_that_stop_are_asked_for_again_at_once() -> None:
+    # An autopilot that restarts without the link noticing (its heartbeat back within the
+    # link's timeout) comes back with its rates reset: its telemetry is asked for again as
+    # soon as it is missing, not at the next tick of a clock, so the first reports carry a
+    # clock young enough to show the restart (test_faults: a restart at x40 went unseen).
+    clock = Clock()
+    streams = Streams(stream_plan("ardupilot"), clock)
+    streams.begin()
+    ids = [getattr(M, f"MAVLINK_MSG_ID_{s.name}") for s in stream_plan("ardupilot")]
+    for _ in range(int(3 * REREQUEST_S)):  # everything arrives, due() polled all along
+        clock.now += 1.0
+        for msg_id in ids:
+            streams.heard(msg_id)
+        assert streams.due() == []
+    clock.now += MISSING_AFTER_S + 0.01  # then nothing arrives any more
+    missing = streams.missing()
+    assert "GLOBAL_POSITION_INT" in missing  # the slower messages follow within their 3 intervals
+    assert {r.spec.name for r in streams.due()} == set(missing)
+    assert streams.due() == []  # and again only after REREQUEST_S
+    clock.now += REREQUEST_S
+    assert streams.due() != []
+
+
 # --- trust only the autopilot ------------------------------------------------------------------------------
 def heartbeat(mode: int = 0, armed: bool = False, autopilot: int = M.MAV_AUTOPILOT_ARDUPILOTMEGA) -> Any:
     base = M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | (M.MAV_MODE_FLAG_SAFETY_ARMED if armed else 0)

@@ -160,14 +160,18 @@ class Streams:
         return tuple(out)
 
     def due(self) -> list[Request]:
-        """Requests to repeat now: every ``REREQUEST_S`` the missing messages are asked for
-        again (the way that worked last, or first the interval)."""
+        """Requests to repeat now: the missing messages are asked for again (the way that
+        worked last, or first the interval) as soon as they are missing, then every
+        ``REREQUEST_S`` while they stay missing. At once matters: an autopilot that restarts
+        without the link noticing comes back with its rates reset, and its restart is known
+        from the clock of the first reports asked for again."""
         now = self.clock()
-        if now - self._last_request < REREQUEST_S:
+        missing = self.missing()
+        if not missing or now - self._last_request < REREQUEST_S:
             return []
         self._last_request = now
         out = []
-        for name in self.missing():
+        for name in missing:
             spec, state = self.by_name[name], self._state[name]
             if state.refused:
                 out.append(Request("stream" if spec.group is not None else "message", spec))
