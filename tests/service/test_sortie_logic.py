@@ -332,6 +332,21 @@ def test_the_mode_a_restarted_autopilot_comes_back_in_is_not_a_pilots() -> None:
     assert run.s.authority.state == "revoked"
 
 
+def test_a_restart_believed_after_the_landing_it_caused_still_gives_the_next_sortie_its_authority() -> None:
+    # SITL killed in the air comes back on the ground, disarmed, in STABILIZE: its heartbeat
+    # (the mode, the landing) can be judged before two position reports show the restart.
+    # The restart explains both, whichever comes first (a CI run met this order).
+    world = FakeWorld()
+    run, _ = fly_to_first_point(world)
+    run.feed(ins.ModeChanged("STABILIZE"), mode="STABILIZE", boot_s=1.0)
+    run.feed(ins.Landed(), airborne=False, armed=False)
+    assert run.s.over is not None and run.s.authority.state == "revoked"
+    run.feed(ins.VehicleRestarted("its clock went back (seen twice)"))
+    run.tick()
+    run.feed(ins.SortieBegun(2))
+    assert run.s.authority.granted, run.s.authority
+
+
 def test_the_holds_margins_are_paid_for_out_of_the_reserve() -> None:
     # A path whose last point leaves the battery just above the floor: the margins' hovering
     # (a command's latency at x80 is 8 s a point) would break it, so that point is cut.

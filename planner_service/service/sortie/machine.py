@@ -203,6 +203,8 @@ class SortieLogic:
                     out.append(fx.Emit(ev.AuthorityGranted(f"the mode change was the autopilot's restart: "
                                                             f"{authority.detail}"[:256])))
                 s = replace(s, restarted=True, authority=replace(authority, expected_mode=None), revoked_by_mode=None)
+                if s.over is not None:  # the sortie ended before the restart was believed: on its authority
+                    s = replace(s, commanded_landing=s.authority.granted)
                 out.append(fx.Emit(ev.VehicleRestarted(why[:256])))
                 s = self._doubt(s, f"the vehicle restarted: {why}", out, hold_interrupted=True)
             case ins.ModeChanged(mode=mode, commanded=commanded):
