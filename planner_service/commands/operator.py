@@ -152,6 +152,8 @@ def _watch(client: Any, args: argparse.Namespace, stop: threading.Event) -> int:
             if args.once and view.status is None and time.monotonic() < deadline:
                 stop.wait(0.1)
                 continue
+            if args.once and view.alive is None and client.wait_for_service(timeout_s=1.0):
+                update(alive=True)  # the token's history may reach the subscriber after the state's answer
             with lock:
                 lines = render(view, time.monotonic())
             if plain:
