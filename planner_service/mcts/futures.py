@@ -43,7 +43,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ..model import params as P
-from ..model._jit import jit_borrow
+from ..model._jit import jit_borrow, jit_inline
 from ..model.channel import distance_sq_m2
 from ..model.fairness import is_eligible
 from ..model.interval import NO_USER, budget_ok, hop_energy_j, return_energy_j, service_cost, user_outcome
@@ -73,7 +73,12 @@ class FutureIndex(NamedTuple):
     in (distance, index) order, their squared distance and upload energy (NaN until first
     needed), ``near_count`` (S, H + 1, K) how many, ``near_cover`` every eligible user
     nearer than this squared distance is listed. Tables: ``hop`` (K, K) flight energy
-    between points, ``home`` (K,) flight home. The root: ``root_q`` (K,), ``root_user``
+    between points, ``home`` (K,) flight home, ``hop_q`` (K, K) the flight's share of q
+    (``hop`` / w_max); ``serve_ub`` (K,) a bound on what a service at each point can add to
+    q (``service_bounds``). ``answered`` (S, H + 1, K): the point's answer on the row is
+    computed; ``eager`` (1,): a row answers every point when it is filled (a search,
+    whose iterations revisit the rows), else each point when first asked (the
+    confirmation, whose playouts pass each row once, in step). The root: ``root_q`` (K,), ``root_user``
     (K,), ``root_allowed`` (1,). ``tree``: the root's tree (its boxes are refitted at a fresh
     step). ``served0`` (I,):
     the root's service counts; ``clock`` (1,): scratch for a row's interval.
@@ -97,6 +102,10 @@ class FutureIndex(NamedTuple):
     near_cover: np.ndarray
     hop: np.ndarray
     home: np.ndarray
+    hop_q: np.ndarray
+    serve_ub: np.ndarray
+    answered: np.ndarray
+    eager: np.ndarray
     root_q: np.ndarray
     root_user: np.ndarray
     root_allowed: np.ndarray
@@ -106,13 +115,33 @@ class FutureIndex(NamedTuple):
 
 
 @jit_borrow
-def point_tables(p: np.ndarray, hover_points: np.ndarray, hop: np.ndarray, home: np.ndarray) -> None:
-    """``hop`` (K, K): flight energy from point j to point k; ``home`` (K,): from each
-    point back to base (``interval.hop_energy_j``, ``interval.return_energy_j``)."""
+def point_tables(p: np.ndarray, hover_points: np.ndarray, hop: np.ndarray, home: np.ndarray,
+                 hop_q: np.ndarray) -> None:
+    """``hop`` (K, K): flight energy from point j to point k, and ``hop_q`` its share of q
+    (over w_max); ``home`` (K,): from each point back to base (``interval.hop_energy_j``,
+    ``interval.return_energy_j``)."""
     for j in range(hover_points.shape[0]):
         home[j] = return_energy_j(p, hover_points[j])
         for k in range(hover_points.shape[0]):
             hop[j, k] = hop_energy_j(p, hover_points[j], hover_points[k])
+            hop_q[j, k] = hop[j, k] / p[P.ENERGY_NORM]
+
+
+@jit_borrow
+def service_bounds(p: np.ndarray, hover_points: np.ndarray, tasks_cap: int, z_low: float, z_high: float,
+                   below: np.ndarray, out: np.ndarray) -> None:
+    """``out`` (K,): no service from point k adds more to q than this (q = the task term less
+    the interval's energy over w_max, the flight's included). Both the task term and the
+    service's own energy (hover, computation) grow in proportion to the tasks, and the rate
+    falls with the distance, so the most a service can add is that of ``tasks_cap`` tasks
+    from a user as near as a user can be: straight below (or above) the point at the
+    nearest altitude in [``z_low``, ``z_high``]; or nothing. ``below`` (3,) is scratch."""
+    for k in range(hover_points.shape[0]):
+        below[0] = hover_points[k, 0]
+        below[1] = hover_points[k, 1]
+        below[2] = min(max(hover_points[k, 2], z_low), z_high)
+        bits, e_h, e_c = service_cost(p, hover_points[k], below, tasks_cap)
+        out[k] = max(task_reward(p, tasks_cap) - (e_h + e_c) / p[P.ENERGY_NORM], 0.0)
 
 
 @jit_borrow
@@ -144,58 +173,68 @@ def evaluate_tree(scene: Scene, w: World, t: UserTree, home: np.ndarray, out_q: 
 
 @jit_borrow
 def _fill_row(scene: Scene, idx: FutureIndex, root: World, s: int) -> None:
-    """Row ready[s] + 1 of future s: step its trajectory on, index it, answer every point."""
-    p = scene.p
-    hp = scene.hover_points
+    """Row ready[s] + 1 of future s: step its trajectory on and index it; answer every
+    point now if the index is ``eager``, else when each is first asked."""
     h = idx.ready[s] + 1
+    users = idx.traj_users[s]
+    idx.clock[0] = root.interval[0] + h  # the interval due after h steps (a task table's row)
+    traj = World(root.uav_xyz, root.hover, users, idx.traj_tasks[s], idx.served0, root.battery_j, idx.clock,
+                 root.energy_used_j, root.reward_sum)
+    advance(scene, traj, idx.moves[s, h - 1], idx.news[s, h - 1])
+    refit_tree(users, UserTree(idx.tree.order, idx.tree.span, idx.box[s, h], idx.tree.stack, idx.tree.bounds))
+    idx.ready[s] = h
+    for k in range(scene.hover_points.shape[0]):
+        idx.answered[s, h, k] = False
+        if idx.eager[0]:
+            _answer_point(scene.p, scene.hover_points, idx, s, h, k)
+
+
+@jit_borrow
+def _answer_point(p: np.ndarray, hp: np.ndarray, idx: FutureIndex, s: int, h: int, k: int) -> None:
+    """Point k's answer on row h of future s, the row future s's trajectory is at
+    (``ready[s] == h``): its listed nearest eligible users and the one it serves."""
     users = idx.traj_users[s]
     tasks = idx.traj_tasks[s]
     served = idx.served0
-    idx.clock[0] = root.interval[0] + h  # the interval due after h steps (a task table's row)
-    traj = World(root.uav_xyz, root.hover, users, tasks, served, root.battery_j, idx.clock,
-                 root.energy_used_j, root.reward_sum)
-    advance(scene, traj, idx.moves[s, h - 1], idx.news[s, h - 1])
     t = UserTree(idx.tree.order, idx.tree.span, idx.box[s, h], idx.tree.stack, idx.tree.bounds)
-    refit_tree(users, t)
-    size = idx.near_user.shape[3]
-    for k in range(hp.shape[0]):
-        near_user = idx.near_user[s, h, k]
-        near_d2 = idx.near_d2[s, h, k]
-        for j in range(size):
-            idx.near_cost[s, h, k, j] = math.nan
-        count, cover = tree_nearest_list(p, hp[k], users, tasks, served, t, near_user, near_d2)
-        idx.near_count[s, h, k] = count
-        idx.near_cover[s, h, k] = cover
-        if count == 0:
-            idx.user[s, h, k] = NO_USER
-            idx.reach_sq[s, h, k] = math.inf
-            idx.window[s, h, k] = 0
-            continue
-        reach = math.sqrt(near_d2[0]) + p[P.TIE_M]  # as interval.nearest_eligible
-        reach_sq = reach * reach
-        inside = 0
-        while inside < count and near_d2[inside] <= reach_sq:
-            inside += 1
-        if inside < count or count < size or reach_sq < cover:  # the whole window is listed
-            chosen = 0
-            for j in range(1, inside):
-                u, c = near_user[j], near_user[chosen]
-                if tasks[u] > tasks[c] or (tasks[u] == tasks[c] and u < c):
-                    chosen = j
-            user = near_user[chosen]
-            idx.window[s, h, k] = inside
-        else:  # a crowd within the window: choose among it through the tree
-            user = tree_window_choice(p, hp[k], users, tasks, served, t, reach_sq)
-            chosen = -1
-            idx.window[s, h, k] = -1
-        bits, e_h, e_c = service_cost(p, hp[k], users[user], tasks[user])
-        idx.user[s, h, k] = user
-        idx.reach_sq[s, h, k] = reach_sq
-        idx.cost[s, h, k] = e_h + e_c
-        idx.gain[s, h, k] = task_reward(p, tasks[user])
-        if chosen >= 0:
-            idx.near_cost[s, h, k, chosen] = e_h + e_c
-    idx.ready[s] = h
+    idx.answered[s, h, k] = True
+    near_user = idx.near_user[s, h, k]
+    near_d2 = idx.near_d2[s, h, k]
+    size = near_user.shape[0]
+    for j in range(size):
+        idx.near_cost[s, h, k, j] = math.nan
+    count, cover = tree_nearest_list(p, hp[k], users, tasks, served, t, near_user, near_d2)
+    idx.near_count[s, h, k] = count
+    idx.near_cover[s, h, k] = cover
+    if count == 0:
+        idx.user[s, h, k] = NO_USER
+        idx.reach_sq[s, h, k] = math.inf
+        idx.window[s, h, k] = 0
+        return
+    reach = math.sqrt(near_d2[0]) + p[P.TIE_M]  # as interval.nearest_eligible
+    reach_sq = reach * reach
+    inside = 0
+    while inside < count and near_d2[inside] <= reach_sq:
+        inside += 1
+    if inside < count or count < size or reach_sq < cover:  # the whole window is listed
+        chosen = 0
+        for j in range(1, inside):
+            u, c = near_user[j], near_user[chosen]
+            if tasks[u] > tasks[c] or (tasks[u] == tasks[c] and u < c):
+                chosen = j
+        user = near_user[chosen]
+        idx.window[s, h, k] = inside
+    else:  # a crowd within the window: choose among it through the tree
+        user = tree_window_choice(p, hp[k], users, tasks, served, t, reach_sq)
+        chosen = -1
+        idx.window[s, h, k] = -1
+    bits, e_h, e_c = service_cost(p, hp[k], users[user], tasks[user])
+    idx.user[s, h, k] = user
+    idx.reach_sq[s, h, k] = reach_sq
+    idx.cost[s, h, k] = e_h + e_c
+    idx.gain[s, h, k] = task_reward(p, tasks[user])
+    if chosen >= 0:
+        idx.near_cost[s, h, k, chosen] = e_h + e_c
 
 
 @jit_borrow
@@ -226,6 +265,58 @@ def _listed_choice(p: np.ndarray, idx: FutureIndex, s: int, h: int, k: int, w: W
     return -2
 
 
+@jit_inline
+def _future_value(p: np.ndarray, hp: np.ndarray, idx: FutureIndex, s: int, h: int, k: int, w: World,
+                  touched: np.ndarray, flag: np.ndarray) -> tuple[float, int]:
+    """Point k's q and user in ``w`` (see ``evaluate_future``); (-inf, ``NO_USER``) where
+    the action is not allowed. The caller excludes staying where staying is not allowed."""
+    if not idx.answered[s, h, k]:
+        _answer_point(p, hp, idx, s, h, k)
+    user = idx.user[s, h, k]
+    if user == NO_USER:  # nobody eligible on the trajectory: nobody now either
+        return -math.inf, NO_USER
+    window = idx.window[s, h, k]
+    dirty = False
+    if window >= 0:
+        for j in range(window):
+            if flag[idx.near_user[s, h, k, j]]:
+                dirty = True
+                break
+    else:
+        for j in range(h):
+            if distance_sq_m2(hp[k], w.users[touched[j]]) <= idx.reach_sq[s, h, k]:
+                dirty = True
+                break
+    if not dirty:
+        cost = idx.cost[s, h, k]
+        gain = idx.gain[s, h, k]
+    else:
+        j = _listed_choice(p, idx, s, h, k, w, flag)
+        if j == -1:
+            return -math.inf, NO_USER
+        if j >= 0:
+            user = idx.near_user[s, h, k, j]
+            cost = idx.near_cost[s, h, k, j]
+        else:
+            user, _ = tree_nearest(p, hp[k], w.users, w.tasks, w.served,
+                                   UserTree(idx.tree.order, idx.tree.span, idx.box[s, h], idx.tree.stack,
+                                            idx.tree.bounds))
+            if user == NO_USER:
+                return -math.inf, NO_USER
+            cost = math.nan
+        if flag[user] or cost != cost:  # a served user's tasks may differ from the trajectory's
+            bits, e_h, e_c = service_cost(p, hp[k], w.users[user], w.tasks[user])
+            cost = e_h + e_c
+            if j >= 0 and not flag[user]:
+                idx.near_cost[s, h, k, j] = cost
+        gain = task_reward(p, w.tasks[user])
+    prev = w.hover[0]
+    energy = cost + idx.hop[prev, k]
+    if not budget_ok(p, w.battery_j[0], energy, idx.home[k]):
+        return -math.inf, NO_USER
+    return reward_of(p, gain, energy), user
+
+
 @jit_borrow
 def evaluate_future(scene: Scene, idx: FutureIndex, root: World, s: int, h: int, w: World, touched: np.ndarray,
                     flag: np.ndarray, out_q: np.ndarray, out_user: np.ndarray) -> int:
@@ -237,61 +328,61 @@ def evaluate_future(scene: Scene, idx: FutureIndex, root: World, s: int, h: int,
     hp = scene.hover_points
     stay = p[P.ALLOW_STAY] > 0.5
     prev = w.hover[0]
-    battery = w.battery_j[0]
     allowed = 0
     for k in range(hp.shape[0]):
         out_q[k] = -math.inf
         out_user[k] = NO_USER
         if k == prev and not stay:
             continue
-        user = idx.user[s, h, k]
-        if user == NO_USER:  # nobody eligible on the trajectory: nobody now either
-            continue
-        window = idx.window[s, h, k]
-        dirty = False
-        if window >= 0:
-            for j in range(window):
-                if flag[idx.near_user[s, h, k, j]]:
-                    dirty = True
-                    break
-        else:
-            for j in range(h):
-                if distance_sq_m2(hp[k], w.users[touched[j]]) <= idx.reach_sq[s, h, k]:
-                    dirty = True
-                    break
-        if not dirty:
-            cost = idx.cost[s, h, k]
-            gain = idx.gain[s, h, k]
-        else:
-            j = _listed_choice(p, idx, s, h, k, w, flag)
-            if j == -1:
-                continue
-            if j >= 0:
-                user = idx.near_user[s, h, k, j]
-                cost = idx.near_cost[s, h, k, j]
-            else:
-                user, _ = tree_nearest(p, hp[k], w.users, w.tasks, w.served,
-                                       UserTree(idx.tree.order, idx.tree.span, idx.box[s, h], idx.tree.stack,
-                                                idx.tree.bounds))
-                if user == NO_USER:
-                    continue
-                cost = math.nan
-            if flag[user] or cost != cost:  # a served user's tasks may differ from the trajectory's
-                bits, e_h, e_c = service_cost(p, hp[k], w.users[user], w.tasks[user])
-                cost = e_h + e_c
-                if j >= 0 and not flag[user]:
-                    idx.near_cost[s, h, k, j] = cost
-            gain = task_reward(p, w.tasks[user])
-        energy = cost + idx.hop[prev, k]
-        if not budget_ok(p, battery, energy, idx.home[k]):
-            continue
-        out_q[k] = reward_of(p, gain, energy)
-        out_user[k] = user
-        allowed += 1
+        q, user = _future_value(p, hp, idx, s, h, k, w, touched, flag)
+        if q > -math.inf:
+            out_q[k] = q
+            out_user[k] = user
+            allowed += 1
     return allowed
 
 
-@jit_borrow
+@jit_inline
+def greedy_future(scene: Scene, idx: FutureIndex, root: World, s: int, h: int, w: World, touched: np.ndarray,
+                  flag: np.ndarray) -> tuple[int, int]:
+    """The point of largest q in ``w`` (the first of equals, as ``np.argmax`` over
+    ``evaluate_future``'s q) and its user; (-1, ``NO_USER``) if no point is allowed.
+
+    A point's q is at most ``serve_ub`` less its flight's share, so only the points whose
+    bound reaches the best q found so far are evaluated: the one with the largest bound
+    first, then every other in order. With many points most are skipped (and, where rows
+    are answered lazily, never asked)."""
+    while idx.ready[s] < h:
+        _fill_row(scene, idx, root, s)
+    p = scene.p
+    hp = scene.hover_points
+    stay = p[P.ALLOW_STAY] > 0.5
+    prev = w.hover[0]
+    hop_q = idx.hop_q[prev]
+    first = -1
+    first_ub = -math.inf
+    for k in range(hp.shape[0]):
+        ub = idx.serve_ub[k] - hop_q[k]
+        if ub > first_ub and (k != prev or stay):
+            first = k
+            first_ub = ub
+    best = -1
+    best_q = -math.inf
+    best_user = NO_USER
+    if first >= 0:
+        q, user = _future_value(p, hp, idx, s, h, first, w, touched, flag)
+        if q > -math.inf:
+            best, best_q, best_user = first, q, user
+    for k in range(hp.shape[0]):
+        if k == first or (k == prev and not stay) or idx.serve_ub[k] - hop_q[k] < best_q:
+            continue  # q < best_q: not the largest, nor tied with it
+        q, user = _future_value(p, hp, idx, s, h, k, w, touched, flag)
+        if q > best_q or (q == best_q and q > -math.inf and k < best):
+            best, best_q, best_user = k, q, user
+    return best, best_user
+
+
+@jit_inline
 def evaluate_step(scene: Scene, idx: FutureIndex, root: World, w: World, future: int, steps: int,
                   touched: np.ndarray, flag: np.ndarray, out_q: np.ndarray, out_user: np.ndarray) -> int:
     """Every point's q and user at a playout step: the root's (step 0), along a shared
@@ -317,17 +408,36 @@ def root_values(scene: Scene, root: World, tree: UserTree, home: np.ndarray, out
 
 
 class PointTables(NamedTuple):
-    """What depends only on the hovering points: ``hop`` (K, K), ``home`` (K,)."""
+    """What depends only on the hovering points: ``hop`` (K, K), ``home`` (K,), ``hop_q``
+    (K, K) (``point_tables``)."""
 
     hop: np.ndarray
     home: np.ndarray
+    hop_q: np.ndarray
 
 
 def point_tables_of(p: np.ndarray, hover_points: np.ndarray) -> PointTables:
     k = len(hover_points)
-    tables = PointTables(np.empty((k, k)), np.empty(k))
-    point_tables(p, hover_points, tables.hop, tables.home)
+    tables = PointTables(np.empty((k, k)), np.empty(k), np.empty((k, k)))
+    point_tables(p, hover_points, tables.hop, tables.home, tables.hop_q)
     return tables
+
+
+def service_bounds_of(scene: Scene, root: World, tables: PointTables) -> np.ndarray:
+    """``service_bounds`` for the futures of ``root``: no user has more tasks than u_max, the
+    root's or the task table's largest count (a draw is capped at u_max, a backlog too), nor
+    lies outside the altitudes of the root's users (and, in 3-D, of [0, user_max_altitude],
+    where the users move). A margin far above rounding makes each a bound in floating point
+    too."""
+    p = scene.p
+    tasks_cap = max(int(p[P.TASK_MAX]), int(root.tasks.max(initial=0)), int(scene.task_table.max(initial=0)))
+    z = root.users[:, 2]
+    z_low, z_high = (float(z.min()), float(z.max())) if len(z) else (0.0, 0.0)
+    if p[P.DIMENSIONS] > 2.5:
+        z_low, z_high = min(z_low, 0.0), max(z_high, float(p[P.USER_ZMAX]))
+    out = np.empty(len(scene.hover_points))
+    service_bounds(p, scene.hover_points, tasks_cap, z_low, z_high, np.empty(3), out)
+    return out + 1e-9 * (1.0 + np.abs(out) + float(np.abs(tables.hop_q).max(initial=0.0)))
 
 
 class RootValues(NamedTuple):
@@ -349,9 +459,10 @@ def root_values_of(scene: Scene, root: World, tables: PointTables) -> RootValues
 
 
 def index_of(scene: Scene, root: World, moves: np.ndarray, news: np.ndarray, tables: PointTables,
-             values: RootValues) -> FutureIndex:
+             values: RootValues, eager: bool = True) -> FutureIndex:
     """An empty index of the futures ``moves`` (S, H, I, 3) and ``news`` (S, H, I) from
-    ``root``; rows are filled as playouts reach them."""
+    ``root``; rows are filled as playouts reach them, each point answered at once
+    (``eager``) or when first asked (for playouts that pass each row once, in step)."""
     s, h, i = news.shape
     k = len(scene.hover_points)
     nodes = len(values.tree.box)
@@ -363,7 +474,9 @@ def index_of(scene: Scene, root: World, moves: np.ndarray, news: np.ndarray, tab
         gain=np.empty((*rows, k)), reach_sq=np.empty((*rows, k)), window=np.empty((*rows, k), dtype=np.int64),
         near_user=np.empty((*rows, k, NEAREST), dtype=np.int64), near_d2=np.empty((*rows, k, NEAREST)),
         near_cost=np.empty((*rows, k, NEAREST)), near_count=np.empty((*rows, k), dtype=np.int64),
-        near_cover=np.empty((*rows, k)), hop=tables.hop, home=tables.home,
+        near_cover=np.empty((*rows, k)), hop=tables.hop, home=tables.home, hop_q=tables.hop_q,
+        serve_ub=service_bounds_of(scene, root, tables), answered=np.zeros((*rows, k), dtype=np.bool_),
+        eager=np.array([eager]),
         root_q=values.q, root_user=values.user, root_allowed=values.allowed,
         tree=values.tree._replace(box=values.tree.box.copy()),
         served0=root.served.copy(), clock=np.zeros(1, dtype=np.int64),
@@ -371,4 +484,4 @@ def index_of(scene: Scene, root: World, moves: np.ndarray, news: np.ndarray, tab
 
 
 __all__ = ["FutureIndex", "PointTables", "RootValues", "evaluate_future", "evaluate_step", "evaluate_tree",
-           "index_of", "point_tables_of", "root_values_of"]
+           "greedy_future", "index_of", "point_tables_of", "root_values_of"]

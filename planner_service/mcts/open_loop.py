@@ -23,10 +23,10 @@ import numpy as np
 
 from ..model._jit import jit, jit_borrow
 from ..model import params as P
-from ..model.interval import remaining_intervals
+from ..model.interval import NO_USER, remaining_intervals
 from ..model.mobility import draw_int
 from ..model.world import Scene, World, advance, clone, copy_into, draw_chance, serve
-from .futures import FutureIndex, evaluate_step
+from .futures import FutureIndex, evaluate_future, evaluate_step, greedy_future
 from .objective import node_return
 from .tree import ROOT_INDEX, UNVISITED, TreeArrays
 
@@ -103,7 +103,7 @@ def _uct_child(
     return best
 
 
-@jit
+@jit_borrow
 def random_allowed(qvals: np.ndarray, allowed: int, rng: np.random.Generator) -> int:
     """A uniform draw among the ``allowed`` actions (those with a finite q)."""
     pick = draw_int(rng, 0, allowed)
@@ -115,12 +115,31 @@ def random_allowed(qvals: np.ndarray, allowed: int, rng: np.random.Generator) ->
     return -1
 
 
-@jit
+@jit_borrow
 def rollout_action(qvals: np.ndarray, allowed: int, policy: int, epsilon: float, rng: np.random.Generator) -> int:
     """A playout step: uniform among allowed actions, or epsilon-greedy on q."""
     if policy == ROLLOUT_EPSILON_GREEDY and rng.random() >= epsilon:
         return int(np.argmax(qvals))
     return random_allowed(qvals, allowed, rng)
+
+
+class Scratch(NamedTuple):
+    """A search's working arrays: the playout's world ``w``, every action's q and user at
+    a step (``qvals``, ``users_at`` (K,)), the steps' rewards (``rewards`` (H,)) and their
+    suffix sums (``suffix`` (H + 1,)), the nodes entered (``path`` (H + 1,)), the users
+    served (``touched`` (H,)) and their marks (``flag`` (I,)), and a fresh step's chance
+    (``moves`` (I, 3), ``news`` (I,))."""
+
+    w: World
+    qvals: np.ndarray
+    users_at: np.ndarray
+    rewards: np.ndarray
+    suffix: np.ndarray
+    path: np.ndarray
+    touched: np.ndarray
+    flag: np.ndarray
+    moves: np.ndarray
+    news: np.ndarray
 
 
 @jit
@@ -133,22 +152,25 @@ def search(scene: Scene, tree: TreeArrays, num_nodes: int, root: World, settings
     grows at most ``settings.max_depth`` levels below the root; past them the playout policy
     decides. The tree arrays must have room for ``iterations`` more nodes (one expansion
     per iteration at most)."""
+    num_actions = scene.hover_points.shape[0]
+    horizon = 1 + remaining_intervals(scene.p, root.users.shape[0], root.interval[0])
+    scratch = Scratch(clone(root), np.empty(num_actions), np.empty(num_actions, dtype=np.int64), np.empty(horizon),
+                      np.empty(horizon + 1), np.empty(horizon + 1, dtype=np.int64), np.zeros(horizon, dtype=np.int64),
+                      np.zeros(root.users.shape[0], dtype=np.bool_), np.empty_like(root.users),
+                      np.empty_like(root.tasks))
+    return _iterate(scene, tree, num_nodes, root, settings, index, iterations, rng, scratch)
+
+
+@jit_borrow
+def _iterate(scene: Scene, tree: TreeArrays, num_nodes: int, root: World, settings: SearchSettings,
+             index: FutureIndex, iterations: int, rng: np.random.Generator, scratch: Scratch) -> int:
+    """``search``'s iterations, in the arrays of ``scratch`` (allocated by ``search``: in
+    here nothing is reference-counted, see ``model._jit.jit_borrow``)."""
     p = scene.p
     parent, action, children, visits, value_sum = tree
-    w = clone(root)
-    num_actions = scene.hover_points.shape[0]
-    qvals = np.empty(num_actions)
-    users_at = np.empty(num_actions, dtype=np.int64)
-    horizon = 1 + remaining_intervals(p, root.users.shape[0], root.interval[0])
-    rewards = np.empty(horizon)
-    suffix = np.empty(horizon + 1)
-    path = np.empty(horizon + 1, dtype=np.int64)
-    touched = np.empty(horizon, dtype=np.int64)
-    flag = np.zeros(root.users.shape[0], dtype=np.bool_)
+    w, qvals, users_at, rewards, suffix, path, touched, flag, moves, news = scratch
     limit = int(p[P.MAX_INTERVALS])
     num_futures = index.moves.shape[0]
-    moves = np.empty_like(root.users)
-    news = np.empty_like(root.tasks)
     steps = 0
     for _ in range(iterations):
         future = -1
@@ -161,36 +183,48 @@ def search(scene: Scene, tree: TreeArrays, num_nodes: int, root: World, settings
         steps = 0
         in_tree = True
         while limit <= 0 or w.interval[0] < limit:
-            allowed = evaluate_step(scene, index, root, w, future, steps, touched, flag, qvals, users_at)
-            if allowed == 0:
-                break
             if in_tree and depth > settings.max_depth:
                 in_tree = False
-            if in_tree:
-                a = _untried_best(children, visits, node, qvals)
-                if a >= 0:
-                    child = children[node, a]
-                    if child == UNVISITED:
-                        child = num_nodes
-                        num_nodes += 1
-                        parent[child] = node
-                        action[child] = a
-                        children[child, :] = UNVISITED
-                        visits[child] = 0.0
-                        value_sum[child] = 0.0
-                        children[node, a] = child
-                    in_tree = False
-                else:
-                    child = _uct_child(children, node, qvals, visits, value_sum, settings.c)
-                    a = action[child]
-                if depth == 1 and num_futures > 0:
-                    future = int(visits[child] + 0.5) % num_futures
-                node = child
-                path[depth] = node
-                depth += 1
+            if not in_tree and future >= 0 and settings.rollout == ROLLOUT_EPSILON_GREEDY:
+                # the greedy step needs only the best point (``greedy_future``); the
+                # uniform one, drawn as ``rollout_action`` draws it, every allowed point
+                a, user = greedy_future(scene, index, root, future, steps, w, touched, flag)
+                if a < 0:
+                    break
+                if rng.random() < settings.epsilon:
+                    allowed = evaluate_step(scene, index, root, w, future, steps, touched, flag, qvals, users_at)
+                    a = random_allowed(qvals, allowed, rng)
+                    user = users_at[a]
             else:
-                a = rollout_action(qvals, allowed, settings.rollout, settings.epsilon, rng)
-            out = serve(scene, w, a, users_at[a])
+                allowed = evaluate_step(scene, index, root, w, future, steps, touched, flag, qvals, users_at)
+                if allowed == 0:
+                    break
+                if in_tree:
+                    a = _untried_best(children, visits, node, qvals)
+                    if a >= 0:
+                        child = children[node, a]
+                        if child == UNVISITED:
+                            child = num_nodes
+                            num_nodes += 1
+                            parent[child] = node
+                            action[child] = a
+                            children[child, :] = UNVISITED
+                            visits[child] = 0.0
+                            value_sum[child] = 0.0
+                            children[node, a] = child
+                        in_tree = False
+                    else:
+                        child = _uct_child(children, node, qvals, visits, value_sum, settings.c)
+                        a = action[child]
+                    if depth == 1 and num_futures > 0:
+                        future = int(visits[child] + 0.5) % num_futures
+                    node = child
+                    path[depth] = node
+                    depth += 1
+                else:
+                    a = rollout_action(qvals, allowed, settings.rollout, settings.epsilon, rng)
+                user = users_at[a]
+            out = serve(scene, w, a, user)
             touched[steps] = out.user
             flag[out.user] = True
             rewards[steps] = out.reward
@@ -222,37 +256,63 @@ def draw_futures(p: np.ndarray, moves: np.ndarray, news: np.ndarray, rng: np.ran
 
 
 @jit
-def paired_rollouts(scene: Scene, root: World, actions: np.ndarray, settings: SearchSettings, index: FutureIndex,
-                    out: np.ndarray) -> None:
-    """Each of ``actions`` (A,) first, then the greedy policy, on each of the index's S
-    futures: ``out`` (S, A) receives the returns (of the first step's node, as ``search``
-    backs up)."""
-    p = scene.p
-    w = clone(root)
-    num_actions = scene.hover_points.shape[0]
-    qvals = np.empty(num_actions)
-    users_at = np.empty(num_actions, dtype=np.int64)
-    touched = np.empty(1 + remaining_intervals(p, root.users.shape[0], root.interval[0]), dtype=np.int64)
-    flag = np.zeros(root.users.shape[0], dtype=np.bool_)
-    limit = int(p[P.MAX_INTERVALS])
-    steps = 0
+def paired_rollouts(scene: Scene, root: World, first: int, second: int, settings: SearchSettings,
+                    index: FutureIndex, out: np.ndarray) -> None:
+    """Action ``first``, then the greedy policy, and action ``second``, then the greedy
+    policy, on each of the index's S futures: ``out`` (S, 2) receives the two returns (of
+    the first step's node, as ``search`` backs up). The two playouts of a future go step
+    by step together, so each row of the future is needed at one step only, and an index
+    that answers points lazily (``index_of(eager=False)``) is asked only what the greedy
+    steps need."""
+    num_users = root.users.shape[0]
+    horizon = 1 + remaining_intervals(scene.p, num_users, root.interval[0])
+    _paired(scene, root, first, second, settings, index, out, clone(root), clone(root),
+            np.zeros((2, horizon), dtype=np.int64), np.zeros((2, num_users), dtype=np.bool_))
+
+
+@jit_borrow
+def _paired(scene: Scene, root: World, first: int, second: int, settings: SearchSettings, index: FutureIndex,
+            out: np.ndarray, w0: World, w1: World, touched: np.ndarray, flag: np.ndarray) -> None:
+    """``paired_rollouts`` in the worlds and arrays it is given."""
+    limit = int(scene.p[P.MAX_INTERVALS])
     for s in range(index.moves.shape[0]):
-        for k in range(actions.shape[0]):
-            for j in range(steps):
-                flag[touched[j]] = False
+        for k in range(2):
+            w = w0 if k == 0 else w1
+            for j in range(touched.shape[1]):
+                flag[k, touched[k, j]] = False
+                touched[k, j] = 0
             copy_into(w, root)
-            total = 0.0
-            steps = 0
-            while limit <= 0 or w.interval[0] < limit:
-                allowed = evaluate_step(scene, index, root, w, s, steps, touched, flag, qvals, users_at)
-                if allowed == 0:
-                    break
-                a = actions[k] if steps == 0 else int(np.argmax(qvals))
-                step_out = serve(scene, w, a, users_at[a])
-                touched[steps] = step_out.user
-                flag[step_out.user] = True
-                total += step_out.reward
+        total0, total1 = 0.0, 0.0
+        steps0, steps1 = -1, -1  # the steps a playout took once it has ended
+        steps = 0
+        while steps0 < 0 or steps1 < 0:
+            for k in range(2):
+                if (steps0 if k == 0 else steps1) >= 0:
+                    continue
+                w = w0 if k == 0 else w1
+                if 0 < limit <= w.interval[0] or (steps == 0 and index.root_allowed[0] == 0):
+                    a, user = -1, NO_USER
+                elif steps == 0:
+                    a = first if k == 0 else second
+                    user = index.root_user[a]
+                else:
+                    a, user = greedy_future(scene, index, root, s, steps, w, touched[k], flag[k])
+                if a < 0:
+                    if k == 0:
+                        steps0 = steps
+                    else:
+                        steps1 = steps
+                    continue
+                step_out = serve(scene, w, a, user)
+                touched[k, steps] = step_out.user
+                flag[k, step_out.user] = True
+                if k == 0:
+                    total0 += step_out.reward
+                else:
+                    total1 += step_out.reward
                 advance(scene, w, index.moves[s, steps], index.news[s, steps])
-                steps += 1
-            out[s, k] = node_return(settings.return_kind, total, steps, total, steps, settings.past_sum,
-                                    settings.past_count)
+            steps += 1
+        out[s, 0] = node_return(settings.return_kind, total0, steps0, total0, steps0, settings.past_sum,
+                                settings.past_count)
+        out[s, 1] = node_return(settings.return_kind, total1, steps1, total1, steps1, settings.past_sum,
+                                settings.past_count)

@@ -171,9 +171,9 @@ class MctsPlanner:
             return best
         if self.config.confidence_z <= 0:
             return best
-        index = self._index(scene, root, values, self.config.confirm_futures)
+        index = self._index(scene, root, values, self.config.confirm_futures, eager=False)
         returns = np.empty((index.moves.shape[0], 2))
-        paired_rollouts(scene, root, np.array([self.tree.action[best], greedy]), settings, index, returns)
+        paired_rollouts(scene, root, int(self.tree.action[best]), greedy, settings, index, returns)
         return best if paired_t(returns[:, 0] - returns[:, 1]) >= self.config.confidence_z else int(greedy_child)
 
     def _search(self, scene: Scene, root: World, values: RootValues, settings: SearchSettings, start: float) -> int:
@@ -196,16 +196,16 @@ class MctsPlanner:
                     break
         return done
 
-    def _index(self, scene: Scene, root: World, values: RootValues, count: int) -> FutureIndex:
+    def _index(self, scene: Scene, root: World, values: RootValues, count: int, eager: bool = True) -> FutureIndex:
         """``count`` futures sampled from the root (drawn now from the planner's generator)
-        and their index: (S, H, I, 3) moves and (S, H, I) task draws."""
+        and their index (``futures.index_of``): (S, H, I, 3) moves and (S, H, I) task draws."""
         num_users = len(root.users)
         horizon = remaining_intervals(self.params, num_users, int(root.interval[0]))
         count = count if horizon > 0 else 0
         moves = np.empty((count, horizon, num_users, 3))
         news = np.empty((count, horizon, num_users), dtype=np.int64)
         draw_futures(self.params, moves, news, self.rng)
-        return index_of(scene, root, moves, news, self.tables, values)
+        return index_of(scene, root, moves, news, self.tables, values, eager)
 
     def describe(self) -> dict:
         return asdict(self.config)
