@@ -63,33 +63,35 @@ class FutureIndex(NamedTuple):
 
     S futures of H steps, I users, K points, N nodes of a users' tree, M = ``NEAREST``.
     Futures: ``moves`` (S, H, I, 3), ``news`` (S, H, I). Rows h = 1..H of each future are
-    filled lazily (row 0 is the root, kept in ``root_*``): ``ready`` (S,) rows done;
-    ``traj_users`` (S, I, 3), ``traj_tasks`` (S, I) future s's users at its last row done;
-    the users' tree built at the root (``tree``: its ``order`` and ``span`` serve every row)
-    and each row's boxes ``box`` (S, H + 1, N, 6). Per point, on the trajectory: ``user`` (S, H + 1, K) served, ``cost``
-    (e_hover + e_comp of that service), ``gain`` (its task term of q), ``reach_sq`` (its
-    tie window); ``window`` how many listed users the window holds (-1: not all listed);
-    ``near_user``, ``near_d2``, ``near_cost`` (S, H + 1, K, M) the nearest eligible users
-    in (distance, index) order, their squared distance and upload energy (NaN until first
-    needed), ``near_count`` (S, H + 1, K) how many, ``near_cover`` every eligible user
-    nearer than this squared distance is listed. Tables: ``hop`` (K, K) flight energy
-    between points, ``home`` (K,) flight home, ``hop_q`` (K, K) the flight's share of q
-    (``hop`` / w_max); ``serve_ub`` (K,) a bound on what a service at each point can add to
-    q (``service_bounds``). ``answered`` (S, H + 1, K): the point's answer on the row is
-    computed; ``eager`` (1,): a row answers every point when it is filled (a search,
-    whose iterations revisit the rows), else each point when first asked (the
-    confirmation, whose playouts pass each row once, in step). The root: ``root_q`` (K,), ``root_user``
-    (K,), ``root_allowed`` (1,). ``tree``: the root's tree (its boxes are refitted at a fresh
-    step). ``served0`` (I,):
-    the root's service counts; ``clock`` (1,): scratch for a row's interval.
+    filled when a playout first reaches them (row 0 is the root, kept in ``root_*``), and
+    a row answers each point when first asked: ``ready`` (S,) rows filled; ``row_users``
+    (S, H + 1, I, 3), ``row_tasks`` (S, H + 1, I) the users on the trajectory at each row,
+    ``row_eligible`` (S, H + 1) how many of them may be served; the users' tree built at
+    the root (``tree``: its ``order`` and ``span`` serve every row) and each row's boxes
+    ``box`` (S, H + 1, N, 6). Per point, on the trajectory: ``answered`` (S, H + 1, K) the
+    answer is computed, ``user`` (S, H + 1, K) served, ``cost`` (e_hover + e_comp of that
+    service), ``gain`` (its task term of q), ``reach_sq`` (its tie window); ``window`` how
+    many listed users the window holds (-1: not all listed); ``near_user``, ``near_d2``,
+    ``near_cost`` (S, H + 1, K, M) the nearest eligible users in (distance, index) order,
+    their squared distance and upload energy (NaN until first needed), ``near_count``
+    (S, H + 1, K) how many, ``near_cover`` every eligible user nearer than this squared
+    distance is listed. Tables: ``hop`` (K, K) flight energy between points, ``home`` (K,)
+    flight home, ``hop_q`` (K, K) the flight's share of q (``hop`` / w_max); bounds
+    (``service_bounds``): ``serve_ub`` (K,) on what a service at each point adds to q,
+    ``cost_ub`` and ``cost_lb`` (K,) on its energy. The root: ``root_q`` (K,), ``root_user`` (K,),
+    ``root_allowed`` (1,). ``tree``: the root's tree (its boxes are refitted at a fresh
+    step). ``served0`` (I,): the root's service counts; ``clock`` (1,): scratch for a
+    row's interval.
     """
 
     moves: np.ndarray
     news: np.ndarray
     ready: np.ndarray
-    traj_users: np.ndarray
-    traj_tasks: np.ndarray
+    row_users: np.ndarray
+    row_tasks: np.ndarray
+    row_eligible: np.ndarray
     box: np.ndarray
+    answered: np.ndarray
     user: np.ndarray
     cost: np.ndarray
     gain: np.ndarray
@@ -104,8 +106,8 @@ class FutureIndex(NamedTuple):
     home: np.ndarray
     hop_q: np.ndarray
     serve_ub: np.ndarray
-    answered: np.ndarray
-    eager: np.ndarray
+    cost_ub: np.ndarray
+    cost_lb: np.ndarray
     root_q: np.ndarray
     root_user: np.ndarray
     root_allowed: np.ndarray
@@ -128,20 +130,29 @@ def point_tables(p: np.ndarray, hover_points: np.ndarray, hop: np.ndarray, home:
 
 
 @jit_borrow
-def service_bounds(p: np.ndarray, hover_points: np.ndarray, tasks_cap: int, z_low: float, z_high: float,
-                   below: np.ndarray, out: np.ndarray) -> None:
-    """``out`` (K,): no service from point k adds more to q than this (q = the task term less
-    the interval's energy over w_max, the flight's included). Both the task term and the
-    service's own energy (hover, computation) grow in proportion to the tasks, and the rate
-    falls with the distance, so the most a service can add is that of ``tasks_cap`` tasks
-    from a user as near as a user can be: straight below (or above) the point at the
-    nearest altitude in [``z_low``, ``z_high``]; or nothing. ``below`` (3,) is scratch."""
+def service_bounds(p: np.ndarray, hover_points: np.ndarray, tasks_cap: int, box: np.ndarray, at: np.ndarray,
+                   out_gain: np.ndarray, out_cost: np.ndarray, out_cost_lb: np.ndarray) -> None:
+    """Bounds on a service from each point by a user with at most ``tasks_cap`` tasks
+    inside ``box`` (x lo, x hi, y lo, y hi, z lo, z hi). ``out_gain`` (K,): no service adds
+    more to q (q = the task term less the interval's energy over w_max, the flight's
+    included): the task term and the service's own energy (hover, computation) both grow in
+    proportion to the tasks and the rate falls with the distance, so at most that of
+    ``tasks_cap`` tasks from the nearest place in the box, or nothing. ``out_cost`` (K,):
+    no service costs more energy than ``tasks_cap`` tasks from the box's farthest corner;
+    ``out_cost_lb`` (K,): none costs less than one task (an eligible user has one at
+    least) from the nearest place. ``at`` (3,) is scratch."""
     for k in range(hover_points.shape[0]):
-        below[0] = hover_points[k, 0]
-        below[1] = hover_points[k, 1]
-        below[2] = min(max(hover_points[k, 2], z_low), z_high)
-        bits, e_h, e_c = service_cost(p, hover_points[k], below, tasks_cap)
-        out[k] = max(task_reward(p, tasks_cap) - (e_h + e_c) / p[P.ENERGY_NORM], 0.0)
+        for a in range(3):
+            at[a] = min(max(hover_points[k, a], box[2 * a]), box[2 * a + 1])
+        bits, e_h, e_c = service_cost(p, hover_points[k], at, tasks_cap)
+        out_gain[k] = max(task_reward(p, tasks_cap) - (e_h + e_c) / p[P.ENERGY_NORM], 0.0)
+        bits, e_h, e_c = service_cost(p, hover_points[k], at, 1)
+        out_cost_lb[k] = e_h + e_c
+        for a in range(3):
+            lo, hi = box[2 * a], box[2 * a + 1]
+            at[a] = lo if abs(hover_points[k, a] - lo) > abs(hover_points[k, a] - hi) else hi
+        bits, e_h, e_c = service_cost(p, hover_points[k], at, tasks_cap)
+        out_cost[k] = e_h + e_c
 
 
 @jit_borrow
@@ -172,29 +183,40 @@ def evaluate_tree(scene: Scene, w: World, t: UserTree, home: np.ndarray, out_q: 
 
 
 @jit_borrow
-def _fill_row(scene: Scene, idx: FutureIndex, root: World, s: int) -> None:
-    """Row ready[s] + 1 of future s: step its trajectory on and index it; answer every
-    point now if the index is ``eager``, else when each is first asked."""
-    h = idx.ready[s] + 1
-    users = idx.traj_users[s]
-    idx.clock[0] = root.interval[0] + h  # the interval due after h steps (a task table's row)
-    traj = World(root.uav_xyz, root.hover, users, idx.traj_tasks[s], idx.served0, root.battery_j, idx.clock,
-                 root.energy_used_j, root.reward_sum)
-    advance(scene, traj, idx.moves[s, h - 1], idx.news[s, h - 1])
-    refit_tree(users, UserTree(idx.tree.order, idx.tree.span, idx.box[s, h], idx.tree.stack, idx.tree.bounds))
-    idx.ready[s] = h
-    for k in range(scene.hover_points.shape[0]):
-        idx.answered[s, h, k] = False
-        if idx.eager[0]:
-            _answer_point(scene.p, scene.hover_points, idx, s, h, k)
+def fill_rows(scene: Scene, idx: FutureIndex, root: World, s: int, h: int) -> None:
+    """Fill future s's rows up to h: each steps the trajectory of the row before on
+    (``world.advance``) and indexes it; its points are answered when first asked."""
+    p = scene.p
+    while idx.ready[s] < h:
+        row = idx.ready[s] + 1
+        users = idx.row_users[s, row]
+        tasks = idx.row_tasks[s, row]
+        before_users = idx.row_users[s, row - 1] if row > 1 else root.users
+        before_tasks = idx.row_tasks[s, row - 1] if row > 1 else root.tasks
+        for i in range(users.shape[0]):
+            for a in range(3):
+                users[i, a] = before_users[i, a]
+            tasks[i] = before_tasks[i]
+        idx.clock[0] = root.interval[0] + row  # the interval due after `row` steps (a task table's row)
+        traj = World(root.uav_xyz, root.hover, users, tasks, idx.served0, root.battery_j, idx.clock,
+                     root.energy_used_j, root.reward_sum)
+        advance(scene, traj, idx.moves[s, row - 1], idx.news[s, row - 1])
+        refit_tree(users, UserTree(idx.tree.order, idx.tree.span, idx.box[s, row], idx.tree.stack, idx.tree.bounds))
+        eligible = 0
+        for i in range(users.shape[0]):
+            eligible += is_eligible(p, tasks[i], idx.served0[i])
+        idx.row_eligible[s, row] = eligible
+        for k in range(idx.answered.shape[2]):
+            idx.answered[s, row, k] = False
+        idx.ready[s] = row
 
 
 @jit_borrow
 def _answer_point(p: np.ndarray, hp: np.ndarray, idx: FutureIndex, s: int, h: int, k: int) -> None:
-    """Point k's answer on row h of future s, the row future s's trajectory is at
-    (``ready[s] == h``): its listed nearest eligible users and the one it serves."""
-    users = idx.traj_users[s]
-    tasks = idx.traj_tasks[s]
+    """Point k's answer on row h of future s: its listed nearest eligible users on the
+    trajectory and the one it serves."""
+    users = idx.row_users[s, h]
+    tasks = idx.row_tasks[s, h]
     served = idx.served0
     t = UserTree(idx.tree.order, idx.tree.span, idx.box[s, h], idx.tree.stack, idx.tree.bounds)
     idx.answered[s, h, k] = True
@@ -322,8 +344,7 @@ def evaluate_future(scene: Scene, idx: FutureIndex, root: World, s: int, h: int,
                     flag: np.ndarray, out_q: np.ndarray, out_user: np.ndarray) -> int:
     """``evaluate_tree`` for ``w``, the state after h >= 1 steps of future s from ``root``
     in which the users ``touched[:h]`` (``flag`` set) were served."""
-    while idx.ready[s] < h:
-        _fill_row(scene, idx, root, s)
+    fill_rows(scene, idx, root, s, h)
     p = scene.p
     hp = scene.hover_points
     stay = p[P.ALLOW_STAY] > 0.5
@@ -349,11 +370,10 @@ def greedy_future(scene: Scene, idx: FutureIndex, root: World, s: int, h: int, w
     ``evaluate_future``'s q) and its user; (-1, ``NO_USER``) if no point is allowed.
 
     A point's q is at most ``serve_ub`` less its flight's share, so only the points whose
-    bound reaches the best q found so far are evaluated: the one with the largest bound
-    first, then every other in order. With many points most are skipped (and, where rows
-    are answered lazily, never asked)."""
-    while idx.ready[s] < h:
-        _fill_row(scene, idx, root, s)
+    bound reaches the best q found so far, and whose budget holds with the least a service
+    there can cost, are evaluated: the one with the largest bound first, then every other
+    in order. With many points most are never asked."""
+    fill_rows(scene, idx, root, s, h)
     p = scene.p
     hp = scene.hover_points
     stay = p[P.ALLOW_STAY] > 0.5
@@ -373,13 +393,71 @@ def greedy_future(scene: Scene, idx: FutureIndex, root: World, s: int, h: int, w
         q, user = _future_value(p, hp, idx, s, h, first, w, touched, flag)
         if q > -math.inf:
             best, best_q, best_user = first, q, user
+    battery = w.battery_j[0]
     for k in range(hp.shape[0]):
         if k == first or (k == prev and not stay) or idx.serve_ub[k] - hop_q[k] < best_q:
             continue  # q < best_q: not the largest, nor tied with it
+        if not budget_ok(p, battery, idx.cost_lb[k] + idx.hop[prev, k], idx.home[k]):
+            continue  # not allowed whoever it serves
         q, user = _future_value(p, hp, idx, s, h, k, w, touched, flag)
         if q > best_q or (q == best_q and q > -math.inf and k < best):
             best, best_q, best_user = k, q, user
     return best, best_user
+
+
+@jit_borrow
+def allowed_future(scene: Scene, idx: FutureIndex, root: World, s: int, h: int, w: World, touched: np.ndarray,
+                   flag: np.ndarray, out_allowed: np.ndarray) -> int:
+    """Which points ``evaluate_future`` would allow (``out_allowed`` (K,): 0.0 where
+    allowed, -inf where not), and how many, asking as few points as it can.
+
+    Whether a point is allowed depends on its user only through the service's energy: if
+    anyone may be served, every point serves someone, and the budget then decides. Nobody
+    eligible on the row means nobody now; otherwise the users this playout served are the
+    only ones who may have left the row's eligible. A point whose budget holds with the
+    most a service there can cost (``cost_ub``) is allowed, one whose budget fails with
+    the least (``cost_lb``) is not; only the points in between are asked."""
+    fill_rows(scene, idx, root, s, h)
+    p = scene.p
+    hp = scene.hover_points
+    stay = p[P.ALLOW_STAY] > 0.5
+    prev = w.hover[0]
+    battery = w.battery_j[0]
+    eligible = idx.row_eligible[s, h]
+    for j in range(h):  # each served user once: was it eligible on the row, and is it no longer?
+        u = touched[j]
+        first = True
+        for i in range(j):
+            if touched[i] == u:
+                first = False
+                break
+        if first and is_eligible(p, idx.row_tasks[s, h, u], idx.served0[u]) and not is_eligible(p, w.tasks[u], w.served[u]):
+            eligible -= 1
+    allowed = 0
+    for k in range(hp.shape[0]):
+        out_allowed[k] = -math.inf
+        if eligible == 0 or (k == prev and not stay):
+            continue
+        hop = idx.hop[prev, k]
+        if budget_ok(p, battery, idx.cost_ub[k] + hop, idx.home[k]):
+            ok = True
+        elif not budget_ok(p, battery, idx.cost_lb[k] + hop, idx.home[k]):
+            ok = False
+        else:
+            q, user = _future_value(p, hp, idx, s, h, k, w, touched, flag)
+            ok = q > -math.inf
+        if ok:
+            out_allowed[k] = 0.0
+            allowed += 1
+    return allowed
+
+
+@jit_borrow
+def point_user(scene: Scene, idx: FutureIndex, s: int, h: int, k: int, w: World, touched: np.ndarray,
+               flag: np.ndarray) -> int:
+    """The user point k serves in ``w`` (``evaluate_future``'s), row h already filled."""
+    q, user = _future_value(scene.p, scene.hover_points, idx, s, h, k, w, touched, flag)
+    return user
 
 
 @jit_inline
@@ -423,21 +501,28 @@ def point_tables_of(p: np.ndarray, hover_points: np.ndarray) -> PointTables:
     return tables
 
 
-def service_bounds_of(scene: Scene, root: World, tables: PointTables) -> np.ndarray:
-    """``service_bounds`` for the futures of ``root``: no user has more tasks than u_max, the
-    root's or the task table's largest count (a draw is capped at u_max, a backlog too), nor
-    lies outside the altitudes of the root's users (and, in 3-D, of [0, user_max_altitude],
-    where the users move). A margin far above rounding makes each a bound in floating point
-    too."""
+def service_bounds_of(scene: Scene, root: World, tables: PointTables) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``service_bounds`` for the futures of ``root`` (``serve_ub``, ``cost_ub``,
+    ``cost_lb``): no user
+    has more tasks than u_max, the root's or the task table's largest count (a draw is
+    capped at u_max, a backlog too), nor lies outside the root's users' box and the area
+    where the users move ([0, area]^2, and in 3-D altitudes [0, user_max_altitude]). A
+    margin far above rounding makes each a bound in floating point too."""
     p = scene.p
     tasks_cap = max(int(p[P.TASK_MAX]), int(root.tasks.max(initial=0)), int(scene.task_table.max(initial=0)))
-    z = root.users[:, 2]
-    z_low, z_high = (float(z.min()), float(z.max())) if len(z) else (0.0, 0.0)
+    box = np.array([0.0, p[P.AREA], 0.0, p[P.AREA], 0.0, 0.0])
     if p[P.DIMENSIONS] > 2.5:
-        z_low, z_high = min(z_low, 0.0), max(z_high, float(p[P.USER_ZMAX]))
-    out = np.empty(len(scene.hover_points))
-    service_bounds(p, scene.hover_points, tasks_cap, z_low, z_high, np.empty(3), out)
-    return out + 1e-9 * (1.0 + np.abs(out) + float(np.abs(tables.hop_q).max(initial=0.0)))
+        box[5] = p[P.USER_ZMAX]
+    if len(root.users):
+        box[0::2] = np.minimum(box[0::2], root.users.min(axis=0))
+        box[1::2] = np.maximum(box[1::2], root.users.max(axis=0))
+    if p[P.DIMENSIONS] <= 2.5 and len(root.users):  # the users keep their altitudes
+        box[4:] = root.users[:, 2].min(), root.users[:, 2].max()
+    k = len(scene.hover_points)
+    gain, cost, cost_lb = np.empty(k), np.empty(k), np.empty(k)
+    service_bounds(p, scene.hover_points, tasks_cap, box, np.empty(3), gain, cost, cost_lb)
+    margin = 1e-9 * (1.0 + np.abs(gain) + float(np.abs(tables.hop_q).max(initial=0.0)))
+    return gain + margin, cost * (1.0 + 1e-9), cost_lb * (1.0 - 1e-9)
 
 
 class RootValues(NamedTuple):
@@ -459,24 +544,24 @@ def root_values_of(scene: Scene, root: World, tables: PointTables) -> RootValues
 
 
 def index_of(scene: Scene, root: World, moves: np.ndarray, news: np.ndarray, tables: PointTables,
-             values: RootValues, eager: bool = True) -> FutureIndex:
+             values: RootValues) -> FutureIndex:
     """An empty index of the futures ``moves`` (S, H, I, 3) and ``news`` (S, H, I) from
-    ``root``; rows are filled as playouts reach them, each point answered at once
-    (``eager``) or when first asked (for playouts that pass each row once, in step)."""
+    ``root``; rows are filled as playouts reach them, and answer each point when asked."""
     s, h, i = news.shape
     k = len(scene.hover_points)
     nodes = len(values.tree.box)
     rows = (s, h + 1)
+    serve_ub, cost_ub, cost_lb = service_bounds_of(scene, root, tables)
     return FutureIndex(
         moves=moves, news=news, ready=np.zeros(s, dtype=np.int64),
-        traj_users=np.repeat(root.users[None], s, axis=0), traj_tasks=np.repeat(root.tasks[None], s, axis=0),
-        box=np.empty((*rows, nodes, 6)), user=np.empty((*rows, k), dtype=np.int64), cost=np.empty((*rows, k)),
-        gain=np.empty((*rows, k)), reach_sq=np.empty((*rows, k)), window=np.empty((*rows, k), dtype=np.int64),
-        near_user=np.empty((*rows, k, NEAREST), dtype=np.int64), near_d2=np.empty((*rows, k, NEAREST)),
-        near_cost=np.empty((*rows, k, NEAREST)), near_count=np.empty((*rows, k), dtype=np.int64),
-        near_cover=np.empty((*rows, k)), hop=tables.hop, home=tables.home, hop_q=tables.hop_q,
-        serve_ub=service_bounds_of(scene, root, tables), answered=np.zeros((*rows, k), dtype=np.bool_),
-        eager=np.array([eager]),
+        row_users=np.empty((*rows, i, 3)), row_tasks=np.empty((*rows, i), dtype=np.int64),
+        row_eligible=np.zeros(rows, dtype=np.int64), box=np.empty((*rows, nodes, 6)),
+        answered=np.zeros((*rows, k), dtype=np.bool_), user=np.empty((*rows, k), dtype=np.int64),
+        cost=np.empty((*rows, k)), gain=np.empty((*rows, k)), reach_sq=np.empty((*rows, k)),
+        window=np.empty((*rows, k), dtype=np.int64), near_user=np.empty((*rows, k, NEAREST), dtype=np.int64),
+        near_d2=np.empty((*rows, k, NEAREST)), near_cost=np.empty((*rows, k, NEAREST)),
+        near_count=np.empty((*rows, k), dtype=np.int64), near_cover=np.empty((*rows, k)), hop=tables.hop,
+        home=tables.home, hop_q=tables.hop_q, serve_ub=serve_ub, cost_ub=cost_ub, cost_lb=cost_lb,
         root_q=values.q, root_user=values.user, root_allowed=values.allowed,
         tree=values.tree._replace(box=values.tree.box.copy()),
         served0=root.served.copy(), clock=np.zeros(1, dtype=np.int64),
@@ -484,4 +569,4 @@ def index_of(scene: Scene, root: World, moves: np.ndarray, news: np.ndarray, tab
 
 
 __all__ = ["FutureIndex", "PointTables", "RootValues", "evaluate_future", "evaluate_step", "evaluate_tree",
-           "greedy_future", "index_of", "point_tables_of", "root_values_of"]
+           "allowed_future", "fill_rows", "greedy_future", "index_of", "point_user", "point_tables_of", "root_values_of"]

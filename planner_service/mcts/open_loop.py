@@ -23,10 +23,10 @@ import numpy as np
 
 from ..model._jit import jit, jit_borrow
 from ..model import params as P
-from ..model.interval import NO_USER, remaining_intervals
+from ..model.interval import remaining_intervals
 from ..model.mobility import draw_int
 from ..model.world import Scene, World, advance, clone, copy_into, draw_chance, serve
-from .futures import FutureIndex, evaluate_future, evaluate_step, greedy_future
+from .futures import FutureIndex, allowed_future, evaluate_step, fill_rows, greedy_future, point_user
 from .objective import node_return
 from .tree import ROOT_INDEX, UNVISITED, TreeArrays
 
@@ -183,20 +183,26 @@ def _iterate(scene: Scene, tree: TreeArrays, num_nodes: int, root: World, settin
         steps = 0
         in_tree = True
         while limit <= 0 or w.interval[0] < limit:
+            if future >= 0 and steps > 0:  # the users are where the future's row has them
+                fill_rows(scene, index, root, future, steps)
+                ws = World(w.uav_xyz, w.hover, index.row_users[future, steps], w.tasks, w.served, w.battery_j,
+                           w.interval, w.energy_used_j, w.reward_sum)
+            else:
+                ws = w
             if in_tree and depth > settings.max_depth:
                 in_tree = False
             if not in_tree and future >= 0 and settings.rollout == ROLLOUT_EPSILON_GREEDY:
-                # the greedy step needs only the best point (``greedy_future``); the
-                # uniform one, drawn as ``rollout_action`` draws it, every allowed point
-                a, user = greedy_future(scene, index, root, future, steps, w, touched, flag)
+                # the greedy step needs only the best point (``greedy_future``), the
+                # uniform one (drawn as ``rollout_action`` draws it) which points are allowed
+                a, user = greedy_future(scene, index, root, future, steps, ws, touched, flag)
                 if a < 0:
                     break
                 if rng.random() < settings.epsilon:
-                    allowed = evaluate_step(scene, index, root, w, future, steps, touched, flag, qvals, users_at)
+                    allowed = allowed_future(scene, index, root, future, steps, ws, touched, flag, qvals)
                     a = random_allowed(qvals, allowed, rng)
-                    user = users_at[a]
+                    user = point_user(scene, index, future, steps, a, ws, touched, flag)
             else:
-                allowed = evaluate_step(scene, index, root, w, future, steps, touched, flag, qvals, users_at)
+                allowed = evaluate_step(scene, index, root, ws, future, steps, touched, flag, qvals, users_at)
                 if allowed == 0:
                     break
                 if in_tree:
@@ -224,12 +230,12 @@ def _iterate(scene: Scene, tree: TreeArrays, num_nodes: int, root: World, settin
                 else:
                     a = rollout_action(qvals, allowed, settings.rollout, settings.epsilon, rng)
                 user = users_at[a]
-            out = serve(scene, w, a, user)
+            out = serve(scene, ws, a, user)
             touched[steps] = out.user
             flag[out.user] = True
             rewards[steps] = out.reward
-            if future >= 0:
-                advance(scene, w, index.moves[future, steps], index.news[future, steps])
+            if future >= 0:  # only the tasks: the next row has the users' moves
+                advance(scene, ws, index.moves[future, steps, :0], index.news[future, steps])
             else:
                 draw_chance(p, moves, news, rng)
                 advance(scene, w, moves, news)
@@ -260,59 +266,44 @@ def paired_rollouts(scene: Scene, root: World, first: int, second: int, settings
                     index: FutureIndex, out: np.ndarray) -> None:
     """Action ``first``, then the greedy policy, and action ``second``, then the greedy
     policy, on each of the index's S futures: ``out`` (S, 2) receives the two returns (of
-    the first step's node, as ``search`` backs up). The two playouts of a future go step
-    by step together, so each row of the future is needed at one step only, and an index
-    that answers points lazily (``index_of(eager=False)``) is asked only what the greedy
-    steps need."""
-    num_users = root.users.shape[0]
-    horizon = 1 + remaining_intervals(scene.p, num_users, root.interval[0])
-    _paired(scene, root, first, second, settings, index, out, clone(root), clone(root),
-            np.zeros((2, horizon), dtype=np.int64), np.zeros((2, num_users), dtype=np.bool_))
+    the first step's node, as ``search`` backs up)."""
+    horizon = 1 + remaining_intervals(scene.p, root.users.shape[0], root.interval[0])
+    _paired(scene, root, first, second, settings, index, out, clone(root), np.zeros(horizon, dtype=np.int64),
+            np.zeros(root.users.shape[0], dtype=np.bool_))
 
 
 @jit_borrow
 def _paired(scene: Scene, root: World, first: int, second: int, settings: SearchSettings, index: FutureIndex,
-            out: np.ndarray, w0: World, w1: World, touched: np.ndarray, flag: np.ndarray) -> None:
-    """``paired_rollouts`` in the worlds and arrays it is given."""
+            out: np.ndarray, w: World, touched: np.ndarray, flag: np.ndarray) -> None:
+    """``paired_rollouts`` in the world and arrays it is given."""
     limit = int(scene.p[P.MAX_INTERVALS])
+    steps = 0
     for s in range(index.moves.shape[0]):
         for k in range(2):
-            w = w0 if k == 0 else w1
-            for j in range(touched.shape[1]):
-                flag[k, touched[k, j]] = False
-                touched[k, j] = 0
+            for j in range(steps):
+                flag[touched[j]] = False
             copy_into(w, root)
-        total0, total1 = 0.0, 0.0
-        steps0, steps1 = -1, -1  # the steps a playout took once it has ended
-        steps = 0
-        while steps0 < 0 or steps1 < 0:
-            for k in range(2):
-                if (steps0 if k == 0 else steps1) >= 0:
-                    continue
-                w = w0 if k == 0 else w1
-                if 0 < limit <= w.interval[0] or (steps == 0 and index.root_allowed[0] == 0):
-                    a, user = -1, NO_USER
-                elif steps == 0:
+            total = 0.0
+            steps = 0
+            while limit <= 0 or w.interval[0] < limit:
+                if steps == 0:
+                    if index.root_allowed[0] == 0:
+                        break
+                    ws = w
                     a = first if k == 0 else second
                     user = index.root_user[a]
                 else:
-                    a, user = greedy_future(scene, index, root, s, steps, w, touched[k], flag[k])
-                if a < 0:
-                    if k == 0:
-                        steps0 = steps
-                    else:
-                        steps1 = steps
-                    continue
-                step_out = serve(scene, w, a, user)
-                touched[k, steps] = step_out.user
-                flag[k, step_out.user] = True
-                if k == 0:
-                    total0 += step_out.reward
-                else:
-                    total1 += step_out.reward
-                advance(scene, w, index.moves[s, steps], index.news[s, steps])
-            steps += 1
-        out[s, 0] = node_return(settings.return_kind, total0, steps0, total0, steps0, settings.past_sum,
-                                settings.past_count)
-        out[s, 1] = node_return(settings.return_kind, total1, steps1, total1, steps1, settings.past_sum,
-                                settings.past_count)
+                    fill_rows(scene, index, root, s, steps)
+                    ws = World(w.uav_xyz, w.hover, index.row_users[s, steps], w.tasks, w.served, w.battery_j,
+                               w.interval, w.energy_used_j, w.reward_sum)
+                    a, user = greedy_future(scene, index, root, s, steps, ws, touched, flag)
+                    if a < 0:
+                        break
+                step_out = serve(scene, ws, a, user)
+                touched[steps] = step_out.user
+                flag[step_out.user] = True
+                total += step_out.reward
+                advance(scene, ws, index.moves[s, steps, :0], index.news[s, steps])
+                steps += 1
+            out[s, k] = node_return(settings.return_kind, total, steps, total, steps, settings.past_sum,
+                                    settings.past_count)

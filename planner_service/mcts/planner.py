@@ -171,7 +171,7 @@ class MctsPlanner:
             return best
         if self.config.confidence_z <= 0:
             return best
-        index = self._index(scene, root, values, self.config.confirm_futures, eager=False)
+        index = self._index(scene, root, values, self.config.confirm_futures)
         returns = np.empty((index.moves.shape[0], 2))
         paired_rollouts(scene, root, int(self.tree.action[best]), greedy, settings, index, returns)
         return best if paired_t(returns[:, 0] - returns[:, 1]) >= self.config.confidence_z else int(greedy_child)
@@ -196,7 +196,7 @@ class MctsPlanner:
                     break
         return done
 
-    def _index(self, scene: Scene, root: World, values: RootValues, count: int, eager: bool = True) -> FutureIndex:
+    def _index(self, scene: Scene, root: World, values: RootValues, count: int) -> FutureIndex:
         """``count`` futures sampled from the root (drawn now from the planner's generator)
         and their index (``futures.index_of``): (S, H, I, 3) moves and (S, H, I) task draws."""
         num_users = len(root.users)
@@ -205,7 +205,7 @@ class MctsPlanner:
         moves = np.empty((count, horizon, num_users, 3))
         news = np.empty((count, horizon, num_users), dtype=np.int64)
         draw_futures(self.params, moves, news, self.rng)
-        return index_of(scene, root, moves, news, self.tables, values, eager)
+        return index_of(scene, root, moves, news, self.tables, values)
 
     def describe(self) -> dict:
         return asdict(self.config)

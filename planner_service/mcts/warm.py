@@ -73,7 +73,7 @@ def _confirmation(scenario: Scenario, points: np.ndarray, state: SortieState, rn
     moves = np.empty((2, horizon, len(state.users), 3))
     news = np.empty((2, horizon, len(state.users)), dtype=np.int64)
     draw_futures(p, moves, news, rng)
-    index = index_of(scene, root, moves, news, tables, values, eager=False)
+    index = index_of(scene, root, moves, news, tables, values)
     settings = SearchSettings(1.0, 1, 0.1, 2, float(state.reward_sum), int(state.interval), 10)
     allowed = np.flatnonzero(np.isfinite(values.q))
     paired_rollouts(scene, root, int(allowed[0]), int(allowed[-1]), settings, index, np.empty((2, 2)))
