@@ -182,8 +182,15 @@ def evaluate_tree(scene: Scene, w: World, t: UserTree, home: np.ndarray, out_q: 
     return allowed
 
 
-@jit_borrow
+@jit_inline
 def fill_rows(scene: Scene, idx: FutureIndex, root: World, s: int, h: int) -> None:
+    """Fill future s's rows up to h (``_fill_rows``), if not yet done."""
+    if idx.ready[s] < h:
+        _fill_rows(scene, idx, root, s, h)
+
+
+@jit_borrow
+def _fill_rows(scene: Scene, idx: FutureIndex, root: World, s: int, h: int) -> None:
     """Fill future s's rows up to h: each steps the trajectory of the row before on
     (``world.advance``) and indexes it; its points are answered when first asked."""
     p = scene.p
@@ -365,9 +372,10 @@ def evaluate_future(scene: Scene, idx: FutureIndex, root: World, s: int, h: int,
 
 @jit_inline
 def greedy_future(scene: Scene, idx: FutureIndex, root: World, s: int, h: int, w: World, touched: np.ndarray,
-                  flag: np.ndarray) -> tuple[int, int]:
+                  flag: np.ndarray, skip: np.ndarray) -> tuple[int, int]:
     """The point of largest q in ``w`` (the first of equals, as ``np.argmax`` over
-    ``evaluate_future``'s q) and its user; (-1, ``NO_USER``) if no point is allowed.
+    ``evaluate_future``'s q) and its user, among the points ``skip`` (K,) does not mark;
+    (-1, ``NO_USER``) if none of them is allowed.
 
     A point's q is at most ``serve_ub`` less its flight's share, so only the points whose
     bound reaches the best q found so far, and whose budget holds with the least a service
@@ -383,7 +391,7 @@ def greedy_future(scene: Scene, idx: FutureIndex, root: World, s: int, h: int, w
     first_ub = -math.inf
     for k in range(hp.shape[0]):
         ub = idx.serve_ub[k] - hop_q[k]
-        if ub > first_ub and (k != prev or stay):
+        if ub > first_ub and (k != prev or stay) and not skip[k]:
             first = k
             first_ub = ub
     best = -1
@@ -395,7 +403,7 @@ def greedy_future(scene: Scene, idx: FutureIndex, root: World, s: int, h: int, w
             best, best_q, best_user = first, q, user
     battery = w.battery_j[0]
     for k in range(hp.shape[0]):
-        if k == first or (k == prev and not stay) or idx.serve_ub[k] - hop_q[k] < best_q:
+        if k == first or (k == prev and not stay) or skip[k] or idx.serve_ub[k] - hop_q[k] < best_q:
             continue  # q < best_q: not the largest, nor tied with it
         if not budget_ok(p, battery, idx.cost_lb[k] + idx.hop[prev, k], idx.home[k]):
             continue  # not allowed whoever it serves

@@ -52,21 +52,41 @@ class SearchSettings(NamedTuple):
 
 
 @jit_borrow
+def _untried(children: np.ndarray, visits: np.ndarray, node: int, a: int) -> bool:
+    """Action a has not been tried at ``node``: no child, or a child kept from a reused
+    tree with its statistics decayed to nothing."""
+    child = children[node, a]
+    return child == UNVISITED or visits[child] <= 0.0
+
+
+@jit_borrow
 def _untried_best(children: np.ndarray, visits: np.ndarray, node: int, qvals: np.ndarray) -> int:
     """The allowed action not yet tried that has the largest immediate q; -1 if none.
 
-    Untried: no child, or a child kept from a reused tree with its statistics decayed to
-    nothing. Expanding the most promising action first is a cheap prior: with K children a
-    level and few iterations, the tree then spends them where they matter."""
+    Expanding the most promising action first is a cheap prior: with K children a level
+    and few iterations, the tree then spends them where they matter."""
     best = -1
     best_q = -math.inf
     for a in range(qvals.shape[0]):
-        child = children[node, a]
-        untried = child == UNVISITED or visits[child] <= 0.0
-        if untried and qvals[a] > best_q:
+        if _untried(children, visits, node, a) and qvals[a] > best_q:
             best = a
             best_q = qvals[a]
     return best
+
+
+@jit_borrow
+def _expand(tree: TreeArrays, num_nodes: int, node: int, a: int) -> int:
+    """The child of ``node`` for action a, made (as node ``num_nodes``) if it has none."""
+    child = tree.children[node, a]
+    if child == UNVISITED:
+        child = num_nodes
+        tree.parent[child] = node
+        tree.action[child] = a
+        tree.children[child, :] = UNVISITED
+        tree.visits[child] = 0.0
+        tree.value_sum[child] = 0.0
+        tree.children[node, a] = child
+    return child
 
 
 @jit_borrow
@@ -127,8 +147,8 @@ class Scratch(NamedTuple):
     """A search's working arrays: the playout's world ``w``, every action's q and user at
     a step (``qvals``, ``users_at`` (K,)), the steps' rewards (``rewards`` (H,)) and their
     suffix sums (``suffix`` (H + 1,)), the nodes entered (``path`` (H + 1,)), the users
-    served (``touched`` (H,)) and their marks (``flag`` (I,)), and a fresh step's chance
-    (``moves`` (I, 3), ``news`` (I,))."""
+    served (``touched`` (H,)) and their marks (``flag`` (I,)), a fresh step's chance
+    (``moves`` (I, 3), ``news`` (I,)), and the points a step leaves out (``skip`` (K,))."""
 
     w: World
     qvals: np.ndarray
@@ -140,6 +160,7 @@ class Scratch(NamedTuple):
     flag: np.ndarray
     moves: np.ndarray
     news: np.ndarray
+    skip: np.ndarray
 
 
 @jit
@@ -157,7 +178,7 @@ def search(scene: Scene, tree: TreeArrays, num_nodes: int, root: World, settings
     scratch = Scratch(clone(root), np.empty(num_actions), np.empty(num_actions, dtype=np.int64), np.empty(horizon),
                       np.empty(horizon + 1), np.empty(horizon + 1, dtype=np.int64), np.zeros(horizon, dtype=np.int64),
                       np.zeros(root.users.shape[0], dtype=np.bool_), np.empty_like(root.users),
-                      np.empty_like(root.tasks))
+                      np.empty_like(root.tasks), np.zeros(num_actions, dtype=np.bool_))
     return _iterate(scene, tree, num_nodes, root, settings, index, iterations, rng, scratch)
 
 
@@ -168,7 +189,7 @@ def _iterate(scene: Scene, tree: TreeArrays, num_nodes: int, root: World, settin
     here nothing is reference-counted, see ``model._jit.jit_borrow``)."""
     p = scene.p
     parent, action, children, visits, value_sum = tree
-    w, qvals, users_at, rewards, suffix, path, touched, flag, moves, news = scratch
+    w, qvals, users_at, rewards, suffix, path, touched, flag, moves, news, skip = scratch
     limit = int(p[P.MAX_INTERVALS])
     num_futures = index.moves.shape[0]
     steps = 0
@@ -191,10 +212,30 @@ def _iterate(scene: Scene, tree: TreeArrays, num_nodes: int, root: World, settin
                 ws = w
             if in_tree and depth > settings.max_depth:
                 in_tree = False
-            if not in_tree and future >= 0 and settings.rollout == ROLLOUT_EPSILON_GREEDY:
+            if future >= 0 and steps > 0 and in_tree:  # the tree's step, asking as few points as it can
+                for b in range(skip.shape[0]):
+                    skip[b] = not _untried(children, visits, node, b)
+                a, user = greedy_future(scene, index, root, future, steps, ws, touched, flag, skip)
+                if a >= 0:  # the untried allowed point of largest q (``_untried_best``)
+                    child = _expand(tree, num_nodes, node, a)
+                    num_nodes += child == num_nodes
+                    in_tree = False
+                else:  # every allowed point tried: UCT needs to know only which are allowed
+                    allowed = allowed_future(scene, index, root, future, steps, ws, touched, flag, qvals)
+                    if allowed == 0:
+                        break
+                    child = _uct_child(children, node, qvals, visits, value_sum, settings.c)
+                    a = action[child]
+                    user = point_user(scene, index, future, steps, a, ws, touched, flag)
+                node = child
+                path[depth] = node
+                depth += 1
+            elif future >= 0 and steps > 0 and settings.rollout == ROLLOUT_EPSILON_GREEDY:
                 # the greedy step needs only the best point (``greedy_future``), the
                 # uniform one (drawn as ``rollout_action`` draws it) which points are allowed
-                a, user = greedy_future(scene, index, root, future, steps, ws, touched, flag)
+                for b in range(skip.shape[0]):
+                    skip[b] = False
+                a, user = greedy_future(scene, index, root, future, steps, ws, touched, flag, skip)
                 if a < 0:
                     break
                 if rng.random() < settings.epsilon:
@@ -208,16 +249,8 @@ def _iterate(scene: Scene, tree: TreeArrays, num_nodes: int, root: World, settin
                 if in_tree:
                     a = _untried_best(children, visits, node, qvals)
                     if a >= 0:
-                        child = children[node, a]
-                        if child == UNVISITED:
-                            child = num_nodes
-                            num_nodes += 1
-                            parent[child] = node
-                            action[child] = a
-                            children[child, :] = UNVISITED
-                            visits[child] = 0.0
-                            value_sum[child] = 0.0
-                            children[node, a] = child
+                        child = _expand(tree, num_nodes, node, a)
+                        num_nodes += child == num_nodes
                         in_tree = False
                     else:
                         child = _uct_child(children, node, qvals, visits, value_sum, settings.c)
@@ -269,13 +302,13 @@ def paired_rollouts(scene: Scene, root: World, first: int, second: int, settings
     the first step's node, as ``search`` backs up)."""
     horizon = 1 + remaining_intervals(scene.p, root.users.shape[0], root.interval[0])
     _paired(scene, root, first, second, settings, index, out, clone(root), np.zeros(horizon, dtype=np.int64),
-            np.zeros(root.users.shape[0], dtype=np.bool_))
+            np.zeros(root.users.shape[0], dtype=np.bool_), np.zeros(scene.hover_points.shape[0], dtype=np.bool_))
 
 
 @jit_borrow
 def _paired(scene: Scene, root: World, first: int, second: int, settings: SearchSettings, index: FutureIndex,
-            out: np.ndarray, w: World, touched: np.ndarray, flag: np.ndarray) -> None:
-    """``paired_rollouts`` in the world and arrays it is given."""
+            out: np.ndarray, w: World, touched: np.ndarray, flag: np.ndarray, skip: np.ndarray) -> None:
+    """``paired_rollouts`` in the world and arrays it is given (``skip`` (K,) all False)."""
     limit = int(scene.p[P.MAX_INTERVALS])
     steps = 0
     for s in range(index.moves.shape[0]):
@@ -296,7 +329,7 @@ def _paired(scene: Scene, root: World, first: int, second: int, settings: Search
                     fill_rows(scene, index, root, s, steps)
                     ws = World(w.uav_xyz, w.hover, index.row_users[s, steps], w.tasks, w.served, w.battery_j,
                                w.interval, w.energy_used_j, w.reward_sum)
-                    a, user = greedy_future(scene, index, root, s, steps, ws, touched, flag)
+                    a, user = greedy_future(scene, index, root, s, steps, ws, touched, flag, skip)
                     if a < 0:
                         break
                 step_out = serve(scene, ws, a, user)
