@@ -333,10 +333,11 @@ def _future_value(p: np.ndarray, hp: np.ndarray, idx: FutureIndex, s: int, h: in
             if user == NO_USER:
                 return -math.inf, NO_USER
             cost = math.nan
-        if flag[user] or cost != cost:  # a served user's tasks may differ from the trajectory's
+        same = w.tasks[user] == idx.row_tasks[s, h, user]  # a served user's tasks may differ from the trajectory's
+        if not same or cost != cost:
             bits, e_h, e_c = service_cost(p, hp[k], w.users[user], w.tasks[user])
             cost = e_h + e_c
-            if j >= 0 and not flag[user]:
+            if j >= 0 and same:
                 idx.near_cost[s, h, k, j] = cost
         gain = task_reward(p, w.tasks[user])
     prev = w.hover[0]

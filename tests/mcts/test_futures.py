@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from planner_service.mcts.futures import evaluate_step, index_of, point_tables_of, root_values_of
+from planner_service.mcts.futures import (allowed_future, evaluate_step, fill_rows, greedy_future, index_of,
+                                          point_tables_of, point_user, root_values_of)
 from planner_service.mcts.open_loop import draw_futures
 from planner_service.model import SortieEnv, field, pack, paper, paper_3d
 from planner_service.model.interval import remaining_intervals, served_user
@@ -45,8 +46,10 @@ def test_index_matches_the_plain_evaluation_along_random_playouts(name):
     news = np.empty((4, horizon, num_users), dtype=np.int64)
     draw_futures(p, moves, news, rng)
     index = index_of(scene, root, moves, news, tables, values)
+    asked = index_of(scene, root, moves, news, tables, values)  # asked only what the lean kernels ask
     k = len(env.hover_points)
     q, users = np.empty(k), np.empty(k, dtype=np.int64)
+    mask, skip = np.empty(k), np.zeros(k, dtype=np.bool_)
     touched = np.zeros(horizon + 1, dtype=np.int64)
     flag = np.zeros(num_users, dtype=np.bool_)
     compared = 0
@@ -62,6 +65,18 @@ def test_index_matches_the_plain_evaluation_along_random_playouts(name):
             assert allowed == np.isfinite(plain).sum()
             for a in np.flatnonzero(np.isfinite(plain)):
                 assert users[a] == served_user(p, scene.hover_points[a], w.users, w.tasks, w.served)
+            if steps > 0:  # the lean kernels: the greedy step, the allowed set, one point's user
+                fill_rows(scene, asked, root, future, steps)
+                skip[:] = rng.random(k) < 0.3 if playout % 2 else False
+                among = np.where(skip, -np.inf, plain)
+                best, user = greedy_future(scene, asked, root, future, steps, w, touched, flag, skip)
+                expected = int(np.argmax(among)) if np.isfinite(among).any() else -1
+                assert best == expected, (playout, steps)
+                assert best < 0 or user == users[best]
+                assert allowed_future(scene, asked, root, future, steps, w, touched, flag, mask) == allowed
+                assert np.array_equal(np.isfinite(mask), np.isfinite(plain))
+                for a in np.flatnonzero(np.isfinite(plain)):
+                    assert point_user(scene, asked, future, steps, a, w, touched, flag) == users[a]
             compared += 1
             if allowed == 0:
                 break
