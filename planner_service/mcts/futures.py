@@ -1,17 +1,19 @@
 """Every action's reward at a playout step, without scoring every point against every user.
 
-A playout step needs q for all K hovering points (the allowed set, the greedy-leaning
-playout, the expansion order), and q needs the user served at each point: scanned
-plainly, K x I distances a step. Two things make it cheaper without changing a result:
+A playout step needs, for the hovering points it considers, q and the user served there;
+scanned plainly, K x I distances a step. What makes it cheaper without changing a result:
 
 - **The futures fix the users.** The users' moves and task draws do not depend on what
   the UAV does, so along sampled future s the users' positions at step h are the same in
   every iteration that plays s. Only the service counts (and, under the backlog model,
   the served users' tasks) depend on the actions, and only for the users this iteration
-  has served: at most one a step. So for each (s, h) the index keeps, per hovering point,
-  the answer on the *trajectory* (the users as they are at (s, h), with the root's
-  service counts): the user served, the energy of its upload and its task term of q, and
-  the reach of its tie window. Rows are computed the first time a playout needs them.
+  has served: at most one a step. So each future keeps *rows*: the users and their tasks
+  after h steps (a playout's world reads the positions from there instead of moving every
+  user itself) and the k-d tree of them (``model.user_tree``: built once on the root's
+  users, a row only refits its boxes). Per hovering point, a row keeps the answer on the
+  *trajectory* (the row's users with the root's service counts): the user served, the
+  energy of its upload and its task term of q, and the reach of its tie window, computed
+  the first time a step asks for that point.
 - **Only the touched users can change an answer.** A user's eligibility can only fall
   when it is served (the fairness rule (3) is monotone in the service count, and a served
   backlog only shrinks), so the users eligible at (s, h) in an iteration are those of the
@@ -19,17 +21,21 @@ plainly, K x I distances a step. Two things make it cheaper without changing a r
   of those lies inside its tie window; then, and only then, the point is asked again: from
   the row's list of the point's M nearest eligible users on the trajectory (skipping the
   touched users no longer eligible), or, when that list cannot settle it, through the
-  row's k-d tree of the users (``model.user_tree``), which answers exactly as the plain
-  scan does. The tree is built once, on the root's users; a row only refits its boxes to
-  where the users have moved. Upload energies are kept per listed user, computed when first needed.
+  row's tree, which answers exactly as the plain scan does. Upload energies are kept per
+  listed user, computed when first needed.
+- **Most steps need few points.** A greedy step needs only the point of largest q, and no
+  service adds more to q than ``serve_ub`` (u_max tasks from straight below the point), so
+  only the points whose bound, less the flight's share, reaches the best q found are asked
+  (``greedy_future``). Whether a point is allowed depends on its user only through the
+  service's energy, bounded above and below per point (``cost_ub``, ``cost_lb``), so a
+  uniform step or a UCT step asks only the points those bounds cannot settle
+  (``allowed_future``).
 
-Then a step costs O(K) for the clean points (a glance at their tie window's users), a
-short list walk for the few points a served user touched, plus what the world's own step
-costs (O(I): every user moves), instead of O(K x I). The flight energy between hovering
-points and home is a table. Every number is computed by the same expressions as
-``model.interval.evaluate_actions``, so the rewards are equal to the last bit and the
-search takes the same decisions (``tests/mcts/test_futures.py`` compares the two on random
-playouts; ``mcts/reference.py`` stays the plain specification).
+The flight energy between hovering points and home is a table. Every number is computed by
+the same expressions as ``model.interval.evaluate_actions``, and the bounds carry margins
+far above rounding, so the rewards are equal to the last bit and the search takes the same
+decisions (``tests/mcts/test_futures.py`` compares every kernel here with the plain
+evaluation along random playouts; ``mcts/reference.py`` stays the plain specification).
 
 With no shared futures (``MctsConfig.futures = 0``) each step's chance is fresh: the step
 refits the root's tree to the users where they are and asks every point through it.
