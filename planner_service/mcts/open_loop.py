@@ -9,9 +9,10 @@ futures (common random numbers), which removes most of the noise from their diff
 iteration draws a fresh future instead. Each node backs up the objective of
 ``objective.py`` (by default the sortie's average reward).
 
-Each step is the world's own ``serve`` and ``advance`` (``model.world``); the rewards of
-all actions at a step come from the futures' index (``futures.py``), equal to the plain
-evaluation's to the last bit.
+Each step is the world's own ``serve`` and ``advance`` (``model.world``), the users' moves
+made once for every iteration, in the future's rows; a step asks the futures' index
+(``futures.py``) only for the points it needs (the best one, or which are allowed), with
+values equal to the plain evaluation's to the last bit.
 """
 
 from __future__ import annotations
