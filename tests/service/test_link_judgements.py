@@ -14,7 +14,7 @@ from pymavlink.dialects.v20 import ardupilotmega as M
 from protocol.text import printable
 from planner_service.service.link import (Connected, Landed, LinkEvent, ModeChanged, PositionChanged, Restarted,
                                           StatusText, TelemetryMissing)
-from planner_service.service.link.state import DERIVED, VehicleState
+from planner_service.service.link.state import DERIVED, SILENCE_S, VehicleState
 from planner_service.service.link.streams import (MISSING_AFTER_S, REREQUEST_S, UNAVAILABLE_AFTER_S, Streams,
                                                   stream_plan)
 from planner_service.service.link.telemetry import (ClockWatch, PositionInputs, assess_position, battery_fraction,
@@ -206,6 +206,28 @@ def test_a_restart_is_believed_only_on_two_reports() -> None:
     feed(state, position(750))  # the second: a real restart
     assert [e for e in events if isinstance(e, Restarted)] and state.telemetry.position_boot_s == 0.75
     assert not state.telemetry.home_set and not state.telemetry.position_ok
+
+
+def test_an_autopilot_heard_after_a_silence_is_asked_for_its_telemetry_at_once() -> None:
+    # A restart too short for a lost link: the new boot streams nothing until asked, and the
+    # restart shows only in its reports' clock (test_faults: at x40 the re-ask came 5 s late).
+    clock = Clock()
+    state, events = vehicle(clock)
+    asked: list[float] = []
+    state.request_streams = lambda: asked.append(clock.now)
+    for t in range(8):  # heartbeats and reports as usual: nothing asked
+        feed(state, position(10_000 + 250 * t))
+        clock.now += 0.25
+        if t % 4 == 0:
+            state.on_heartbeat(1, 1, heartbeat(mode=3, armed=True))
+    assert asked == []
+    clock.now += SILENCE_S + 0.2  # the autopilot dies and comes back
+    state.on_heartbeat(1, 1, heartbeat(mode=5, armed=True))
+    assert asked == [clock.now] and not state.lost
+    assert [e for e in events if isinstance(e, ModeChanged)][-1].mode == "LOITER"
+    clock.now += 0.5
+    state.on_heartbeat(1, 1, heartbeat(mode=5, armed=True))
+    assert len(asked) == 1
 
 
 def test_commanded_and_foreign_mode_changes_are_told_apart() -> None:

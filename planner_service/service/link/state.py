@@ -35,6 +35,10 @@ AIRBORNE_STATES = frozenset({M.MAV_LANDED_STATE_IN_AIR, M.MAV_LANDED_STATE_TAKEO
 NOT_AUTOPILOTS = frozenset({M.MAV_TYPE_GCS, M.MAV_TYPE_ONBOARD_CONTROLLER, M.MAV_TYPE_GIMBAL, M.MAV_TYPE_CAMERA,
                             M.MAV_TYPE_ADSB, M.MAV_TYPE_ANTENNA_TRACKER})
 COMMANDED_WINDOW_S = 5.0
+SILENCE_S = 1.3
+"""Seconds without any message from the autopilot after which the next one is taken as
+possibly from a new boot, and its telemetry is asked for again (an autopilot sends a
+heartbeat every second whatever else it sends)."""
 """A mode reported within this many wall seconds of our asking for it was commanded by us."""
 DERIVED = "derived (armed, relative altitude, climb)"
 TEXTS_KEPT_S = 30.0
@@ -85,13 +89,22 @@ class VehicleState:
 
     # --- link liveness ----------------------------------------------------------------------
     def heard(self) -> None:
-        self._last_heard = self.clock()
+        now = self.clock()
+        silent_s = now - self._last_heard
+        self._last_heard = now
         if self._lost:
             self._lost = False
             self._set(connected=True)
             log.info("autopilot heard again (mode %s)", self.telemetry.mode)
             self.emit(Restored(self.telemetry.mode))
             self.request_streams()  # it may have restarted meanwhile, its rates reset
+        elif silent_s > SILENCE_S:
+            # Too short for a lost link, long enough for a reboot: a restarted autopilot
+            # streams nothing until asked, and only its reports' clock shows the restart, so
+            # ask now rather than when a missing message is next asked for (seconds later,
+            # after the mode it came back in was taken for a pilot's; test_faults met it).
+            log.info("autopilot heard after %.1f s of silence: asking for its telemetry again", silent_s)
+            self.request_streams()
 
     def lose(self, detail: str) -> None:
         """The link is down (silence, or the connection broke)."""
