@@ -44,26 +44,24 @@ def jit_borrow(func: F) -> F:
     Returning an array from it would corrupt the counts: never do that. If numba refuses the
     option, the kernel is compiled as ``jit`` does, the same results, slower.
     """
-    if _numba is None:
-        func.py_func = func  # type: ignore[attr-defined]
-        return func
-    try:
-        return _numba.njit(cache=True, nogil=True, _nrt=False)(func)  # type: ignore[return-value]
-    except (KeyError, TypeError, ValueError):  # pragma: no cover - a numba without the option
-        return _numba.njit(cache=True, nogil=True)(func)  # type: ignore[return-value]
+    return _borrowing(func)
 
 
 def jit_inline(func: F) -> F:
     """``jit_borrow`` for a small kernel called in a loop with records of many arrays: it is
     compiled into each caller (numba passes a record member by member, tens of values a
     call, which costs more than the kernel's own work)."""
+    return _borrowing(func, inline="always")
+
+
+def _borrowing(func: F, **options: Any) -> F:
     if _numba is None:
         func.py_func = func  # type: ignore[attr-defined]
         return func
     try:
-        return _numba.njit(cache=True, nogil=True, _nrt=False, inline="always")(func)  # type: ignore[return-value]
+        return _numba.njit(cache=True, nogil=True, _nrt=False, **options)(func)  # type: ignore[return-value]
     except (KeyError, TypeError, ValueError):  # pragma: no cover - a numba without the option
-        return _numba.njit(cache=True, nogil=True, inline="always")(func)  # type: ignore[return-value]
+        return _numba.njit(cache=True, nogil=True, **options)(func)  # type: ignore[return-value]
 
 
 def py(func: Callable[..., Any]) -> Callable[..., Any]:
