@@ -16,6 +16,7 @@ from planner_service.service.sortie import Rules, Sortie, SortieLogic, Vehicle, 
 from planner_service.service.sortie import effects as fx
 from planner_service.service.sortie import inputs as ins
 from protocol import Area, GeoOrigin
+from protocol.mission import NAV_RTL
 
 SCENARIO = preset("field")
 
@@ -312,8 +313,26 @@ def test_a_backlog_grown_since_the_plan_lengthens_the_hold_it_is_bound_to() -> N
     b = run.s.binding
     assert (b.request_id, b.tasks, b.planned) == (5, 20, False)
     assert b.needed_s > 60.0, "the planned 60 s hold cannot carry 20 tasks"
+    assert plan.basis.at_point.hold_s >= b.needed_s + 1.0, "the planner pays for the longer hold"
     (up,) = only(run.feed(ins.Planned(plan.basis, path(point(9, 400.0, 300.0, "b", 2)))), fx.Upload)
     assert up.items[2].param1 >= b.needed_s + 1.0 and up.mission.point_at(2).hold_s >= b.needed_s
+
+
+def test_a_hold_the_battery_cannot_carry_is_cut_to_what_keeps_the_reserve() -> None:
+    # A backlog grown tenfold: the hold it needs would leave the vehicle below its reserve
+    # on the way home, by 2000 J. The planner, paying for the whole hold, finds nothing
+    # more to fly; the hold is cut by the hovering those 2000 J buy.
+    world = FakeWorld()
+    run, _ = fly_to_first_point(world)
+    world.ask("a", 120.0, 200.0, 100, 5)
+    (plan,) = only(run.tick(seq=2, xyz=(120.0, 200.0, 100.0), boot_s=20.0), fx.Plan)
+    bound = plan.basis.at_point.hold_s
+    assert bound >= run.s.binding.needed_s > 300.0
+    home = PlannedPath((), 4000.0, SCENARIO.energy_floor_j - 2000.0, "the energy reserve")
+    (up,) = only(run.feed(ins.Planned(plan.basis, home)), fx.Upload)
+    cut = bound - 2000.0 / SCENARIO.hover_power_w
+    assert up.mission.point_at(2).hold_s == pytest.approx(cut)
+    assert up.items[2].param1 == math.ceil(cut) and up.items[3].command == NAV_RTL
 
 
 def test_the_mode_a_restarted_autopilot_comes_back_in_is_not_a_pilots() -> None:

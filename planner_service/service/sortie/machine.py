@@ -431,10 +431,13 @@ class SortieLogic:
             # (a hold found already under way, its start unseen, is left to the autopilot's
             # own timer: a replacement now would start it again; the next arrival decides)
             point = s.held.point_at(w.seq)
+            assert point is not None
             b = s.binding
             serving = b.user_id if b is not None and b.request_id is not None else None
-            return fx.PlanBasis(f"arrived at point {point.hover_index if point else w.seq}", s.version, w.seq,
-                                at_point=point, serving=serving, serving_tasks=b.tasks if serving and b else 0)
+            # the hold the bound request needs, so that the planner pays for all of it
+            bound = replace(point, hold_s=self._bound_hold_s(s, w.seq, point.hold_s, self._margin_s(v)))
+            return fx.PlanBasis(f"arrived at point {point.hover_index}", s.version, w.seq,
+                                at_point=bound, serving=serving, serving_tasks=b.tasks if serving and b else 0)
         if (s.dirty and v.seq == s.held.rtl_seq and now - s.last_plan_at >= r.replan_min_interval_s
                 and self.world.pending_count() > 0 and v.xyz[2] >= r.area.min_flight_altitude_m):
             return fx.PlanBasis("new requests on the way home", s.version, s.held.rtl_seq - 1)
@@ -450,8 +453,7 @@ class SortieLogic:
         airborne = v.airborne
         if not path.points and not airborne and not s.must_upload:
             return s  # nothing to fly yet
-        margin = self.rules.hold_margin_s + CONTROL_LATENCY_S * v.time_rate
-        path = self._with_margins(path, margin)
+        path = self._with_margins(path, self._margin_s(v))
         try:
             check_path(path, self.rules.area, self.rules.scenario, path.battery_after_j + path.predicted_energy_j)
             hover = [HoverPoint(p.x_m, p.y_m, p.z_m, p.hold_s) for p in path.points]
@@ -473,7 +475,7 @@ class SortieLogic:
                                              self.rules.flavour)  # type: ignore[arg-type]
                 if basis.at_point is not None:  # holding there: that item stays the one flown
                     items = marked_current(items, basis.keep_through)
-                    held, items = self._hold_for_binding(s, held, items, basis.keep_through, margin)
+                    held, items = self._hold_at(held, items, basis.keep_through, self._affordable_hold_s(basis.at_point, path))
                 mission = HeldMission.replacement(plan_id, items, held, basis.keep_through, path.points)
                 # Replacing the item flown (the return to launch, on the way home): start it
                 # again, or ArduPilot flies on home; a hold at the item kept goes on.
@@ -511,19 +513,45 @@ class SortieLogic:
         return replace(path, points=tuple(points), battery_after_j=battery - extra * len(points),
                        predicted_energy_j=spent, stop_reason=reason)
 
-    def _hold_for_binding(self, s: Sortie, held: HeldMission, items: list[MissionItem], seq: int,
-                          margin: float) -> tuple[HeldMission, list[MissionItem]]:
+    def _margin_s(self, v: ins.Vehicle) -> float:
+        """How much longer than its upload needs a hold is flown: the configured margin and a
+        command's latency in vehicle time (the service ends a hold a command after it sees it)."""
+        return self.rules.hold_margin_s + CONTROL_LATENCY_S * v.time_rate
+
+    def _bound_hold_s(self, s: Sortie, seq: int, planned_s: float, margin_s: float) -> float:
         """The hold at ``seq`` as long as the request bound there needs (it was sized on the
-        request the plan saw; the user's backlog may have grown since). The replacement
+        request the plan saw; the user's backlog may have grown since, or the model's rule
+        serves another user there now), never shorter than planned."""
+        b = s.binding
+        if b is None or b.seq != seq or b.request_id is None:
+            return planned_s
+        return max(planned_s, min(b.needed_s + margin_s, MAX_HOLD_S))
+
+    def _affordable_hold_s(self, at_point: PlannedPoint, path: PlannedPath) -> float:
+        """The hold at ``at_point`` cut by what the path from it leaves below the energy
+        reserve (``check_path``'s rule): the planner paid for the whole hold before the path,
+        so a path that ends below the reserve (an empty one: the way home alone) means the
+        hold itself is too long for the battery."""
+        sc = self.rules.scenario
+        left_j = path.battery_after_j
+        if not sc.reserve_return_energy:  # the way home may dip below the floor
+            last = path.points[-1] if path.points else at_point
+            left_j += return_energy_j(self.p, np.array([last.x_m, last.y_m, last.z_m]))
+        short_j = sc.energy_floor_j - left_j
+        return max(at_point.hold_s - max(short_j, 0.0) / sc.hover_power_w, 0.0)
+
+    def _hold_at(self, held: HeldMission, items: list[MissionItem], seq: int,
+                 hold_s: float) -> tuple[HeldMission, list[MissionItem]]:
+        """The held mission with the hold at ``seq`` set to ``hold_s``. The replacement
         restarts that hold anyway (ArduPilot's change detector, PX4's current mark), and the
-        service ends it once the request is served: the item's hold is the ceiling."""
-        b, point = s.binding, held.point_at(seq)
-        if b is None or b.seq != seq or b.request_id is None or point is None or b.needed_s + margin <= point.hold_s:
+        service ends it once the request is served: the item's hold is the ceiling, and the
+        energy the planner paid for."""
+        point = held.point_at(seq)
+        if point is None or point.hold_s == hold_s:
             return held, items
-        hold = min(b.needed_s + margin, MAX_HOLD_S)
-        longer = replace(point, hold_s=hold)
-        held = replace(held, points=tuple((q, longer if q == seq else p) for q, p in held.points))
-        items = [replace(i, param1=encoded_hold_s(hold, self.rules.flavour)) if i.seq == seq else i for i in items]  # type: ignore[arg-type]
+        point = replace(point, hold_s=hold_s)
+        held = replace(held, points=tuple((q, point if q == seq else p) for q, p in held.points))
+        items = [replace(i, param1=encoded_hold_s(hold_s, self.rules.flavour)) if i.seq == seq else i for i in items]  # type: ignore[arg-type]
         return held, items
 
     def _uploaded(self, s: Sortie, uploaded: ins.Uploaded, out: list[fx.Effect]) -> Sortie:
