@@ -62,7 +62,10 @@ def check_sorties(stack: Stack, scenario: Scenario, vehicle: Child, count: int) 
     rows = stack.rows("SELECT number, started_at_s, ended_at_s, why FROM sorties ORDER BY number")
     assert [r[0] for r in rows[:count]] == list(range(1, count + 1)), rows
     vehicle_log = vehicle.log()
-    assert ": returning" not in vehicle_log, "the vehicle's battery failsafe fired"
+    if ": returning" in vehicle_log:  # what each service planned and flew, to see why
+        logs = "\n".join(f"--- {c.name}\n{c.log()[-6000:]}" for c in stack.children
+                         if c.name.startswith("planner_service"))
+        raise AssertionError(f"the vehicle's battery failsafe fired\n{vehicle_log[-4000:]}\n{logs}")
     assert not any(e.event == "returning" and "battery at" in e.detail for e in stack.events), "the service's RTL fired"
     landings = [float(line.rsplit("battery", 1)[1].strip().rstrip("%"))
                 for line in vehicle_log.splitlines() if "landed at" in line]
