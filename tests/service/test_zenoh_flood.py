@@ -25,7 +25,8 @@ OUTSTANDING = 250
 """Gets one session has in flight at once: together far more than the service's bound."""
 MAX_PENDING = 40
 MAX_IN_FLIGHT = 32
-ROUNDS = 2
+ROUNDS = 5
+"""Floods in a row: memory is judged by its floor over the first two and the last two."""
 
 
 def rss_kib(pid: int) -> int:
@@ -123,9 +124,14 @@ def test_flood_gets_an_answer_for_every_query_and_bounded_memory(stack: Stack) -
     assert tally["busy: in flight"] > 0  # the bound was reached: the flood really was one
     assert tally["task_ack"] > 0 and tally["state"] > 0
     assert max(pending_seen) <= MAX_PENDING
-    # The first flood grows zenoh's and the allocator's buffers once (about 40 MiB here); a
-    # second one as large must find them in place, not grow like a queue.
-    assert rss[2] - rss[1] < 16 * 1024, "the service's memory kept growing with the flood"
+    # The first flood grows zenoh's and the allocator's buffers once (about 40 MiB here);
+    # the floods after it must find them in place, not grow like a queue. One flood to the
+    # next the RSS swings by up to 20 MiB either way (the allocator's arenas, measured on a
+    # loaded machine: 238.6, 258.9, 259.4, 245.2, 260.0, 241.3 MiB), so the floor is judged:
+    # a queue would raise it by each flood's queries, three floods' worth at the end.
+    early, late = min(rss[1:3]), min(rss[-2:])
+    assert late - early < 16 * 1024, f"the service's memory kept growing with the floods: floor {early / 1024:.1f} " \
+        f"MiB after floods 1-2, {late / 1024:.1f} MiB after floods {ROUNDS - 1}-{ROUNDS}"
     assert service.proc.poll() is None
 
     # every acked request is in the journal, under its user
