@@ -39,8 +39,9 @@ from ..mcts import MctsConfig, MctsPlanner, PaperMctsPlanner, warm_up
 from ..model import AT_BASE, NO_MOVES, NO_NEWS, NO_USER, Scenario, SortieState, base_position, hover_points, pack
 from ..model.channel import channel_gain, upload_rate_bps
 from ..model.energy import flight_energy_j
-from ..model.interval import remaining_intervals, return_energy_j, served_user, user_outcome, within_budget
-from ..model.world import World, clone, evaluate, scene_of, step
+from ..model.interval import (evaluate_actions, remaining_intervals, return_energy_j, served_user, user_outcome,
+                              within_budget)
+from ..model.world import clone, evaluate, scene_of, step
 from ..policy import Decision
 from .config import FLIGHT_ALGOS, FlightAlgo
 from .errors import PlanningError
@@ -227,6 +228,19 @@ def planning_battery_j(scenario: Scenario, battery_j: float, stale_vehicle_s: fl
     power_w = max(scenario.hover_power_w, flight_energy_j(p, scenario.speed_mps))  # 1 s of cruise
     descent_j = flight_energy_j(p, scenario.base_z_m)
     return battery_j - power_w * max(stale_vehicle_s, 0.0) - descent_j - margin_j
+
+
+def first_steps(scenario: Scenario, points: np.ndarray, requests: list[RequestRow], served: list[int],
+                uav_xyz: tuple[float, float, float], hover_index: int, battery_j: float) -> int:
+    """How many hovering points a decision from ``uav_xyz`` could fly to first with
+    ``battery_j``: the model's first step (``evaluate_actions``) on the pending
+    ``requests`` (``served``: each one's user's services). 0: a decision would find nothing
+    to fly, whatever its search."""
+    users = np.array([[r.x_m, r.y_m, r.z_m] for r in requests], dtype=np.float64).reshape(len(requests), 3)
+    tasks = np.array([r.backlog for r in requests], dtype=np.int64)
+    q = np.empty(len(points))
+    return int(evaluate_actions(pack(scenario), points, hover_index, np.array(uav_xyz, dtype=np.float64), users,
+                                tasks, np.array(served, dtype=np.int64), float(battery_j), q))
 
 
 def should_return(battery_fraction: float, airborne: bool, returning: bool, threshold: float) -> bool:

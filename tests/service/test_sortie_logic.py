@@ -418,3 +418,19 @@ def test_a_user_done_early_ends_the_hold_but_not_the_physics() -> None:
     assert [(c.kind, c.seq) for c in only(out, fx.Command)] == [("set_current", 3)]
     (svc,) = only(run.tick(seq=3, xyz=(150.0, 200.0, 100.0), boot_s=22.0 + needed / 4), fx.RecordService)
     assert 0 < svc.tasks < 10, "a quarter of the hold carries about a quarter of the tasks"
+
+
+def test_on_the_way_home_a_new_request_is_decided_on_only_if_the_battery_allows_a_point() -> None:
+    # A decision whose first step (the model's, with the whole battery the vehicle reports)
+    # has no point to fly to would find nothing whatever it searched: it is not made.
+    world = FakeWorld()
+    run, up = fly_to_first_point(world)
+    rtl = up.items[-1].seq
+    run.tick(seq=rtl, xyz=(200.0, 150.0, 100.0), boot_s=60.0, battery_fraction=0.105)  # flying home
+    run.now += 2.0
+    world.ask("c", 300.0, 300.0, 10, 9)
+    assert not only(run.feed(ins.RequestIn("c", 10)) + run.tick(), fx.Plan)
+    assert not only(run.tick(), fx.Plan), "nor at a later tick"
+    world.ask("d", 250.0, 200.0, 10, 10)
+    (plan,) = only(run.feed(ins.RequestIn("d", 10), battery_fraction=0.6), fx.Plan)
+    assert plan.basis.reason == "new requests on the way home" and plan.basis.keep_through == rtl - 1

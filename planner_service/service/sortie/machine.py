@@ -35,13 +35,13 @@ from protocol import Area, GeoOrigin, HoverPoint, MissionItem, encode_path, repl
 from protocol.errors import MissionError
 from protocol.mission import MAX_HOLD_S, Flavour, encoded_hold_s
 
-from ...model import Scenario, pack
+from ...model import Scenario, hover_points, pack
 from ...model.reward import interval_reward
 from ..errors import PlanningError
 from ..link.base import HOLDING_MODES, MISSION_MODES, RETURNING_MODES
 from ...model.interval import NO_USER, return_energy_j, served_user
 from ..journal import RequestRow
-from ..planning import PlannedPath, PlannedPoint, check_path, hold_time_s
+from ..planning import PlannedPath, PlannedPoint, check_path, first_steps, hold_time_s, planning_battery_j
 from .. import events as ev
 from . import effects as fx
 from . import inputs as ins
@@ -178,6 +178,7 @@ class SortieLogic:
         self.rules = rules
         self.world = world
         self.p = pack(rules.scenario)
+        self.points = hover_points(rules.scenario)
 
     # --- entry ------------------------------------------------------------------------------
     def step(self, s: Sortie, event: ins.Input, v: ins.Vehicle, now: float) -> Step:
@@ -439,9 +440,21 @@ class SortieLogic:
             return fx.PlanBasis(f"arrived at point {point.hover_index}", s.version, w.seq,
                                 at_point=bound, serving=serving, serving_tasks=b.tasks if serving and b else 0)
         if (s.dirty and v.seq == s.held.rtl_seq and now - s.last_plan_at >= r.replan_min_interval_s
-                and self.world.pending_count() > 0 and v.xyz[2] >= r.area.min_flight_altitude_m):
+                and self.world.pending_count() > 0 and v.xyz[2] >= r.area.min_flight_altitude_m
+                and self._could_turn_back(s, v)):
             return fx.PlanBasis("new requests on the way home", s.version, s.held.rtl_seq - 1)
         return None
+
+    def _could_turn_back(self, s: Sortie, v: ins.Vehicle) -> bool:
+        """Whether a decision on the way home could find a point to fly to: the model's first
+        step on the pending requests, with the whole battery the vehicle reports (the planner
+        counts less: the reading's age, the margin), so a decision is skipped only where it
+        would find nothing whatever it searched."""
+        rows = self.world.pending()
+        battery = planning_battery_j(self.rules.scenario, (v.battery_fraction or 0.0) * self.rules.scenario.battery_j,
+                                     0.0, 0.0)
+        return first_steps(self.rules.scenario, self.points, rows, [self.world.services_of(r.user_id) for r in rows],
+                           v.xyz, s.last_hover_index, battery) > 0
 
     def _planned(self, s: Sortie, planned: ins.Planned, v: ins.Vehicle, now: float, out: list[fx.Effect]) -> Sortie:
         basis, path = planned.basis, planned.path
