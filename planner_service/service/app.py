@@ -146,7 +146,7 @@ class Service:
             rtl_battery_fraction=s.rtl_battery_fraction, repeat=config.sortie.repeat,
             next_battery_fraction=config.sortie.next_battery_fraction,
             max_mission_items=config.mavlink.max_mission_items, max_failures=config.planner.max_failures,
-            hold_margin_s=s.hold_margin_s,
+            hold_margin_s=s.hold_margin_s, energy_margin_j=s.energy_margin_j,
         ), JournalWorld(self.journal))
         self.state = self._restore()
         self.plan_msg: Plan | None = None

@@ -432,5 +432,9 @@ def test_on_the_way_home_a_new_request_is_decided_on_only_if_the_battery_allows_
     assert not only(run.feed(ins.RequestIn("c", 10)) + run.tick(), fx.Plan)
     assert not only(run.tick(), fx.Plan), "nor at a later tick"
     world.ask("d", 250.0, 200.0, 10, 10)
+    before = run.s
     (plan,) = only(run.feed(ins.RequestIn("d", 10), battery_fraction=0.6), fx.Plan)
     assert plan.basis.reason == "new requests on the way home" and plan.basis.keep_through == rtl - 1
+    # the configured margin is the planner's too: 50 % of the battery kept back leaves nothing
+    run.s, run.logic = before, SortieLogic(rules(energy_margin_j=0.5 * SCENARIO.battery_j), world)
+    assert not only(run.feed(ins.RequestIn("d", 10)), fx.Plan)

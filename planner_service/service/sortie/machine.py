@@ -81,6 +81,7 @@ class Rules:
     next_battery_fraction: float = 0.95
     max_mission_items: int = 512
     hold_margin_s: float = 1.0
+    energy_margin_j: float = 0.0
     max_failures: int = 8
     retry_s: float = 1.0
     max_retry_s: float = 30.0
@@ -447,12 +448,13 @@ class SortieLogic:
 
     def _could_turn_back(self, s: Sortie, v: ins.Vehicle) -> bool:
         """Whether a decision on the way home could find a point to fly to: the model's first
-        step on the pending requests, with the whole battery the vehicle reports (the planner
-        counts less: the reading's age, the margin), so a decision is skipped only where it
-        would find nothing whatever it searched."""
+        step on the pending requests, with the battery the vehicle reports less the landing
+        and the margin (the planner counts less still: what is spent while it searches), so
+        a decision is skipped only where it would find nothing whatever it searched."""
         rows = self.world.pending()
-        battery = planning_battery_j(self.rules.scenario, (v.battery_fraction or 0.0) * self.rules.scenario.battery_j,
-                                     0.0, 0.0)
+        r = self.rules
+        battery = planning_battery_j(r.scenario, (v.battery_fraction or 0.0) * r.scenario.battery_j, 0.0,
+                                     r.energy_margin_j)
         return first_steps(self.rules.scenario, self.points, rows, [self.world.services_of(r.user_id) for r in rows],
                            v.xyz, s.last_hover_index, battery) > 0
 
