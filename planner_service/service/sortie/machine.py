@@ -452,11 +452,10 @@ class SortieLogic:
         and the margin (the planner counts less still: what is spent while it searches), so
         a decision is skipped only where it would find nothing whatever it searched."""
         rows = self.world.pending()
-        r = self.rules
-        battery = planning_battery_j(r.scenario, (v.battery_fraction or 0.0) * r.scenario.battery_j, 0.0,
-                                     r.energy_margin_j)
-        return first_steps(self.rules.scenario, self.points, rows, [self.world.services_of(r.user_id) for r in rows],
-                           v.xyz, s.last_hover_index, battery) > 0
+        sc = self.rules.scenario
+        battery = planning_battery_j(sc, (v.battery_fraction or 0.0) * sc.battery_j, 0.0, self.rules.energy_margin_j)
+        served = [self.world.services_of(row.user_id) for row in rows]
+        return first_steps(sc, self.points, rows, served, v.xyz, s.last_hover_index, battery) > 0
 
     def _planned(self, s: Sortie, planned: ins.Planned, v: ins.Vehicle, now: float, out: list[fx.Effect]) -> Sortie:
         basis, path = planned.basis, planned.path
@@ -490,7 +489,8 @@ class SortieLogic:
                                              self.rules.flavour)  # type: ignore[arg-type]
                 if basis.at_point is not None:  # holding there: that item stays the one flown
                     items = marked_current(items, basis.keep_through)
-                    held, items = self._hold_at(held, items, basis.keep_through, self._affordable_hold_s(basis.at_point, path))
+                    hold = self._affordable_hold_s(basis.at_point, path)
+                    held, items = self._hold_at(held, items, basis.keep_through, hold)
                 mission = HeldMission.replacement(plan_id, items, held, basis.keep_through, path.points)
                 # Replacing the item flown (the return to launch, on the way home): start it
                 # again, or ArduPilot flies on home; a hold at the item kept goes on.
