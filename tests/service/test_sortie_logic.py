@@ -421,7 +421,7 @@ def test_a_user_done_early_ends_the_hold_but_not_the_physics() -> None:
 
 
 def test_on_the_way_home_a_new_request_is_decided_on_only_if_the_battery_allows_a_point() -> None:
-    # A decision whose first step (the model's, with the whole battery the vehicle reports)
+    # A decision whose first step (the model's, with the battery the vehicle reports)
     # has no point to fly to would find nothing whatever it searched: it is not made.
     world = FakeWorld()
     run, up = fly_to_first_point(world)
