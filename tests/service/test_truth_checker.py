@@ -11,7 +11,7 @@ import numpy as np
 from planner_service.model import pack, preset
 from planner_service.service.planning import hold_time_s
 from protocol import GeoOrigin, local_to_global
-from tests.support.truth import Fix, Recorded, false_services, sitl_track, stays
+from tests.support.truth import Fix, Recorded, false_services, one_clock, sitl_track, stays
 
 SCENARIO = preset("field")
 P = (120.0, 200.0, 100.0)
@@ -74,3 +74,19 @@ def test_sitl_track_reads_pos_in_local_metres_and_keeps_time_going_across_a_rest
     assert false_services([ok], fixes, SCENARIO, 5.0, 1.0) == []
     at_home = Recorded(2, "b", 1, (0.0, 0.0, 0.0), USER)
     assert false_services([at_home, ok], fixes, SCENARIO, 5.0, 1.0), "order kept: home was after P"
+
+
+def test_a_stub_restarted_from_its_saved_flight_keeps_its_stays_in_order() -> None:
+    """A stub saves its flight during a hold, leaves the point and is killed; restarted, it
+    comes back where the saved flight was, its clock 6 s back (a CI run: the service's
+    second hold at the point began on the restored clock before the end of the first
+    hold's stay, and every later service was judged "never came"). On one clock both holds
+    are borne out, in their order."""
+    before = [Fix(float(t), P) for t in range(10, 41)]  # first hold, then flying off
+    before += [Fix(float(t), (120.0 + 10 * (t - 40), 200.0, 100.0)) for t in range(41, 45)]
+    after = [Fix(float(t), P) for t in range(38, 69)]  # saved at t = 38: the second hold there
+    first, second = Recorded(1, "a", tasks_for(29.0), P, USER), Recorded(2, "b", tasks_for(29.0), P, USER)
+    assert false_services([first, second], before + after, SCENARIO, 5.0, 1.0), "as logged: one stay too early"
+    fixes = one_clock(before + after)
+    assert all(b.time_s > a.time_s for a, b in zip(fixes, fixes[1:]))
+    assert false_services([first, second], fixes, SCENARIO, 5.0, 1.0) == []

@@ -96,11 +96,29 @@ def recorded_services(journal: Path, sortie: int | None = None) -> list[Recorded
     return [Recorded(int(r[0]), r[1], int(r[2]), (r[3], r[4], r[5]), (r[6], r[7], r[8])) for r in rows]
 
 
+def one_clock(fixes: Iterable[Fix]) -> list[Fix]:
+    """``fixes`` in the order they were logged, on one clock: where the clock steps back (a
+    new boot of the autopilot, or a stub restarted from the flight it saved a moment before
+    it was killed), the later fixes are moved on to 1 s past the last one, so that
+    ``false_services``, which matches services to stays in time order, sees them after it."""
+    out: list[Fix] = []
+    offset = 0.0
+    last = -math.inf
+    for fix in fixes:
+        t = fix.time_s + offset
+        if t < last:
+            offset = last + 1.0 - fix.time_s
+            t = last + 1.0
+        last = t
+        out.append(Fix(t, fix.xyz))
+    return out
+
+
 def stub_track(path: Path) -> list[Fix]:
-    """The stub's ``--track`` file as fixes (airborne or not)."""
+    """The stub's ``--track`` file as fixes (airborne or not), on one clock (``one_clock``)."""
     from sim_bridge.vehicle.track import read_track
 
-    return [Fix(p.time_s, p.xyz) for p in read_track(path)]
+    return one_clock(Fix(p.time_s, p.xyz) for p in read_track(path))
 
 
 def sitl_track(log_messages: Iterable[Mapping[str, Any]], origin: GeoOrigin) -> list[Fix]:
@@ -108,18 +126,7 @@ def sitl_track(log_messages: Iterable[Mapping[str, Any]], origin: GeoOrigin) -> 
     first; other kinds are skipped), local metres from ``origin`` (the service's, which is
     SITL's ``--home``), the height above home as the service takes it (RelHomeAlt, as
     GLOBAL_POSITION_INT's relative altitude). Times are the autopilot's clock (TimeUS); a
-    restarted autopilot counts from 0 again in a new log, so each boot's times are moved
-    on past the last one's (``false_services`` matches services to stays in time order)."""
-    fixes: list[Fix] = []
-    offset = 0.0
-    last = -math.inf
-    for m in log_messages:
-        if m.get("mavpackettype") != "POS":
-            continue
-        t = m["TimeUS"] / 1e6 + offset
-        if t < last:  # a new boot: its clock starts again
-            offset = last + 1.0 - m["TimeUS"] / 1e6
-            t = last + 1.0
-        last = t
-        fixes.append(Fix(t, global_to_local(origin, m["Lat"], m["Lng"], origin.alt_m + m["RelHomeAlt"])))
-    return fixes
+    restarted autopilot counts from 0 again in a new log: each boot's times are moved on
+    past the last one's (``one_clock``)."""
+    return one_clock(Fix(m["TimeUS"] / 1e6, global_to_local(origin, m["Lat"], m["Lng"], origin.alt_m + m["RelHomeAlt"]))
+                     for m in log_messages if m.get("mavpackettype") == "POS")
