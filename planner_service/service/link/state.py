@@ -35,11 +35,11 @@ AIRBORNE_STATES = frozenset({M.MAV_LANDED_STATE_IN_AIR, M.MAV_LANDED_STATE_TAKEO
 NOT_AUTOPILOTS = frozenset({M.MAV_TYPE_GCS, M.MAV_TYPE_ONBOARD_CONTROLLER, M.MAV_TYPE_GIMBAL, M.MAV_TYPE_CAMERA,
                             M.MAV_TYPE_ADSB, M.MAV_TYPE_ANTENNA_TRACKER})
 COMMANDED_WINDOW_S = 5.0
+"""A mode reported within this many wall seconds of our asking for it was commanded by us."""
 SILENCE_S = 1.3
 """Seconds without any message from the autopilot after which the next one is taken as
 possibly from a new boot, and its telemetry is asked for again (an autopilot sends a
 heartbeat every second whatever else it sends)."""
-"""A mode reported within this many wall seconds of our asking for it was commanded by us."""
 DERIVED = "derived (armed, relative altitude, climb)"
 TEXTS_KEPT_S = 30.0
 """STATUSTEXTs kept this long, to name an autopilot's refusal in an error."""
