@@ -35,6 +35,7 @@ from protocol.text import printable
 
 from ..mcts import MctsConfig
 from ..model import pack
+from .allocator import ARENAS, cap_arenas
 from .config import ServiceConfig
 from .errors import JournalError, LinkError, PlanningError
 from . import events as ev
@@ -642,5 +643,7 @@ def build_parts(config: ServiceConfig) -> Parts:
 def run_service(config: ServiceConfig) -> int:
     """Run the service until SIGINT or SIGTERM; returns the exit status."""
     np.seterr(all="ignore")  # the kernels handle their own infinities
+    if cap_arenas():
+        log.info("C allocator capped at %d arenas (MALLOC_ARENA_MAX overrides)", ARENAS)
     service = Service(config, build_parts(config))
     return asyncio.run(service.run())
