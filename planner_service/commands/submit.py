@@ -10,11 +10,9 @@ from __future__ import annotations
 
 import argparse
 import sys
-
 from typing import TYPE_CHECKING
-from protocol.arguments import finite_float, non_negative_int, positive_float
-from protocol.client_args import DEFAULT_ENDPOINT, add_client_arguments
 
+from protocol.arguments import finite_float, non_negative_int, positive_float
 from protocol.client_args import DEFAULT_ENDPOINT, add_client_arguments
 from protocol.text import printable
 

@@ -17,7 +17,7 @@ from typing import Any, Callable
 import pytest
 
 from planner_service.service.errors import LinkError
-from planner_service.service.link import (Connected, Current, LinkEvent, LinkSettings, Lost, Reached, Restarted,
+from planner_service.service.link import (Connected, Current, LinkEvent, LinkSettings, Lost, Restarted,
                                           Restored, VehicleLink, open_link)
 from protocol import GeoOrigin, HoverPoint, encode_path, global_to_local, replacement_items, same_mission
 
