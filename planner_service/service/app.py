@@ -643,6 +643,6 @@ def run_service(config: ServiceConfig) -> int:
     """Run the service until SIGINT or SIGTERM; returns the exit status."""
     np.seterr(all="ignore")  # the kernels handle their own infinities
     if cap_arenas():
-        log.info("C allocator capped at %d arenas (MALLOC_ARENA_MAX overrides)", ARENAS)
+        log.debug("C allocator capped at %d arenas (MALLOC_ARENA_MAX overrides)", ARENAS)
     service = Service(config, build_parts(config))
     return asyncio.run(service.run())
