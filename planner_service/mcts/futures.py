@@ -302,14 +302,15 @@ def _listed_choice(p: np.ndarray, idx: FutureIndex, s: int, h: int, k: int, w: W
 
 @jit_inline
 def _future_value(p: np.ndarray, hp: np.ndarray, idx: FutureIndex, s: int, h: int, k: int, w: World,
-                  touched: np.ndarray, flag: np.ndarray) -> tuple[float, int]:
-    """Point k's q and user in ``w`` (see ``evaluate_future``); (-inf, ``NO_USER``) where
-    the action is not allowed. The caller excludes staying where staying is not allowed."""
+                  touched: np.ndarray, flag: np.ndarray) -> tuple[float, int, float]:
+    """Point k's q, user and the interval's energy (service and flight) in ``w`` (see
+    ``evaluate_future``); (-inf, ``NO_USER``, 0) where the action is not allowed. The
+    caller excludes staying where staying is not allowed."""
     if not idx.answered[s, h, k]:
         _answer_point(p, hp, idx, s, h, k)
     user = idx.user[s, h, k]
     if user == NO_USER:  # nobody eligible on the trajectory: nobody now either
-        return -math.inf, NO_USER
+        return -math.inf, NO_USER, 0.0
     window = idx.window[s, h, k]
     dirty = False
     if window >= 0:
@@ -328,7 +329,7 @@ def _future_value(p: np.ndarray, hp: np.ndarray, idx: FutureIndex, s: int, h: in
     else:
         j = _listed_choice(p, idx, s, h, k, w, flag)
         if j == -1:
-            return -math.inf, NO_USER
+            return -math.inf, NO_USER, 0.0
         if j >= 0:
             user = idx.near_user[s, h, k, j]
             cost = idx.near_cost[s, h, k, j]
@@ -337,7 +338,7 @@ def _future_value(p: np.ndarray, hp: np.ndarray, idx: FutureIndex, s: int, h: in
                                    UserTree(idx.tree.order, idx.tree.span, idx.box[s, h], idx.tree.stack,
                                             idx.tree.bounds))
             if user == NO_USER:
-                return -math.inf, NO_USER
+                return -math.inf, NO_USER, 0.0
             cost = math.nan
         same = w.tasks[user] == idx.row_tasks[s, h, user]  # a served user's tasks may differ from the trajectory's
         if not same or cost != cost:
@@ -349,8 +350,8 @@ def _future_value(p: np.ndarray, hp: np.ndarray, idx: FutureIndex, s: int, h: in
     prev = w.hover[0]
     energy = cost + idx.hop[prev, k]
     if not budget_ok(p, w.battery_j[0], energy, idx.home[k]):
-        return -math.inf, NO_USER
-    return reward_of(p, gain, energy), user
+        return -math.inf, NO_USER, 0.0
+    return reward_of(p, gain, energy), user, energy
 
 
 @jit_borrow
@@ -369,7 +370,7 @@ def evaluate_future(scene: Scene, idx: FutureIndex, root: World, s: int, h: int,
         out_user[k] = NO_USER
         if k == prev and not stay:
             continue
-        q, user = _future_value(p, hp, idx, s, h, k, w, touched, flag)
+        q, user, _ = _future_value(p, hp, idx, s, h, k, w, touched, flag)
         if q > -math.inf:
             out_q[k] = q
             out_user[k] = user
@@ -379,10 +380,10 @@ def evaluate_future(scene: Scene, idx: FutureIndex, root: World, s: int, h: int,
 
 @jit_inline
 def greedy_future(scene: Scene, idx: FutureIndex, root: World, s: int, h: int, w: World, touched: np.ndarray,
-                  flag: np.ndarray, skip: np.ndarray) -> tuple[int, int]:
+                  flag: np.ndarray, skip: np.ndarray) -> tuple[int, int, float, float]:
     """The point of largest q in ``w`` (the first of equals, as ``np.argmax`` over
-    ``evaluate_future``'s q) and its user, among the points ``skip`` (K,) does not mark;
-    (-1, ``NO_USER``) if none of them is allowed.
+    ``evaluate_future``'s q), its user, the interval's energy and q, among the points
+    ``skip`` (K,) does not mark; (-1, ``NO_USER``, 0, -inf) if none of them is allowed.
 
     A point's q is at most ``serve_ub`` less its flight's share, so only the points whose
     bound reaches the best q found so far, and whose budget holds with the least a service
@@ -404,20 +405,21 @@ def greedy_future(scene: Scene, idx: FutureIndex, root: World, s: int, h: int, w
     best = -1
     best_q = -math.inf
     best_user = NO_USER
+    best_energy = 0.0
     if first >= 0:
-        q, user = _future_value(p, hp, idx, s, h, first, w, touched, flag)
+        q, user, energy = _future_value(p, hp, idx, s, h, first, w, touched, flag)
         if q > -math.inf:
-            best, best_q, best_user = first, q, user
+            best, best_q, best_user, best_energy = first, q, user, energy
     battery = w.battery_j[0]
     for k in range(hp.shape[0]):
         if k == first or (k == prev and not stay) or skip[k] or idx.serve_ub[k] - hop_q[k] < best_q:
             continue  # q < best_q: not the largest, nor tied with it
         if not budget_ok(p, battery, idx.cost_lb[k] + idx.hop[prev, k], idx.home[k]):
             continue  # not allowed whoever it serves
-        q, user = _future_value(p, hp, idx, s, h, k, w, touched, flag)
+        q, user, energy = _future_value(p, hp, idx, s, h, k, w, touched, flag)
         if q > best_q or (q == best_q and q > -math.inf and k < best):
-            best, best_q, best_user = k, q, user
-    return best, best_user
+            best, best_q, best_user, best_energy = k, q, user, energy
+    return best, best_user, best_energy, best_q
 
 
 @jit_borrow
@@ -459,7 +461,7 @@ def allowed_future(scene: Scene, idx: FutureIndex, root: World, s: int, h: int, 
         elif not budget_ok(p, battery, idx.cost_lb[k] + hop, idx.home[k]):
             ok = False
         else:
-            q, user = _future_value(p, hp, idx, s, h, k, w, touched, flag)
+            q, user, _ = _future_value(p, hp, idx, s, h, k, w, touched, flag)
             ok = q > -math.inf
         if ok:
             out_allowed[k] = 0.0
@@ -469,10 +471,11 @@ def allowed_future(scene: Scene, idx: FutureIndex, root: World, s: int, h: int, 
 
 @jit_borrow
 def point_user(scene: Scene, idx: FutureIndex, s: int, h: int, k: int, w: World, touched: np.ndarray,
-               flag: np.ndarray) -> int:
-    """The user point k serves in ``w`` (``evaluate_future``'s), row h already filled."""
-    q, user = _future_value(scene.p, scene.hover_points, idx, s, h, k, w, touched, flag)
-    return user
+               flag: np.ndarray) -> tuple[int, float, float]:
+    """The user point k serves in ``w`` (``evaluate_future``'s), the interval's energy and
+    q; row h already filled."""
+    q, user, energy = _future_value(scene.p, scene.hover_points, idx, s, h, k, w, touched, flag)
+    return user, energy, q
 
 
 @jit_inline

@@ -26,7 +26,7 @@ from ..model._jit import jit, jit_borrow
 from ..model import params as P
 from ..model.interval import remaining_intervals
 from ..model.mobility import draw_int
-from ..model.world import Scene, World, advance, clone, copy_into, draw_chance, serve
+from ..model.world import Scene, World, advance, clone, copy_into, draw_chance, serve, settle
 from .futures import FutureIndex, allowed_future, evaluate_step, fill_rows, greedy_future, point_user
 from .objective import node_return
 from .tree import ROOT_INDEX, UNVISITED, TreeArrays
@@ -204,6 +204,7 @@ def _iterate(scene: Scene, tree: TreeArrays, num_nodes: int, root: World, settin
         depth = 1
         steps = 0
         in_tree = True
+        energy, q = 0.0, 0.0
         while limit <= 0 or w.interval[0] < limit:
             if future >= 0 and steps > 0:  # the users are where the future's row has them
                 fill_rows(scene, index, root, future, steps)
@@ -213,10 +214,11 @@ def _iterate(scene: Scene, tree: TreeArrays, num_nodes: int, root: World, settin
                 ws = w
             if in_tree and depth > settings.max_depth:
                 in_tree = False
-            if future >= 0 and steps > 0 and in_tree:  # the tree's step, asking as few points as it can
+            priced = future >= 0 and steps > 0  # the index gives the step's energy and q
+            if priced and in_tree:  # the tree's step, asking as few points as it can
                 for b in range(skip.shape[0]):
                     skip[b] = not _untried(children, visits, node, b)
-                a, user = greedy_future(scene, index, root, future, steps, ws, touched, flag, skip)
+                a, user, energy, q = greedy_future(scene, index, root, future, steps, ws, touched, flag, skip)
                 if a >= 0:  # the untried allowed point of largest q (``_untried_best``)
                     child = _expand(tree, num_nodes, node, a)
                     num_nodes += child == num_nodes
@@ -227,23 +229,24 @@ def _iterate(scene: Scene, tree: TreeArrays, num_nodes: int, root: World, settin
                         break
                     child = _uct_child(children, node, qvals, visits, value_sum, settings.c)
                     a = action[child]
-                    user = point_user(scene, index, future, steps, a, ws, touched, flag)
+                    user, energy, q = point_user(scene, index, future, steps, a, ws, touched, flag)
                 node = child
                 path[depth] = node
                 depth += 1
-            elif future >= 0 and steps > 0 and settings.rollout == ROLLOUT_EPSILON_GREEDY:
+            elif priced and settings.rollout == ROLLOUT_EPSILON_GREEDY:
                 # the greedy step needs only the best point (``greedy_future``), the
                 # uniform one (drawn as ``rollout_action`` draws it) which points are allowed
                 for b in range(skip.shape[0]):
                     skip[b] = False
-                a, user = greedy_future(scene, index, root, future, steps, ws, touched, flag, skip)
+                a, user, energy, q = greedy_future(scene, index, root, future, steps, ws, touched, flag, skip)
                 if a < 0:
                     break
                 if rng.random() < settings.epsilon:
                     allowed = allowed_future(scene, index, root, future, steps, ws, touched, flag, qvals)
                     a = random_allowed(qvals, allowed, rng)
-                    user = point_user(scene, index, future, steps, a, ws, touched, flag)
+                    user, energy, q = point_user(scene, index, future, steps, a, ws, touched, flag)
             else:
+                priced = False
                 allowed = evaluate_step(scene, index, root, ws, future, steps, touched, flag, qvals, users_at)
                 if allowed == 0:
                     break
@@ -264,10 +267,14 @@ def _iterate(scene: Scene, tree: TreeArrays, num_nodes: int, root: World, settin
                 else:
                     a = rollout_action(qvals, allowed, settings.rollout, settings.epsilon, rng)
                 user = users_at[a]
-            out = serve(scene, ws, a, user)
-            touched[steps] = out.user
-            flag[out.user] = True
-            rewards[steps] = out.reward
+            if priced:
+                settle(scene, ws, a, user, energy, q)
+            else:
+                out = serve(scene, ws, a, user)
+                user, q = out.user, out.reward
+            touched[steps] = user
+            flag[user] = True
+            rewards[steps] = q
             if future >= 0:  # only the tasks: the next row has the users' moves
                 advance(scene, ws, index.moves[future, steps, :0], index.news[future, steps])
             else:
@@ -330,13 +337,17 @@ def _paired(scene: Scene, root: World, first: int, second: int, settings: Search
                     fill_rows(scene, index, root, s, steps)
                     ws = World(w.uav_xyz, w.hover, index.row_users[s, steps], w.tasks, w.served, w.battery_j,
                                w.interval, w.energy_used_j, w.reward_sum)
-                    a, user = greedy_future(scene, index, root, s, steps, ws, touched, flag, skip)
+                    a, user, energy, q = greedy_future(scene, index, root, s, steps, ws, touched, flag, skip)
                     if a < 0:
                         break
-                step_out = serve(scene, ws, a, user)
-                touched[steps] = step_out.user
-                flag[step_out.user] = True
-                total += step_out.reward
+                if steps == 0:
+                    step_out = serve(scene, ws, a, user)
+                    user, q = step_out.user, step_out.reward
+                else:
+                    settle(scene, ws, a, user, energy, q)
+                touched[steps] = user
+                flag[user] = True
+                total += q
                 advance(scene, ws, index.moves[s, steps, :0], index.news[s, steps])
                 steps += 1
             out[s, k] = node_return(settings.return_kind, total, steps, total, steps, settings.past_sum,

@@ -137,25 +137,31 @@ def serve(scene: Scene, w: World, action: int, user: int) -> Outcome:
     """Fly to hovering point ``action`` and serve ``user`` there (the nearest eligible one,
     ``served_user``; a search that knows it already passes it): count the service, offload
     the user's tasks, charge the battery, advance the interval. No chance yet."""
-    p = scene.p
-    hover_xyz = scene.hover_points[action]
     if user == NO_USER:
         out = Outcome(NO_USER, 0, 0.0, 0.0, 0.0, 0.0, 0.0)
     else:
         tasks = w.tasks[user]
-        bits, e_h, e_c, e_f, q = user_outcome(p, w.uav_xyz, hover_xyz, w.users[user], tasks)
+        bits, e_h, e_c, e_f, q = user_outcome(scene.p, w.uav_xyz, scene.hover_points[action], w.users[user], tasks)
         out = Outcome(user, tasks, bits, e_h, e_c, e_f, q)
+    settle(scene, w, action, out.user, out.e_hover_j + out.e_comp_j + out.e_flight_j, out.reward)
+    return out
+
+
+@jit_borrow
+def settle(scene: Scene, w: World, action: int, user: int, energy_j: float, reward: float) -> None:
+    """``serve``'s change to ``w`` once the interval's energy and reward are known: a
+    playout along a shared future knows them from its index (bit for bit what ``serve``
+    computes: the same expressions on the same numbers) and need not price the step twice."""
+    if user != NO_USER:
         w.served[user] += 1
         w.tasks[user] = 0  # offloaded; under the paper's redraw the next draw replaces it anyway
         for a in range(3):
-            w.uav_xyz[a] = hover_xyz[a]
-    energy = out.e_hover_j + out.e_comp_j + out.e_flight_j
-    w.battery_j[0] -= energy
-    w.energy_used_j[0] += energy
-    w.reward_sum[0] += out.reward
+            w.uav_xyz[a] = scene.hover_points[action, a]
+    w.battery_j[0] -= energy_j
+    w.energy_used_j[0] += energy_j
+    w.reward_sum[0] += reward
     w.hover[0] = action
     w.interval[0] += 1
-    return out
 
 
 @jit_borrow
@@ -212,4 +218,4 @@ def draw_chance(p: np.ndarray, moves: np.ndarray, news: np.ndarray, rng: np.rand
 
 
 __all__ = ["NO_MOVES", "NO_NEWS", "Outcome", "Scene", "World", "advance", "clone", "copy_into", "draw_chance",
-           "evaluate", "scene_of", "serve", "step", "world_from"]
+           "evaluate", "scene_of", "serve", "settle", "step", "world_from"]

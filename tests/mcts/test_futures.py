@@ -23,6 +23,12 @@ CASES = {
 }
 
 
+def priced_by_serve(scene, w, action: int, user: int) -> float:
+    """The interval's energy as ``serve`` computes it (on a copy of ``w``)."""
+    out = serve(scene, clone(w), action, user)
+    return out.e_hover_j + out.e_comp_j + out.e_flight_j
+
+
 @pytest.mark.parametrize("name", sorted(CASES))
 def test_index_matches_the_plain_evaluation_along_random_playouts(name):
     scenario = CASES[name]
@@ -69,14 +75,17 @@ def test_index_matches_the_plain_evaluation_along_random_playouts(name):
                 fill_rows(scene, asked, root, future, steps)
                 skip[:] = rng.random(k) < 0.3 if playout % 2 else False
                 among = np.where(skip, -np.inf, plain)
-                best, user = greedy_future(scene, asked, root, future, steps, w, touched, flag, skip)
+                best, user, energy, best_q = greedy_future(scene, asked, root, future, steps, w, touched, flag, skip)
                 expected = int(np.argmax(among)) if np.isfinite(among).any() else -1
                 assert best == expected, (playout, steps)
-                assert best < 0 or user == users[best]
+                assert best < 0 or (user == users[best] and best_q == plain[best]
+                                    and energy == priced_by_serve(scene, w, best, user))
                 assert allowed_future(scene, asked, root, future, steps, w, touched, flag, mask) == allowed
                 assert np.array_equal(np.isfinite(mask), np.isfinite(plain))
                 for a in np.flatnonzero(np.isfinite(plain)):
-                    assert point_user(scene, asked, future, steps, a, w, touched, flag) == users[a]
+                    user, energy, point_q = point_user(scene, asked, future, steps, a, w, touched, flag)
+                    assert user == users[a] and point_q == plain[a]
+                    assert energy == priced_by_serve(scene, w, a, user)  # to the last bit: ``settle`` takes it
             compared += 1
             if allowed == 0:
                 break
