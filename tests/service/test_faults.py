@@ -18,7 +18,7 @@ from planner_service.service.processes import Child
 from protocol import Event
 from protocol.client import ClientError
 from tests.support.gcs import M, GroundStation
-from tests.support.sortie_checks import check_sortie
+from tests.support.sortie_checks import check_sortie, read_sortie
 from tests.support.stack import Stack
 
 SPEEDUP = "40"
@@ -167,3 +167,31 @@ def test_a_landing_while_the_service_is_down_ends_the_sortie(stack: Stack) -> No
     time.sleep(1.0)  # a plan, an upload or an arm command would have come by now
     assert max(p for (p,) in stack.rows("SELECT plan_id FROM missions")) == plans_before
     assert flight_commands(vehicle.log()) == commands_before, vehicle.log()[-1500:]
+
+
+@pytest.mark.timeout(90)
+def test_a_mission_that_goes_up_while_the_service_stops_is_journalled(stack: Stack) -> None:
+    """SIGINT while a mission goes up a slow link: the service lets the upload finish (up to
+    ``GRACE_S``), and the mission the vehicle then holds is in the journal, accepted (was:
+    the upload's outcome was dropped once the service was stopping, so the vehicle held a
+    mission the journal never knew; seen at the end of a lossy sortie, a way-home plan
+    still going up when the test stopped the service after the landing)."""
+    vehicle = stack.vehicle()
+    port = stack.proxy("--delay-ms", "120")
+    service = stack.service(mavlink__url=f"udpout:127.0.0.1:{port}")
+    client = stack.client
+    assert client is not None
+    client.submit("u-1", 100.0, 100.0, 5, timeout_s=10.0)
+    deadline = time.monotonic() + 30.0
+    while "decision (" not in service.log():  # the upload begins as the decision is logged
+        assert time.monotonic() < deadline, service.log()[-2000:]
+        time.sleep(0.02)
+    t0 = time.monotonic()
+    assert service.stop() == 0
+    stopped_s = time.monotonic() - t0
+    log = service.log()
+    print(f"stopped {stopped_s:.1f} s after the decision; the upload: "
+          + next((line.split(" INFO ")[-1] for line in log.splitlines() if "uploaded (" in line), "none logged"))
+    sortie = read_sortie(stack, [vehicle.log()], "ardupilot")
+    assert "uploaded (" in log and sortie.commits, "the upload did not finish before the service stopped"
+    assert sortie.commits == sortie.accepted, (sortie.commits, sortie.accepted)
