@@ -12,9 +12,11 @@ The service is given its parts (``Parts``: journal, link factory, zenoh I/O, clo
 ``run_service`` builds them from the configuration.
 
 Shutdown: SIGINT/SIGTERM -> ``stopping`` -> intake closed (queryable undeclared, late
-requests refused) -> bounded wait for an upload in progress (``GRACE_S``; its outcome is
-journalled, as the mission the vehicle then holds must be; an abandoned upload is cancelled
-with MISSION_ACK CANCELLED and the autopilot keeps the complete mission it held) -> tasks cancelled -> link, zenoh and journal closed (WAL checkpointed).
+requests refused, no new operation started) -> bounded wait for an upload in progress
+(``GRACE_S``; its outcome is journalled, as the mission the vehicle then holds must be; an
+abandoned upload is cancelled with MISSION_ACK CANCELLED and the autopilot keeps the
+complete mission it held) -> tasks cancelled -> link, zenoh and journal closed (WAL
+checkpointed).
 """
 
 from __future__ import annotations
@@ -59,7 +61,8 @@ log = logging.getLogger("planner_service")
 GRACE_S = 5.0
 """Bounded wait for an upload in progress at shutdown."""
 OPERATIONS = (fx.Plan, fx.Upload, fx.ReadBack, fx.Command)
-"""The effects that start an operation on the planner or the vehicle (``Service._job``)."""
+"""The effects that start an operation on the planner or the vehicle (``Service._job``):
+none is carried out once the service is stopping."""
 CONNECT_TIMEOUT_S = 10.0
 TICK_S = 0.05
 """Period of the sortie logic's look at the telemetry (every position report counts for a
@@ -251,19 +254,21 @@ class Service:
                 self.link = self.parts.open_link(self._on_link_event)
 
     # --- feeding the sortie logic -------------------------------------------------------------------
-    def _feed(self, event: ins.Input, records_only: bool = False) -> None:
+    def _feed(self, event: ins.Input) -> None:
         before = self.state
         self.state, effects = self.logic.step(before, event, self._vehicle(), self.mono())
-        if records_only:
-            effects = [e for e in effects if not isinstance(e, OPERATIONS)]
         self._carry_out(before, effects)
 
     def _carry_out(self, before: Sortie, effects: list[fx.Effect]) -> None:
+        """Carry out the logic's effects; once the service is stopping, only those that
+        record (journal, events, logs): no plan, upload, read-back or command starts."""
         if self.state.authority != before.authority:
             self._save_meta(AUTHORITY_KEY, f"{self.state.number}|{self.state.authority.state}|"
                                            f"{self.state.authority.detail}")
+        stopping = self.stopping.is_set()
         for effect in effects:
-            self._do(effect)
+            if not (stopping and isinstance(effect, OPERATIONS)):
+                self._do(effect)
 
     def _do(self, e: fx.Effect) -> None:
         match e:
@@ -298,17 +303,13 @@ class Service:
 
     def _job(self, name: str, coro: Awaitable[ins.Input | None]) -> None:
         """Run an operation off the logic and feed its outcome back when it ends. Once the
-        service is stopping only an upload's outcome is fed (the shutdown waits for it so
-        that the journal records the mission the vehicle now holds), and only its records
-        are carried out: nothing new starts."""
+        service is stopping only an upload's outcome is fed: the shutdown waits for it so
+        that the journal records the mission the vehicle now holds."""
         async def run() -> None:
             outcome = await coro
-            if outcome is None:
-                return
-            if not self.stopping.is_set():
+            if outcome is not None and (not self.stopping.is_set()
+                                        or isinstance(outcome, (ins.Uploaded, ins.UploadFailed))):
                 self._feed(outcome)
-            elif isinstance(outcome, (ins.Uploaded, ins.UploadFailed)):
-                self._feed(outcome, records_only=True)
         task = asyncio.ensure_future(run())
         task.set_name(name)
         self._jobs.add(task)
