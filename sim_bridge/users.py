@@ -25,7 +25,9 @@ A user learns what was served from its ack (``served_tasks`` in its ``sortie``) 
 ``user_place`` publication (which also says the service's count of its backlog); counts are
 per sortie. Until its first news it knows of no service and sends no ``served_seen``. The
 walk and the task law are pure (functions of a ``Walker``, the time and an explicit
-generator); ``run_users`` adds the clock and the zenoh client.
+generator); ``run_users`` adds the clock and the zenoh client. Each user walks and draws its
+tasks from generators of its own (``user_streams``), so that one seed gives the same users
+to any two sorties, whatever the wall clock and the planner did (``advance_users``).
 """
 
 from __future__ import annotations
@@ -179,6 +181,32 @@ def arrive(w: Walker, now_s: float, p: np.ndarray, tp: TaskParams, rng: np.rando
         w.next_draw_s += tp.interval_s
 
 
+UserStreams = tuple[np.random.Generator, np.random.Generator]
+"""One user's own generators: its walk's and its tasks'."""
+
+
+def user_streams(seed: int, count: int) -> tuple[np.random.Generator, list[UserStreams]]:
+    """The generators of ``count`` users from ``seed``: one for their start (``new_walkers``)
+    and, for each user, one for its walk and one for its tasks (independent streams of one
+    ``SeedSequence``)."""
+    seqs = np.random.SeedSequence(seed).spawn(1 + 2 * count)
+    rngs = [np.random.default_rng(s) for s in seqs]
+    return rngs[0], [(rngs[1 + 2 * i], rngs[2 + 2 * i]) for i in range(count)]
+
+
+def advance_users(walkers: list[Walker], streams: list[UserStreams], dt_s: float, now_s: float, params: WalkParams,
+                  p: np.ndarray, tp: TaskParams) -> None:
+    """Walk every user ``dt_s`` and add the tasks due by ``now_s``, each user from its own
+    generators: a user's walk and tasks are then functions of the seed and the simulated
+    time alone, not of how the wall clock cut that time into ticks nor of what the other
+    users drew. Two sorties with one seed meet the same users whatever their planner does
+    (the common random numbers of ``bench --flight``'s A/B); only a service changes a
+    backlog."""
+    for w, (walk, tasks) in zip(walkers, streams):
+        step(w, dt_s, params, walk)
+        arrive(w, now_s, p, tp, tasks)
+
+
 def learn_served(w: Walker, sortie: int | None, served_tasks: int | None) -> None:
     """The service says ``served_tasks`` of this user were served in ``sortie``: what is new
     of it comes off the backlog. The first news is the baseline; a later sortie counts
@@ -272,10 +300,10 @@ def run_users(client: PlannerClient, scenario: Scenario, count: int, tp: TaskPar
     or the service refuses every user because it flies no more sorties. Between two sorties
     the service refuses requests too ("sortie over: waiting for ..."): users keep walking,
     their tasks keep arriving, and they ask again after ``tp.retry_s``."""
-    rng = np.random.default_rng(seed)
+    setup, streams = user_streams(seed, count)
     params = WalkParams(scenario.area_side_m)
     # the first draws within a wall second, so that the first plan sees every user
-    walkers = new_walkers(count, scenario, params, rng, min(tp.interval_s, speedup))
+    walkers = new_walkers(count, scenario, params, setup, min(tp.interval_s, speedup))
     by_id = {w.user_id: w for w in walkers}
     p = pack(scenario)
     places: queue.SimpleQueue[UserPlace] = queue.SimpleQueue()
@@ -291,9 +319,7 @@ def run_users(client: PlannerClient, scenario: Scenario, count: int, tp: TaskPar
             place = places.get()
             if place.user_id in by_id:
                 on_place(by_id[place.user_id], place)
-        for w in walkers:
-            step(w, (now - last) * speedup, params, rng)
-            arrive(w, sim, p, tp, rng)
+        advance_users(walkers, streams, (now - last) * speedup, sim, params, p, tp)
         last = now
         for w in walkers:
             if wants_to_send(w, sim, tp):

@@ -16,8 +16,8 @@ from planner_service.model.mobility import draw_arrivals, draw_tasks
 from planner_service.service.intake import Accepted, Intake, fairness_rule
 from planner_service.service.journal import Journal
 from protocol import Area, TaskAck, UserPlace, encode
-from sim_bridge.users import (TaskParams, WalkParams, Walker, arrive, learn_served, new_walkers, on_ack, on_place,
-                              on_refused, request_of, sent, step, wants_to_send)
+from sim_bridge.users import (TaskParams, WalkParams, Walker, advance_users, arrive, learn_served, new_walkers, on_ack,
+                              on_place, on_refused, request_of, sent, step, user_streams, wants_to_send)
 
 SCENARIO = field()
 P = pack(SCENARIO)
@@ -222,3 +222,36 @@ def test_the_same_seed_walks_the_same(law: str) -> None:
                            request_of(w, float(k), tp, WALK))
         return [h for w in ws for h in w.history]
     assert run(5) == run(5) and run(5) != run(6)
+
+
+def test_one_seed_gives_the_same_users_whatever_the_ticks_and_the_services() -> None:
+    """``run_users``'s walk: each user's position and task draws at a simulated time depend
+    on the seed and that time only. Cut into regular ticks, or into ragged ones with a
+    service to user 0 on the way, the users are the same (user 0's backlog aside); so two
+    flights of one seed meet the same users whatever their planners did."""
+    tp = TaskParams(interval_s=40.0)
+    checkpoints = [50.0 * k for k in range(1, 9)]
+
+    def walk(ticks: np.random.Generator | None, serve_at: float | None) -> list[list[tuple]]:
+        setup, streams = user_streams(5, 4)
+        ws = new_walkers(4, SCENARIO, WALK, setup, 10.0)
+        now, seen = 0.0, []
+        for mark in checkpoints:
+            while now < mark:
+                dt = 1.0 if ticks is None else float(ticks.uniform(0.01, 7.0))
+                dt = min(dt, mark - now)
+                now += dt
+                advance_users(ws, streams, dt, now, WALK, BUSY, tp)
+                if serve_at is not None and now >= serve_at:
+                    ws[0].backlog, serve_at = 0, None  # a service takes user 0's whole backlog
+            seen.append([(*w.xy, w.draws, w.arrived + w.lost, w.backlog) for w in ws])
+        return seen
+
+    regular, ragged = walk(None, None), walk(np.random.default_rng(1), 120.0)
+    for at_regular, at_ragged in zip(regular, ragged):
+        for user, (a, b) in enumerate(zip(at_regular, at_ragged)):
+            assert np.allclose(a[:2], b[:2], atol=1e-6) and a[2:4] == b[2:4], (user, a, b)
+            assert user == 0 or a[4] == b[4], (user, a, b)
+    assert regular[2][0][4] != ragged[2][0][4]  # at 150 s, the service had changed user 0's backlog
+    other = user_streams(6, 4)[1][0][0].uniform(0.0, 1.0)
+    assert other != user_streams(5, 4)[1][0][0].uniform(0.0, 1.0)  # another seed, other users
