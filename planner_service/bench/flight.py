@@ -9,7 +9,9 @@ so each figure is a median over seeds, and the ratio of the medians is the figur
 
 Per sortie: throughput in tasks per interval (per service), average reward (11), tasks per
 sortie, the services whose request was the one the plan was made for, and decisions per
-service (the service's decisions, counted from its log, over its services).
+service (the service's decisions, counted from its log, over its services). Two flights of
+one seed meet the same users (each user draws from its own generators), so the algorithms
+are also compared seed by seed against the first.
 """
 
 from __future__ import annotations
@@ -78,6 +80,7 @@ def run_flight_bench(seeds: Sequence[int], algos: Sequence[str] = ALGOS, users: 
             row[key] = {"flown": f, "offline": o, "ratio": f / o if o else float("nan")}
         row["planned_request_share"] = statistics.median(s["planned_request_share"] for s in flown)
         row["decisions_per_service"] = statistics.median(s["decisions_per_service"] for s in flown)
+        row["flown_per_seed"] = {key: [s[key] for s in flown] for key in FIGURES}
         row["fairness_violations"] = sum(s["fairness_violations"] for s in flown)
         row["energy_violations"] = sum(bool(s["energy_violation"]) for s in flown)
         rows.append(row)
@@ -96,4 +99,19 @@ def format_flight(r: dict[str, Any]) -> str:
                      f"{q['flown']:7.3f} {q['offline']:7.3f} {q['ratio']:6.2f}  "
                      f"{n['flown']:6.0f} {n['offline']:6.0f} {n['ratio']:6.2f}  "
                      f"{row['planned_request_share']:11.0%} {row['decisions_per_service']:17.2f}")
+    first = r["rows"][0]
+    for row in r["rows"][1:]:
+        lines.append(paired_line(first, row))
     return "\n".join(lines)
+
+
+def paired_line(a: dict[str, Any], b: dict[str, Any]) -> str:
+    """Flown ``a`` against flown ``b`` seed by seed (each seed's users are the same in both
+    flights: ``sim_bridge.users.user_streams``): the median difference and the seeds each
+    leads, in tasks per interval and in reward."""
+    parts = []
+    for key, name, fmt in (("throughput_tasks_per_interval", "tasks/interval", "+.2f"), ("average_reward", "reward", "+.3f")):
+        diffs = [x - y for x, y in zip(a["flown_per_seed"][key], b["flown_per_seed"][key])]
+        ahead, behind = sum(d > 0 for d in diffs), sum(d < 0 for d in diffs)
+        parts.append(f"{name} {statistics.median(diffs):{fmt}} (ahead on {ahead}, behind on {behind} of {len(diffs)})")
+    return f"flown {a['algo']} - {b['algo']}, per seed: " + "; ".join(parts)

@@ -34,7 +34,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
                              "real processes) and planned offline, side by side per algorithm: tasks/interval, "
                              "reward, tasks per sortie, services of the planned request, decisions per service "
                              "(medians over --seeds; with --quick 2 seeds and mcts only)")
-    parser.add_argument("--seeds", default="1-6", metavar="A-B", help="seeds with --flight (default 1-6)")
+    parser.add_argument("--seeds", default="1-12", metavar="A-B",
+                        help="seeds with --flight (default 1-12: one seed's flight differs from another's by more "
+                             "than one planner's from another's; 3 algorithms take about 16 minutes)")
     parser.add_argument("--algos", default="mcts,greedy,random", help="algorithms with --flight (default mcts,greedy,random)")
     parser.add_argument("--speedup", type=float, default=25.0, help="the stub's speed-up with --flight (default 25)")
     parser.add_argument("--budget-ms", type=float, default=150.0, help="planner budget with --flight (default 150)")
