@@ -47,7 +47,7 @@ from .link import (Connected, Landed, LinkEvent, LinkSettings, Lost, ModeChanged
 from .link.base import RETURNING_MODES
 from .operator import read_command, reply_for
 from .places import plan_places, user_places
-from .planning import Planner, VehicleFix, assemble, not_served_reason, planning_battery_j
+from .planning import Planner, VehicleFix, after_hold, assemble, not_served_reason, planning_battery_j
 from .sortie import HeldMission, Rules, Sortie, SortieLogic, Vehicle, item_dict, new_sortie
 from .sortie import effects as fx
 from .sortie import inputs as ins
@@ -329,7 +329,7 @@ class Service:
         except JournalError as err:
             return ins.PlanFailed(basis, f"journal: {err}")
         if basis.at_point is not None:
-            assembled = _at_point(assembled, basis)
+            assembled = after_hold(assembled, basis.at_point, basis.serving, basis.serving_reward)
         newest = max((r.request_id for r in self.journal.pending()), default=0)
         t0 = time.perf_counter()
         try:
@@ -616,22 +616,6 @@ class Service:
             self.journal.set_meta(key, value)
         except JournalError as err:
             log.error("could not note %s in the journal: %s", key, err)
-
-
-def _at_point(assembled: Any, basis: fx.PlanBasis) -> Any:
-    """The planner's state as it will be when the hold at ``basis.at_point`` ends: the
-    vehicle there, its user served (its tasks consumed), one more interval."""
-    state = assembled.state.copy()
-    pt = basis.at_point
-    assert pt is not None
-    state.uav_xyz = np.array([pt.x_m, pt.y_m, pt.z_m], dtype=np.float64)
-    state.hover_index = pt.hover_index
-    if basis.serving is not None and basis.serving in assembled.user_ids:
-        i = assembled.user_ids.index(basis.serving)
-        state.tasks[i] = 0
-        state.served[i] += 1
-        state.interval += 1
-    return replace(assembled, state=state)
 
 
 def _max_points(config: ServiceConfig) -> int:

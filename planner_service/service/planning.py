@@ -5,6 +5,8 @@ numbers out): the service runs ``Planner.decide`` in a worker thread.
   user heard from (in order of first request), standing where they last reported; a user
   with a pending request has its task count, any other has 0 (nothing to offload, so not
   eligible); service counts come from the journal (the fairness rule spans restarts).
+- ``after_hold``: the state a decision on arrival at a point starts from, its hold done
+  (its user served, the interval and its q counted).
 - ``predict_path``: the planner's line as hovering points with hold times, by stepping a
   copy of the state along it with the model's own ``step``, with nothing happening
   between the intervals (the service knows no future): the user served at each point, its
@@ -28,7 +30,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Callable
 
 import numpy as np
@@ -122,6 +124,24 @@ def assemble(scenario: Scenario, users: list[UserRow], pending: list[RequestRow]
         task_table=np.zeros((0, n), dtype=np.int64), reward_sum=float(sum(s.reward for s in services)),
     )
     return Assembled(state, ids, tuple(request_ids))
+
+
+def after_hold(assembled: Assembled, point: PlannedPoint, serving: str | None, reward: float) -> Assembled:
+    """The state as it will be when the hold at ``point`` ends: the vehicle there and, if
+    it serves the user ``serving``, that user served (its tasks consumed, one more service)
+    and one more interval, whose q (``reward``) joins the sortie's sum: the interval and its
+    reward are counted together, or the sortie's average (``mcts``'s objective) would take
+    the hold under way for an interval that earned nothing."""
+    state = assembled.state.copy()
+    state.uav_xyz = np.array([point.x_m, point.y_m, point.z_m], dtype=np.float64)
+    state.hover_index = point.hover_index
+    if serving is not None and serving in assembled.user_ids:
+        i = assembled.user_ids.index(serving)
+        state.tasks[i] = 0
+        state.served[i] += 1
+        state.interval += 1
+        state.reward_sum += reward
+    return replace(assembled, state=state)
 
 
 def hold_time_s(p: np.ndarray, hover_xyz: np.ndarray, user_xyz: np.ndarray, bits: float) -> float:

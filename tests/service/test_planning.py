@@ -14,8 +14,9 @@ from planner_service.model.energy import flight_energy_j
 from planner_service.model.world import evaluate, scene_of
 from planner_service.service.config import FLIGHT_ALGOS, build_config
 from planner_service.service.errors import PlanningError
-from planner_service.service.journal import RequestRow, UserRow
-from planner_service.service.planning import (PlannedPath, PlannedPoint, Planner, VehicleFix, assemble, check_path,
+from planner_service.service.journal import RequestRow, ServiceRow, UserRow
+from planner_service.service.planning import (PlannedPath, PlannedPoint, Planner, VehicleFix, after_hold, assemble,
+                                              check_path,
                                               hold_time_s, not_served_reason, planning_battery_j, predict_path,
                                               should_return)
 from protocol import Area
@@ -44,6 +45,27 @@ def test_assemble_from_the_ground_starts_at_base() -> None:
     assert a.state.hover_index == -1 and list(a.state.uav_xyz) == [0.0, 0.0, 100.0]
     assert list(a.state.tasks) == [10, 0] and a.request_ids == (1, 0) and a.user_ids == ("u0", "u1")
     assert a.state.task_table.shape == (0, 2)
+
+
+def test_the_state_after_a_hold_counts_its_interval_with_its_reward() -> None:
+    """Planning on arrival at a point: the state is the one after its hold, in which the
+    user is served and the sortie has one more interval, earning the hold's q; the past
+    average that ``mcts`` maximises is then what the journal will say once it ends."""
+    users = [UserRow("u0", HP[5][0], HP[5][1], 0.0, 1), UserRow("u1", HP[11][0], HP[11][1], 0.0, 0)]
+    pending = [RequestRow(7, "u0", HP[5][0], HP[5][1], 0.0, 12, None, 0.0, "pending", ""),
+               RequestRow(8, "u1", HP[11][0], HP[11][1], 0.0, 9, None, 0.0, "pending", "")]
+    done = [ServiceRow(1, 3, "u0", 10, 1e6, 2, *HP[2], 0.35, 90_000.0, 0.0)]
+    fix = VehicleFix(*HP[5], 80_000.0, True)
+    a = assemble(S, users, pending, done, fix, 2)
+    assert (a.state.interval, a.state.reward_sum) == (1, 0.35)
+    here = PlannedPoint(5, *HP[5], 36.0, "u0", 7, 12, 1.2e6, 7000.0, 0.25)
+    after = after_hold(a, here, "u0", 0.25)
+    assert after.state.hover_index == 5 and list(after.state.uav_xyz) == list(HP[5])
+    assert list(after.state.tasks) == [0, 9] and list(after.state.served) == [2, 0]
+    assert after.state.interval == 2 and after.state.reward_sum == pytest.approx(0.60)
+    assert (a.state.interval, a.state.reward_sum, list(a.state.tasks)) == (1, 0.35, [12, 9]), "a copy"
+    nobody = after_hold(a, here, None, 0.25)  # nobody bound there: no service, no interval
+    assert (nobody.state.interval, nobody.state.reward_sum, nobody.state.hover_index) == (1, 0.35, 5)
 
 
 def test_path_steps_the_model_along_the_line() -> None:

@@ -118,6 +118,7 @@ def test_a_sortie_records_only_holds_the_vehicle_was_seen_at() -> None:
     out = run.tick(seq=2, xyz=(119.0, 200.5, 100.0), boot_s=12.0)
     (plan,) = only(out, fx.Plan)
     assert plan.basis.keep_through == 2 and plan.basis.serving == "a" and plan.basis.at_point.hover_index == 3
+    assert plan.basis.serving_reward == 0.4, "the planned q of the planned tasks, as the hold's end records it"
     assert run.s.binding.request_id == 1 and run.s.binding.planned
     out = run.feed(ins.Planned(plan.basis, path(point(9, 400.0, 300.0, "b", 2))))
     (up,) = only(out, fx.Upload)
@@ -314,6 +315,9 @@ def test_a_backlog_grown_since_the_plan_lengthens_the_hold_it_is_bound_to() -> N
     assert (b.request_id, b.tasks, b.planned) == (5, 20, False)
     assert b.needed_s > 60.0, "the planned 60 s hold cannot carry 20 tasks"
     assert plan.basis.at_point.hold_s >= b.needed_s + 1.0, "the planner pays for the longer hold"
+    # ... and counts the q the hold's end will record: 20 tasks for the planned energy
+    assert plan.basis.serving_reward == pytest.approx(SCENARIO.task_reward_weight * 20 / SCENARIO.task_max
+                                                 - 5000.0 / SCENARIO.energy_norm_j)
     (up,) = only(run.feed(ins.Planned(plan.basis, path(point(9, 400.0, 300.0, "b", 2)))), fx.Upload)
     assert up.items[2].param1 >= b.needed_s + 1.0 and up.mission.point_at(2).hold_s >= b.needed_s
 

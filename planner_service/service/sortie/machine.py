@@ -398,13 +398,18 @@ class SortieLogic:
                                user_id=b.user_id, request_id=b.request_id)))
             return s
         bits = tasks * self.rules.scenario.bits_per_task
-        reward = point.reward if tasks == point.tasks else interval_reward(self.p, tasks, point.energy_j)
+        reward = self._service_reward(point, tasks)
         out.append(fx.RecordService(b.request_id, b.user_id, point.hover_index, (point.x_m, point.y_m, point.z_m),
                                     tasks, bits, reward, w.held_s, b.planned))
         detail = f"{tasks} tasks at point {point.hover_index}" + ("" if tasks == b.tasks else f" of {b.tasks}")
         out.append(fx.Emit(ev.UserServed(f"{detail}; held {w.held_s:.1f} s", user_id=b.user_id,
                            request_id=b.request_id)))
         return replace(s, services=s.services + 1)
+
+    def _service_reward(self, point: PlannedPoint, tasks: int) -> float:
+        """q of ``tasks`` served at ``point``, as the journal records it: the plan's own
+        when they are the tasks planned, else (11) with the point's planned energy."""
+        return point.reward if tasks == point.tasks else interval_reward(self.p, tasks, point.energy_j)
 
     # --- deciding ------------------------------------------------------------------------------
     def _plan_wanted(self, s: Sortie, v: ins.Vehicle, now: float) -> fx.PlanBasis | None:
@@ -438,8 +443,10 @@ class SortieLogic:
             serving = b.user_id if b is not None and b.request_id is not None else None
             # the hold the bound request needs, so that the planner pays for all of it
             bound = replace(point, hold_s=self._bound_hold_s(s, w.seq, point.hold_s, self._margin_s(v)))
+            tasks = b.tasks if serving and b else 0
             return fx.PlanBasis(f"arrived at point {point.hover_index}", s.version, w.seq,
-                                at_point=bound, serving=serving, serving_tasks=b.tasks if serving and b else 0)
+                                at_point=bound, serving=serving, serving_tasks=tasks,
+                                serving_reward=self._service_reward(point, tasks) if serving else 0.0)
         if (s.dirty and v.seq == s.held.rtl_seq and now - s.last_plan_at >= r.replan_min_interval_s
                 and self.world.pending_count() > 0 and v.xyz[2] >= r.area.min_flight_altitude_m
                 and self._could_turn_back(s, v)):
