@@ -59,10 +59,35 @@ LAWS: tuple[Law, ...] = ("backlog", "redraw")
 
 @dataclass(frozen=True)
 class WalkParams:
+    """A random-waypoint walk over [0, ``side_m``]^2: each leg at a speed drawn in
+    [``speed_min_mps``, ``speed_max_mps``], a pause of up to ``pause_max_s`` at each
+    waypoint (``model_pace`` gives the speeds of the model's users)."""
+
     side_m: float
     speed_min_mps: float = 0.5
     speed_max_mps: float = 2.0
     pause_max_s: float = 20.0
+
+
+def model_move_m(scenario: Scenario) -> float:
+    """How far the model moves a user in an interval, on average over its draws (in the
+    plane): each axis uniform in [-epsilon, epsilon] (``user_move_range_m``), in whole
+    metres where ``user_move_integer`` (8.0 m for 10 m), else continuous (7.7 m)."""
+    reach = scenario.user_move_range_m
+    if scenario.user_move_integer:
+        r = np.arange(-int(reach), int(reach) + 1, dtype=np.float64)
+        return float(np.hypot(*np.meshgrid(r, r)).mean())
+    return reach * (math.sqrt(2.0) + math.asinh(1.0)) / 3.0  # the mean length in the square [-1, 1]^2
+
+
+def model_pace(scenario: Scenario, interval_s: float) -> tuple[float, float]:
+    """Walking speeds (m/s) at which a user goes, over an interval of ``interval_s``
+    simulated seconds, as far on average as the model moves it in one (``model_move_m``),
+    from half to 1.5 times that pace: the users flown then move as the planner's futures
+    have them move. (The field preset's 8.0 m an interval of 55 s is a stroll, 0.15 m/s on
+    average: users who mostly stand while their device offloads.)"""
+    pace = model_move_m(scenario) / interval_s
+    return 0.5 * pace, 1.5 * pace
 
 
 @dataclass(frozen=True)
@@ -295,13 +320,15 @@ def request_of(w: Walker, now_s: float, tp: TaskParams, params: WalkParams) -> T
 
 
 def run_users(client: PlannerClient, scenario: Scenario, count: int, tp: TaskParams, speedup: float,
-              seed: int, stop: threading.Event, duration_s: float | None = None) -> list[Walker]:
+              seed: int, stop: threading.Event, duration_s: float | None = None,
+              speeds_mps: tuple[float, float] | None = None) -> list[Walker]:
     """Walk, let tasks arrive and submit until ``stop`` is set, ``duration_s`` (wall) passes,
     or the service refuses every user because it flies no more sorties. Between two sorties
     the service refuses requests too ("sortie over: waiting for ..."): users keep walking,
-    their tasks keep arriving, and they ask again after ``tp.retry_s``."""
+    their tasks keep arriving, and they ask again after ``tp.retry_s``. They walk at
+    ``speeds_mps`` (default: ``model_pace``)."""
     setup, streams = user_streams(seed, count)
-    params = WalkParams(scenario.area_side_m)
+    params = WalkParams(scenario.area_side_m, *(speeds_mps or model_pace(scenario, tp.interval_s)))
     # the first draws within a wall second, so that the first plan sees every user
     walkers = new_walkers(count, scenario, params, setup, min(tp.interval_s, speedup))
     by_id = {w.user_id: w for w in walkers}

@@ -5,6 +5,7 @@ whole walk against the real intake and journal (no zenoh), whose counts must agr
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import msgspec
@@ -12,12 +13,12 @@ import numpy as np
 import pytest
 
 from planner_service.model import field, pack, preset
-from planner_service.model.mobility import draw_arrivals, draw_tasks
+from planner_service.model.mobility import draw_arrivals, draw_tasks, move_users
 from planner_service.service.intake import Accepted, Intake, fairness_rule
 from planner_service.service.journal import Journal
 from protocol import Area, TaskAck, UserPlace, encode
 from sim_bridge.users import (TaskParams, WalkParams, Walker, advance_users, arrive, learn_served, new_walkers, on_ack,
-                              on_place, on_refused, request_of, sent, step, user_streams, wants_to_send)
+                              model_pace, on_place, on_refused, request_of, sent, step, user_streams, wants_to_send)
 
 SCENARIO = field()
 P = pack(SCENARIO)
@@ -255,3 +256,37 @@ def test_one_seed_gives_the_same_users_whatever_the_ticks_and_the_services() -> 
     assert regular[2][0][4] != ragged[2][0][4]  # at 150 s, the service had changed user 0's backlog
     other = user_streams(6, 4)[1][0][0].uniform(0.0, 1.0)
     assert other != user_streams(5, 4)[1][0][0].uniform(0.0, 1.0)  # another seed, other users
+
+
+def test_users_at_the_model_pace_move_an_interval_as_far_as_the_model_moves_them() -> None:
+    """``model_pace``: over an interval a walking user goes, on average, as far as the
+    model's own move (``mobility.move_users``) takes a user in one."""
+    interval = 55.0
+    walk = WalkParams(SCENARIO.area_side_m, *model_pace(SCENARIO, interval))
+    setup, streams = user_streams(3, 50)
+    ws = new_walkers(50, SCENARIO, walk, setup)
+    walked = []
+    for _ in range(40):
+        before = [w.xy.copy() for w in ws]
+        for w, (rng, _tasks) in zip(ws, streams):
+            step(w, interval, walk, rng)
+        walked += [float(np.hypot(*(w.xy - b))) for w, b in zip(ws, before)]
+    users = np.zeros((2000, 3))
+    users[:, :2] = SCENARIO.area_side_m / 2
+    moved = users.copy()
+    move_users(P, moved, np.random.default_rng(4))
+    model = float(np.hypot(*(moved - users)[:, :2].T).mean())
+    assert model == pytest.approx(8.1, abs=0.3)  # epsilon = 10 m: uniform whole-metre moves on each axis
+    assert np.mean(walked) == pytest.approx(model, rel=0.1)
+
+
+@pytest.mark.parametrize("text, ok", [("0.1,0.2", True), ("0.2,0.2", True), ("0.2,0.1", False), ("0,1", False),
+                                      ("1", False), ("a,b", False), ("nan,1", False), ("1,inf", False)])
+def test_walk_speeds_are_checked(text: str, ok: bool) -> None:
+    from sim_bridge.commands.users import walk_speeds
+
+    if ok:
+        assert walk_speeds(text) == tuple(float(v) for v in text.split(","))
+    else:
+        with pytest.raises(ValueError, match=re.escape(repr(text))):  # the message names the value
+            walk_speeds(text)
