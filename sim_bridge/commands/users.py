@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import argparse
 import logging
-import math
 import signal
 import sys
 import threading
@@ -40,7 +39,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--resend-m", type=positive_float, default=50.0, metavar="M",
                         help="a user with tasks that has moved this far since its last request sends again "
                              "(default 50)")
-    parser.add_argument("--walk-speed", default=None, metavar="LO,HI",
+    parser.add_argument("--walk-speed", type=walk_speeds, default=None, metavar="LO,HI",
                         help="walking speeds in m/s, each leg of the random-waypoint walk drawn in [LO, HI] "
                              "(default: the model's pace, a user going as far in an interval as the scenario's "
                              "user_move_range_m moves it: 0.07,0.22 for the field preset)")
@@ -61,11 +60,6 @@ def run(args: argparse.Namespace) -> int:
 
     if args.count < 1 or not args.interval > 0 or not args.speedup > 0 or not args.resend_m > 0:
         print("error: --count must be at least 1, --interval, --speedup and --resend-m positive", file=sys.stderr)
-        return 2
-    try:
-        speeds = None if args.walk_speed is None else walk_speeds(args.walk_speed)
-    except ValueError as err:
-        print(f"error: --walk-speed: {err}", file=sys.stderr)
         return 2
     from protocol.messages import MAX_TASKS
     if args.backlog_max is not None and not 1 <= args.backlog_max <= MAX_TASKS:
@@ -93,7 +87,7 @@ def run(args: argparse.Namespace) -> int:
         tasks = TaskParams(interval_s=args.interval, law=args.tasks, resend_m=args.resend_m, retry_s=args.interval,
                            backlog_max=scenario.task_max if args.backlog_max is None else args.backlog_max)
         walkers = run_users(client, scenario, args.count, tasks, args.speedup, args.seed, stop, args.duration,
-                            speeds)
+                            args.walk_speed)
     for w in walkers:
         print(f"{w.user_id}: {w.submitted} submitted, {w.acked} acked, {w.refused} refused; {w.arrived} tasks arrived, "
               f"{w.lost} lost to a full backlog, {w.served} served, backlog {w.backlog}", file=sys.stderr)
@@ -101,14 +95,11 @@ def run(args: argparse.Namespace) -> int:
 
 
 def walk_speeds(text: str) -> tuple[float, float]:
-    """``LO,HI`` in m/s: finite, 0 < LO <= HI."""
+    """``LO,HI`` in m/s, each a positive number and LO <= HI, checked as parsed."""
     parts = text.split(",")
     if len(parts) != 2:
-        raise ValueError(f"{text!r} is not LO,HI")
-    try:
-        lo, hi = (float(v) for v in parts)
-    except ValueError:
-        raise ValueError(f"{text!r} is not two numbers") from None
-    if not (math.isfinite(lo) and math.isfinite(hi) and 0 < lo <= hi):
-        raise ValueError(f"{text!r}: need 0 < LO <= HI, finite")
+        raise argparse.ArgumentTypeError(f"{text!r} is not LO,HI")
+    lo, hi = (positive_float(part) for part in parts)
+    if lo > hi:
+        raise argparse.ArgumentTypeError(f"{text!r}: LO is above HI")
     return lo, hi

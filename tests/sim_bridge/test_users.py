@@ -5,6 +5,7 @@ whole walk against the real intake and journal (no zenoh), whose counts must agr
 
 from __future__ import annotations
 
+import argparse
 import re
 from pathlib import Path
 
@@ -280,13 +281,15 @@ def test_users_at_the_model_pace_move_an_interval_as_far_as_the_model_moves_them
     assert np.mean(walked) == pytest.approx(model, rel=0.1)
 
 
-@pytest.mark.parametrize("text, ok", [("0.1,0.2", True), ("0.2,0.2", True), ("0.2,0.1", False), ("0,1", False),
-                                      ("1", False), ("a,b", False), ("nan,1", False), ("1,inf", False)])
-def test_walk_speeds_are_checked(text: str, ok: bool) -> None:
+@pytest.mark.parametrize("text, why", [("0.1,0.2", None), ("0.2,0.2", None), ("0.2,0.1", "'0.2,0.1': LO is above HI"),
+                                       ("0,1", "0 is not positive"), ("1", "'1' is not LO,HI"),
+                                       ("a,b", "'a' is not a number"), ("nan,1", "'nan' is not a finite number"),
+                                       ("1,inf", "'inf' is not a finite number")])
+def test_walk_speeds_are_checked_as_parsed(text: str, why: str | None) -> None:
     from sim_bridge.commands.users import walk_speeds
 
-    if ok:
+    if why is None:
         assert walk_speeds(text) == tuple(float(v) for v in text.split(","))
     else:
-        with pytest.raises(ValueError, match=re.escape(repr(text))):  # the message names the value
+        with pytest.raises(argparse.ArgumentTypeError, match=re.escape(why)):  # the message names the value
             walk_speeds(text)

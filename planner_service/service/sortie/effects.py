@@ -27,7 +27,6 @@ class PlanBasis:
     """Plan from this point, the vehicle holding there (its hold counted as done)."""
     serving: str | None = None
     """The user served at ``at_point``: counted as served, its tasks consumed."""
-    serving_tasks: int = 0
     serving_reward: float = 0.0
     """That service's q as the hold's end will record it (a whole hold): the sortie's
     average reward, which ``mcts`` maximises, counts it with the interval it takes."""

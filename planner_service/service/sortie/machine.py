@@ -443,10 +443,9 @@ class SortieLogic:
             serving = b.user_id if b is not None and b.request_id is not None else None
             # the hold the bound request needs, so that the planner pays for all of it
             bound = replace(point, hold_s=self._bound_hold_s(s, w.seq, point.hold_s, self._margin_s(v)))
-            tasks = b.tasks if serving and b else 0
-            return fx.PlanBasis(f"arrived at point {point.hover_index}", s.version, w.seq,
-                                at_point=bound, serving=serving, serving_tasks=tasks,
-                                serving_reward=self._service_reward(point, tasks) if serving else 0.0)
+            reward = self._service_reward(point, b.tasks) if serving and b else 0.0
+            return fx.PlanBasis(f"arrived at point {point.hover_index}", s.version, w.seq, at_point=bound,
+                                serving=serving, serving_reward=reward)
         if (s.dirty and v.seq == s.held.rtl_seq and now - s.last_plan_at >= r.replan_min_interval_s
                 and self.world.pending_count() > 0 and v.xyz[2] >= r.area.min_flight_altitude_m
                 and self._could_turn_back(s, v)):
