@@ -327,23 +327,20 @@ def _paired(scene: Scene, root: World, first: int, second: int, settings: Search
             total = 0.0
             steps = 0
             while limit <= 0 or w.interval[0] < limit:
-                if steps == 0:
+                if steps == 0:  # the root's step: the action paired, priced by ``serve``
                     if index.root_allowed[0] == 0:
                         break
                     ws = w
                     a = first if k == 0 else second
-                    user = index.root_user[a]
-                else:
+                    step_out = serve(scene, ws, a, index.root_user[a])
+                    user, q = step_out.user, step_out.reward
+                else:  # greedy along the future, priced by the index
                     fill_rows(scene, index, root, s, steps)
                     ws = World(w.uav_xyz, w.hover, index.row_users[s, steps], w.tasks, w.served, w.battery_j,
                                w.interval, w.energy_used_j, w.reward_sum)
                     a, user, energy, q = greedy_future(scene, index, root, s, steps, ws, touched, flag, skip)
                     if a < 0:
                         break
-                if steps == 0:
-                    step_out = serve(scene, ws, a, user)
-                    user, q = step_out.user, step_out.reward
-                else:
                     settle(scene, ws, a, user, energy, q)
                 touched[steps] = user
                 flag[user] = True
