@@ -19,8 +19,11 @@ venv: $(STAMP)
 demo: $(STAMP)
 	$(PY) -m planner_service demo --out demo-out
 
+# Timed tests (marker `alone`) run after the rest, by themselves: beside another test
+# process on two cores their figures measure the neighbour, not the code.
 test: $(STAMP)
-	$(PY) -m pytest -q -n $(JOBS) --dist loadfile
+	$(PY) -m pytest -q -n $(JOBS) --dist loadfile -m 'not slow and not soak and not alone'
+	$(PY) -m pytest -q -m alone
 
 bench: $(STAMP)
 	$(PY) -m planner_service bench

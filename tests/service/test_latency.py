@@ -1,6 +1,10 @@
 """End-to-end latency on loopback through real processes (``bench --e2e`` with fewer
 requests): a request to the mission accepted by the stub, the planner's time excluded,
-must stay under the issue's target of 100 ms at the 99th percentile."""
+must stay under the issue's target of 100 ms at the 99th percentile.
+
+Marked ``alone``: ``make test`` runs it after the other tests, not beside another test
+process on a 2-core machine, where a few requests in a hundred waited for the CPU
+(p99 100-315 ms, median 20-38 ms, in 3 of about 15 runs)."""
 
 from __future__ import annotations
 
@@ -9,6 +13,7 @@ import pytest
 from planner_service.bench.e2e import run_e2e
 
 
+@pytest.mark.alone
 @pytest.mark.timeout(90)
 def test_request_to_accepted_mission_p99_under_100_ms() -> None:
     r = run_e2e(requests=40, budget_ms=20.0)
