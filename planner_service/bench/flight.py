@@ -12,6 +12,13 @@ sortie, the services whose request was the one the plan was made for, and decisi
 service (the service's decisions, counted from its log, over its services). Two flights of
 one seed meet the same users (each user draws from its own generators), so the algorithms
 are also compared seed by seed against the first.
+
+A third world, ``timed``, is planned offline too: the model's, but with the users' tasks
+arriving in time as ``sim_bridge users``' do (a draw every ``USERS_ARRIVAL_PERIOD_S`` of
+flight and hold, ``SortieEnv`` option ``arrivals_every_s``), while the planners' futures
+keep adding them once per interval. What the algorithms do there, against what they do in
+the model's own world, is the part of the flown figures that comes from that difference
+alone; ``--offline-only`` plans both worlds without flying (seconds, not minutes).
 """
 
 from __future__ import annotations
@@ -29,6 +36,10 @@ from ..sortie import run_sortie
 
 ALGOS = ("mcts", "greedy", "random")
 FIGURES = ("throughput_tasks_per_interval", "average_reward", "total_tasks")
+WORLDS = ("flown", "offline", "timed")
+USERS_ARRIVAL_PERIOD_S = 55.0
+"""``sim_bridge users``' default ``--interval``: a draw of the model's arrivals every so many
+simulated seconds (the service's process boundary: not imported from it; a test checks)."""
 
 
 def offline_scenario(users: int) -> Any:
@@ -57,61 +68,82 @@ def fly(algo: str, seed: int, users: int, speedup: float, budget_ms: float,
 
 
 def plan_offline(algo: str, seed: int, users: int, budget_ms: float, echo: Callable[[str], None],
-                 scenario: Any = None) -> dict[str, Any]:
-    """The sortie planned offline on ``scenario`` (default: the demo's, ``offline_scenario``)."""
+                 scenario: Any = None, timed: bool = False) -> dict[str, Any]:
+    """The sortie planned offline on ``scenario`` (default: the demo's, ``offline_scenario``);
+    ``timed``: in the world whose tasks arrive in time (the module's ``timed``)."""
     scenario = offline_scenario(users) if scenario is None else scenario.replace(num_users=users)
+    options = {"arrivals_every_s": USERS_ARRIVAL_PERIOD_S} if timed else None
     with contextlib.redirect_stdout(io.StringIO()):
-        summary = run_sortie(scenario, algo, seed, PolicySpec(iterations=None, budget_ms=budget_ms))
-    echo(f"  offline {algo:7s} seed {seed}: {summary['intervals']} intervals, "
+        summary = run_sortie(scenario, algo, seed, PolicySpec(iterations=None, budget_ms=budget_ms), options)
+    echo(f"  {'timed' if timed else 'offline':7s} {algo:7s} seed {seed}: {summary['intervals']} intervals, "
          f"{summary['throughput_tasks_per_interval']:.1f} tasks/interval, reward {summary['average_reward']:.3f}")
     return summary
 
 
 def run_flight_bench(seeds: Sequence[int], algos: Sequence[str] = ALGOS, users: int = 10, speedup: float = 25.0,
-                     budget_ms: float = 150.0, progress: Callable[[str], None] | None = None) -> dict[str, Any]:
+                     budget_ms: float = 150.0, progress: Callable[[str], None] | None = None,
+                     fly_too: bool = True) -> dict[str, Any]:
+    """Each algorithm on each seed in each world (``WORLDS``; without ``fly_too`` the two
+    offline ones only): medians, the flown-to-offline ratios and the per-seed figures."""
     echo = progress or (lambda _: None)
     rows = []
     for algo in algos:
-        flown = [fly(algo, seed, users, speedup, budget_ms, echo) for seed in seeds]
-        offline = [plan_offline(algo, seed, users, budget_ms, echo) for seed in seeds]
+        runs = {}
+        if fly_too:
+            runs["flown"] = [fly(algo, seed, users, speedup, budget_ms, echo) for seed in seeds]
+        runs["offline"] = [plan_offline(algo, seed, users, budget_ms, echo) for seed in seeds]
+        runs["timed"] = [plan_offline(algo, seed, users, budget_ms, echo, timed=True) for seed in seeds]
         row: dict[str, Any] = {"algo": algo, "seeds": list(seeds)}
         for key in FIGURES:
-            f, o = statistics.median(s[key] for s in flown), statistics.median(s[key] for s in offline)
-            row[key] = {"flown": f, "offline": o, "ratio": f / o if o else float("nan")}
-        row["planned_request_share"] = statistics.median(s["planned_request_share"] for s in flown)
-        row["decisions_per_service"] = statistics.median(s["decisions_per_service"] for s in flown)
-        row["flown_per_seed"] = {key: [s[key] for s in flown] for key in FIGURES}
-        row["fairness_violations"] = sum(s["fairness_violations"] for s in flown)
-        row["energy_violations"] = sum(bool(s["energy_violation"]) for s in flown)
+            row[key] = {world: statistics.median(s[key] for s in runs[world]) for world in runs}
+            if fly_too:
+                o = row[key]["offline"]
+                row[key]["ratio"] = row[key]["flown"] / o if o else float("nan")
+        row["per_seed"] = {world: {key: [s[key] for s in runs[world]] for key in FIGURES} for world in runs}
+        if fly_too:
+            flown = runs["flown"]
+            row["planned_request_share"] = statistics.median(s["planned_request_share"] for s in flown)
+            row["decisions_per_service"] = statistics.median(s["decisions_per_service"] for s in flown)
+            row["fairness_violations"] = sum(s["fairness_violations"] for s in flown)
+            row["energy_violations"] = sum(bool(s["energy_violation"]) for s in flown)
         rows.append(row)
-    return {"users": users, "speedup": speedup, "budget_ms": budget_ms, "rows": rows}
+    return {"users": users, "speedup": speedup, "budget_ms": budget_ms, "flown": fly_too,
+            "arrivals_every_s": USERS_ARRIVAL_PERIOD_S, "rows": rows}
 
 
 def format_flight(r: dict[str, Any]) -> str:
-    lines = [f"flown through the service (stub x{r['speedup']:g}, {r['users']} users, {r['budget_ms']:g} ms a "
-             f"decision) against planned offline, medians over seeds {r['rows'][0]['seeds']}:",
-             f"{'algo':8s} {'tasks/interval':>24s} {'average reward':>24s} {'tasks/sortie':>22s} "
-             f"{'planned req.':>12s} {'decisions/service':>17s}",
-             f"{'':8s} {'flown  offline  ratio':>24s} {'flown  offline  ratio':>24s} {'flown offline ratio':>22s}"]
+    """The table: per algorithm, each figure in each world (and flown / offline)."""
+    worlds = [w for w in WORLDS if w in r["rows"][0]["per_seed"]]
+    ratio = "flown" in worlds
+    lines = [(f"flown through the service (stub x{r['speedup']:g}, {r['users']} users, {r['budget_ms']:g} ms a "
+              "decision) against planned offline" if ratio else f"planned offline ({r['users']} users, "
+              f"{r['budget_ms']:g} ms a decision)") + f", medians over seeds {r['rows'][0]['seeds']}; timed: "
+             f"offline, the users' tasks arriving every {r['arrivals_every_s']:g} s as in flight:"]
+    cols = " ".join(f"{w:>7s}" for w in worlds) + ("  ratio" if ratio else "")
+    width = len(cols)
+    lines.append(f"{'algo':8s} {'tasks/interval':>{width}s}  {'average reward':>{width}s}  {'tasks/sortie':>{width}s}"
+                 + ("  planned req.  decisions/service" if ratio else ""))
+    lines.append(f"{'':8s} {cols}  {cols}  {cols}")
     for row in r["rows"]:
-        t, q, n = (row[k] for k in FIGURES)
-        lines.append(f"{row['algo']:8s} {t['flown']:7.1f} {t['offline']:7.1f} {t['ratio']:6.2f}  "
-                     f"{q['flown']:7.3f} {q['offline']:7.3f} {q['ratio']:6.2f}  "
-                     f"{n['flown']:6.0f} {n['offline']:6.0f} {n['ratio']:6.2f}  "
-                     f"{row['planned_request_share']:11.0%} {row['decisions_per_service']:17.2f}")
+        cells = []
+        for key, fmt in zip(FIGURES, ("7.1f", "7.3f", "7.0f")):
+            figure = row[key]
+            cells.append(" ".join(f"{figure[w]:{fmt}}" for w in worlds) + (f" {figure['ratio']:6.2f}" if ratio else ""))
+        extra = f"  {row['planned_request_share']:11.0%} {row['decisions_per_service']:18.2f}" if ratio else ""
+        lines.append(f"{row['algo']:8s} " + "  ".join(cells) + extra)
     first = r["rows"][0]
     for row in r["rows"][1:]:
-        lines.append(paired_line(first, row))
+        lines += [paired_line(first, row, world) for world in worlds]
     return "\n".join(lines)
 
 
-def paired_line(a: dict[str, Any], b: dict[str, Any]) -> str:
-    """Flown ``a`` against flown ``b`` seed by seed (each seed's users are the same in both
-    flights: ``sim_bridge.users.user_streams``): the median difference and the seeds each
-    leads, in tasks per interval and in reward."""
+def paired_line(a: dict[str, Any], b: dict[str, Any], world: str = "flown") -> str:
+    """``a`` against ``b`` seed by seed in ``world`` (each seed's users are the same for
+    both: ``sim_bridge.users.user_streams`` in flight, the seed's own draws offline): the
+    median difference and the seeds each leads, in tasks per interval and in reward."""
     parts = []
     for key, name, fmt in (("throughput_tasks_per_interval", "tasks/interval", "+.2f"), ("average_reward", "reward", "+.3f")):
-        diffs = [x - y for x, y in zip(a["flown_per_seed"][key], b["flown_per_seed"][key])]
+        diffs = [x - y for x, y in zip(a["per_seed"][world][key], b["per_seed"][world][key])]
         ahead, behind = sum(d > 0 for d in diffs), sum(d < 0 for d in diffs)
         parts.append(f"{name} {statistics.median(diffs):{fmt}} (ahead on {ahead}, behind on {behind} of {len(diffs)})")
-    return f"flown {a['algo']} - {b['algo']}, per seed: " + "; ".join(parts)
+    return f"{world} {a['algo']} - {b['algo']}, per seed: " + "; ".join(parts)

@@ -33,7 +33,10 @@ def configure(parser: argparse.ArgumentParser) -> None:
                         help="instead: the same seeded world flown through the service (stub, simulated users, "
                              "real processes) and planned offline, side by side per algorithm: tasks/interval, "
                              "reward, tasks per sortie, services of the planned request, decisions per service "
-                             "(medians over --seeds; with --quick 2 seeds and mcts only)")
+                             "(medians over --seeds; with --quick 2 seeds and mcts only); also offline in a "
+                             "world whose tasks arrive in time as the simulated users' do (timed)")
+    parser.add_argument("--offline-only", action="store_true",
+                        help="with --flight: plan the two offline worlds only, no flights (seconds per seed)")
     parser.add_argument("--seeds", default="1-12", metavar="A-B",
                         help="seeds with --flight (default 1-12: one seed's flight differs from another's by more "
                              "than one planner's from another's; 3 algorithms take about 16 minutes)")
@@ -101,6 +104,7 @@ def _run_flight(args: argparse.Namespace) -> int:
     if args.quick:
         seeds, algos = seeds[:2], ["mcts"]
     results = run_flight_bench(seeds, algos, speedup=args.speedup, budget_ms=args.budget_ms,
+                               fly_too=not args.offline_only,
                                progress=lambda msg: print(msg, file=sys.stderr, flush=True))
     print(json.dumps(results, indent=1) if args.json else format_flight(results))
     return 0

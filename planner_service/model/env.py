@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from .arrivals import TimedArrivals, interval_duration_s
 from .errors import ScenarioError
 from .interval import AT_BASE, NO_USER, evaluate_actions
 from .mobility import draw_tasks
@@ -21,7 +22,7 @@ from .layouts import base_position, hover_points, user_rows
 from .params import pack
 from .scenario import Scenario
 from .state import SortieState
-from .world import draw_chance, scene_of, step
+from .world import NO_NEWS, draw_chance, scene_of, step
 
 
 @dataclass(frozen=True)
@@ -31,6 +32,7 @@ class Snapshot:
     state: SortieState
     rng_state: dict[str, Any]
     done: bool
+    arrivals: TimedArrivals | None = None
 
 
 class SortieEnv:
@@ -43,6 +45,9 @@ class SortieEnv:
         self.base_xyz = base_position(scenario)
         self.rng = np.random.default_rng()
         self.state: SortieState | None = None
+        self.arrivals: TimedArrivals | None = None
+        """The world's tasks arriving in time (``reset`` option ``arrivals_every_s``);
+        None: once per interval, as the planners' model has them."""
         self._done = True
         self._q = np.empty(len(self.hover_points))
 
@@ -58,7 +63,10 @@ class SortieEnv:
 
         ``seed`` reseeds the generator. ``options``: ``task_table`` (T, I) ints, a known
         task schedule used instead of draws for its T intervals; ``users_xyz`` (I, 3),
-        starting positions instead of the rows.
+        starting positions instead of the rows; ``arrivals_every_s`` (``backlog`` only): the
+        users' new tasks come in time, a draw of the model's arrivals every so many seconds
+        of flight and hold (``arrivals.TimedArrivals``, from a generator spawned from this
+        one), instead of once per interval as the planners' model has them.
         """
         if seed is not None:
             self.rng = np.random.default_rng(seed)
@@ -70,8 +78,12 @@ class SortieEnv:
         table = _option_array(options.pop("task_table", None), (None, s.num_users), "task_table", int)
         if table is None:
             table = np.zeros((0, s.num_users), dtype=np.int64)
+        period = options.pop("arrivals_every_s", None)
         if options:
             raise ScenarioError(next(iter(options)), f"unknown reset option {next(iter(options))!r}")
+        if period is not None and len(table):
+            raise ScenarioError("arrivals_every_s", "arrivals_every_s and task_table both say when tasks arrive: give one")
+        self.arrivals = None if period is None else _timed_arrivals(period, s, self.rng)
         if len(table) and (table.min() < 0 or table.max() > s.task_max):
             raise ScenarioError("task_table", f"task_table values must lie in [0, {s.task_max}]")
         tasks = np.zeros(s.num_users, dtype=np.int64)
@@ -108,8 +120,12 @@ class SortieEnv:
         moves, news = np.empty_like(st.users), np.empty_like(st.tasks)
         draw_chance(self.params, moves, news, self.rng)
         world = st.world()
-        out = step(scene_of(self.params, self.hover_points, st.task_table), world, int(action), moves, news)
+        from_xyz = st.uav_xyz.copy()
+        scene = scene_of(self.params, self.hover_points, st.task_table)
+        out = step(scene, world, int(action), moves, news if self.arrivals is None else NO_NEWS)
         st.absorb(world)
+        if self.arrivals is not None:
+            self.arrivals.run(self.params, st.tasks, interval_duration_s(self.params, from_xyz, hp, out.e_hover_j))
         info = {
             "interval": st.interval - 1,
             "hover_point": int(action),
@@ -166,17 +182,28 @@ class SortieEnv:
 
     def snapshot(self) -> Snapshot:
         """Copy of the state and the generator; ``restore`` continues identically."""
-        return Snapshot(self._require_state().copy(), self.rng.bit_generator.state, self._done)
+        arrivals = None if self.arrivals is None else self.arrivals.copy()
+        return Snapshot(self._require_state().copy(), self.rng.bit_generator.state, self._done, arrivals)
 
     def restore(self, snap: Snapshot) -> None:
         self.state = snap.state.copy()
         self.rng.bit_generator.state = snap.rng_state
         self._done = snap.done
+        self.arrivals = None if snap.arrivals is None else snap.arrivals.copy()
 
     def _require_state(self) -> SortieState:
         if self.state is None:
             raise ScenarioError("state", "call reset() before using the environment")
         return self.state
+
+
+def _timed_arrivals(period: Any, s: Scenario, rng: np.random.Generator) -> TimedArrivals:
+    if s.task_model != "backlog":
+        raise ScenarioError("arrivals_every_s", "arrivals_every_s needs task_model = 'backlog' (tasks that wait)")
+    try:
+        return TimedArrivals.start(float(period), s.num_users, rng.spawn(1)[0])
+    except (TypeError, ValueError) as exc:
+        raise ScenarioError("arrivals_every_s", str(exc)) from None
 
 
 def _option_array(value: Any, shape: tuple[int | None, int], name: str, kind: type) -> np.ndarray | None:

@@ -3,11 +3,12 @@ bench is a command, not a test)."""
 
 from __future__ import annotations
 
-from planner_service.bench.flight import paired_line
+from planner_service.bench.flight import USERS_ARRIVAL_PERIOD_S, format_flight, paired_line, run_flight_bench
+from sim_bridge.users import TaskParams
 
 
 def _row(algo: str, tasks: list[float], reward: list[float]) -> dict:
-    return {"algo": algo, "flown_per_seed": {"throughput_tasks_per_interval": tasks, "average_reward": reward}}
+    return {"algo": algo, "per_seed": {"flown": {"throughput_tasks_per_interval": tasks, "average_reward": reward}}}
 
 
 def test_the_paired_line_counts_the_seeds_each_leads_and_the_median_difference() -> None:
@@ -17,3 +18,22 @@ def test_the_paired_line_counts_the_seeds_each_leads_and_the_median_difference()
     # differences 1, 0, -1, 0.5 (median 0.25); 0.2, -0.05, 0, 0.2 (median 0.1)
     assert line == ("flown mcts - greedy, per seed: tasks/interval +0.25 (ahead on 2, behind on 1 of 4); "
                     "reward +0.100 (ahead on 2, behind on 1 of 4)")
+
+
+def test_the_timed_world_is_the_simulated_users_arrival_period() -> None:
+    assert USERS_ARRIVAL_PERIOD_S == TaskParams().interval_s
+
+
+def test_offline_only_plans_both_offline_worlds_and_compares_them_seed_by_seed() -> None:
+    r = run_flight_bench([1, 2], ["greedy", "random"], budget_ms=5.0, fly_too=False)
+    greedy, random = r["rows"]
+    assert set(greedy["per_seed"]) == {"offline", "timed"} and not r["flown"]
+    for row in r["rows"]:
+        for world in ("offline", "timed"):
+            assert all(n > 0 for n in row["per_seed"][world]["total_tasks"])
+    # greedy's choices do not depend on how the tasks arrive until the backlogs differ: the
+    # two worlds give the same first world but not the same sortie
+    assert greedy["per_seed"]["offline"] != greedy["per_seed"]["timed"]
+    text = format_flight(r)
+    assert "timed greedy - random, per seed" in text and "offline greedy - random, per seed" in text
+    assert "flown" not in text.split("\n", 1)[1]
