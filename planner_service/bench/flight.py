@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import contextlib
 import io
+import math
 import re
 import statistics
 import tempfile
@@ -68,13 +69,15 @@ def fly(algo: str, seed: int, users: int, speedup: float, budget_ms: float,
 
 
 def plan_offline(algo: str, seed: int, users: int, budget_ms: float, echo: Callable[[str], None],
-                 scenario: Any = None, timed: bool = False) -> dict[str, Any]:
+                 scenario: Any = None, timed: bool = False, iterations: int | None = None) -> dict[str, Any]:
     """The sortie planned offline on ``scenario`` (default: the demo's, ``offline_scenario``);
-    ``timed``: in the world whose tasks arrive in time (the module's ``timed``)."""
+    ``timed``: in the world whose tasks arrive in time (the module's ``timed``). MCTS decides
+    on ``budget_ms``, as in flight, or on ``iterations`` (the same decisions every run)."""
     scenario = offline_scenario(users) if scenario is None else scenario.replace(num_users=users)
     options = {"arrivals_every_s": USERS_ARRIVAL_PERIOD_S} if timed else None
+    spec = PolicySpec(iterations=None, budget_ms=budget_ms) if iterations is None else PolicySpec(iterations)
     with contextlib.redirect_stdout(io.StringIO()):
-        summary = run_sortie(scenario, algo, seed, PolicySpec(iterations=None, budget_ms=budget_ms), options)
+        summary = run_sortie(scenario, algo, seed, spec, options)
     echo(f"  {'timed' if timed else 'offline':7s} {algo:7s} seed {seed}: {summary['intervals']} intervals, "
          f"{summary['throughput_tasks_per_interval']:.1f} tasks/interval, reward {summary['average_reward']:.3f}")
     return summary
@@ -82,17 +85,19 @@ def plan_offline(algo: str, seed: int, users: int, budget_ms: float, echo: Calla
 
 def run_flight_bench(seeds: Sequence[int], algos: Sequence[str] = ALGOS, users: int = 10, speedup: float = 25.0,
                      budget_ms: float = 150.0, progress: Callable[[str], None] | None = None,
-                     fly_too: bool = True) -> dict[str, Any]:
+                     fly_too: bool = True, iterations: int | None = None) -> dict[str, Any]:
     """Each algorithm on each seed in each world (``WORLDS``; without ``fly_too`` the two
-    offline ones only): medians, the flown-to-offline ratios and the per-seed figures."""
+    offline ones only): medians, the flown-to-offline ratios and the per-seed figures.
+    ``iterations``: offline, MCTS decides on that many instead of ``budget_ms``."""
     echo = progress or (lambda _: None)
     rows = []
     for algo in algos:
         runs = {}
         if fly_too:
             runs["flown"] = [fly(algo, seed, users, speedup, budget_ms, echo) for seed in seeds]
-        runs["offline"] = [plan_offline(algo, seed, users, budget_ms, echo) for seed in seeds]
-        runs["timed"] = [plan_offline(algo, seed, users, budget_ms, echo, timed=True) for seed in seeds]
+        for world in ("offline", "timed"):
+            runs[world] = [plan_offline(algo, seed, users, budget_ms, echo, timed=world == "timed",
+                                        iterations=iterations) for seed in seeds]
         row: dict[str, Any] = {"algo": algo, "seeds": list(seeds)}
         for key in FIGURES:
             row[key] = {world: statistics.median(s[key] for s in runs[world]) for world in runs}
@@ -107,7 +112,7 @@ def run_flight_bench(seeds: Sequence[int], algos: Sequence[str] = ALGOS, users: 
             row["fairness_violations"] = sum(s["fairness_violations"] for s in flown)
             row["energy_violations"] = sum(bool(s["energy_violation"]) for s in flown)
         rows.append(row)
-    return {"users": users, "speedup": speedup, "budget_ms": budget_ms, "flown": fly_too,
+    return {"users": users, "speedup": speedup, "budget_ms": budget_ms, "iterations": iterations, "flown": fly_too,
             "arrivals_every_s": USERS_ARRIVAL_PERIOD_S, "rows": rows}
 
 
@@ -115,9 +120,10 @@ def format_flight(r: dict[str, Any]) -> str:
     """The table: per algorithm, each figure in each world (and flown / offline)."""
     worlds = [w for w in WORLDS if w in r["rows"][0]["per_seed"]]
     ratio = "flown" in worlds
-    lines = [(f"flown through the service (stub x{r['speedup']:g}, {r['users']} users, {r['budget_ms']:g} ms a "
+    pace = f"{r['budget_ms']:g} ms" if r["iterations"] is None else f"{r['iterations']} iterations"
+    lines = [(f"flown through the service (stub x{r['speedup']:g}, {r['users']} users, {pace} a "
               "decision) against planned offline" if ratio else f"planned offline ({r['users']} users, "
-              f"{r['budget_ms']:g} ms a decision)") + f", medians over seeds {r['rows'][0]['seeds']}; timed: "
+              f"{pace} a decision)") + f", medians over seeds {_span(r['rows'][0]['seeds'])}; timed: "
              f"offline, the users' tasks arriving every {r['arrivals_every_s']:g} s as in flight:"]
     cols = " ".join(f"{w:>7s}" for w in worlds) + ("  ratio" if ratio else "")
     width = len(cols)
@@ -137,13 +143,21 @@ def format_flight(r: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
+def _span(seeds: list[int]) -> str:
+    """``1-12`` for consecutive seeds, else the list."""
+    return f"{seeds[0]}-{seeds[-1]}" if seeds == list(range(seeds[0], seeds[-1] + 1)) else str(seeds)
+
+
 def paired_line(a: dict[str, Any], b: dict[str, Any], world: str = "flown") -> str:
     """``a`` against ``b`` seed by seed in ``world`` (each seed's users are the same for
     both: ``sim_bridge.users.user_streams`` in flight, the seed's own draws offline): the
-    median difference and the seeds each leads, in tasks per interval and in reward."""
+    median and mean difference with the mean's standard error, and the seeds each leads, in
+    tasks per interval and in reward."""
     parts = []
-    for key, name, fmt in (("throughput_tasks_per_interval", "tasks/interval", "+.2f"), ("average_reward", "reward", "+.3f")):
+    for key, name, fmt in (("throughput_tasks_per_interval", "tasks/interval", ".2f"), ("average_reward", "reward", ".3f")):
         diffs = [x - y for x, y in zip(a["per_seed"][world][key], b["per_seed"][world][key])]
         ahead, behind = sum(d > 0 for d in diffs), sum(d < 0 for d in diffs)
-        parts.append(f"{name} {statistics.median(diffs):{fmt}} (ahead on {ahead}, behind on {behind} of {len(diffs)})")
+        se = statistics.stdev(diffs) / math.sqrt(len(diffs)) if len(diffs) > 1 else float("nan")
+        parts.append(f"{name} median {statistics.median(diffs):+{fmt}}, mean {statistics.fmean(diffs):+{fmt}} "
+                     f"+- {se:{fmt}} (ahead on {ahead}, behind on {behind} of {len(diffs)})")
     return f"{world} {a['algo']} - {b['algo']}, per seed: " + "; ".join(parts)

@@ -36,7 +36,8 @@ def configure(parser: argparse.ArgumentParser) -> None:
                              "(medians over --seeds; with --quick 2 seeds and mcts only); also offline in a "
                              "world whose tasks arrive in time as the simulated users' do (timed)")
     parser.add_argument("--offline-only", action="store_true",
-                        help="with --flight: plan the two offline worlds only, no flights (seconds per seed)")
+                        help="with --flight: plan the two offline worlds only, no flights (seconds per seed), "
+                             "mcts on --iterations per decision (the same decisions every run) instead of the clock")
     parser.add_argument("--seeds", default="1-12", metavar="A-B",
                         help="seeds with --flight (default 1-12: one seed's flight differs from another's by more "
                              "than one planner's from another's; 3 algorithms take about 16 minutes)")
@@ -104,7 +105,7 @@ def _run_flight(args: argparse.Namespace) -> int:
     if args.quick:
         seeds, algos = seeds[:2], ["mcts"]
     results = run_flight_bench(seeds, algos, speedup=args.speedup, budget_ms=args.budget_ms,
-                               fly_too=not args.offline_only,
+                               fly_too=not args.offline_only, iterations=args.iterations if args.offline_only else None,
                                progress=lambda msg: print(msg, file=sys.stderr, flush=True))
     print(json.dumps(results, indent=1) if args.json else format_flight(results))
     return 0

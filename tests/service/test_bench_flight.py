@@ -15,9 +15,10 @@ def test_the_paired_line_counts_the_seeds_each_leads_and_the_median_difference()
     a = _row("mcts", [14.0, 13.0, 12.0, 15.5], [0.30, 0.20, 0.25, 0.40])
     b = _row("greedy", [13.0, 13.0, 13.0, 15.0], [0.10, 0.25, 0.25, 0.20])
     line = paired_line(a, b)
-    # differences 1, 0, -1, 0.5 (median 0.25); 0.2, -0.05, 0, 0.2 (median 0.1)
-    assert line == ("flown mcts - greedy, per seed: tasks/interval +0.25 (ahead on 2, behind on 1 of 4); "
-                    "reward +0.100 (ahead on 2, behind on 1 of 4)")
+    # differences 1, 0, -1, 0.5: median 0.25, mean 0.125, s.d. 0.854 (s.e. 0.427);
+    # 0.2, -0.05, 0, 0.2: median 0.1, mean 0.0875, s.d. 0.1315 (s.e. 0.0657)
+    assert line == ("flown mcts - greedy, per seed: tasks/interval median +0.25, mean +0.12 +- 0.43 (ahead on 2, "
+                    "behind on 1 of 4); reward median +0.100, mean +0.087 +- 0.066 (ahead on 2, behind on 1 of 4)")
 
 
 def test_the_timed_world_is_the_simulated_users_arrival_period() -> None:
