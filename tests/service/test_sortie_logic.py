@@ -442,3 +442,41 @@ def test_on_the_way_home_a_new_request_is_decided_on_only_if_the_battery_allows_
     # the configured margin is the planner's too: 50 % of the battery kept back leaves nothing
     run.s, run.logic = before, SortieLogic(rules(energy_margin_j=0.5 * SCENARIO.battery_j), world)
     assert not only(run.feed(ins.RequestIn("d", 10)), fx.Plan)
+
+
+def _replacement_arriving_late(world: FakeWorld, then: PlannedPoint) -> tuple[Run, list[fx.Effect]]:
+    """The decision made at point 3 goes up a slow link; meanwhile the vehicle ends that hold
+    and arrives at the old mission's next point (7, item 3), where the new mission flies
+    ``then``; the replacement is accepted there."""
+    run, _ = fly_to_first_point(world)
+    out = run.tick(seq=2, xyz=(120.0, 200.0, 100.0), boot_s=12.0)
+    (plan,) = only(out, fx.Plan)
+    (up,) = only(run.feed(ins.Planned(plan.basis, path(then, point(9, 400.0, 300.0, "b", 2)))), fx.Upload)
+    out = run.tick(seq=3, xyz=(200.0, 200.0, 100.0), boot_s=60.0)  # the autopilot's timer ended the hold
+    assert [s.hover_index for s in only(out, fx.RecordService)] == [3]
+    run.tick(seq=3, xyz=(319.0, 200.0, 100.0), boot_s=70.0)
+    assert run.s.watch.seq == 3 and run.s.watch.phase == "holding" and run.s.binding.user_id == "b"
+    return run, run.feed(ins.Uploaded(up, 2))
+
+
+def test_a_replacement_that_flies_the_point_reached_meanwhile_keeps_its_hold() -> None:
+    # The new mission flies point 7 at item 3 too: the vehicle holds on there, one hold, one
+    # service (judging it "replaced" and watching it again bound a second user at the same
+    # point in the same stay: two services the vehicle's log shows as one).
+    world = FakeWorld()
+    run, out = _replacement_arriving_late(world, point(7, 320.0, 200.0, "b", 2))
+    assert not only(out, fx.RecordService)
+    assert run.s.watch.seq == 3 and run.s.watch.phase == "holding" and run.s.binding.user_id == "b"
+    (plan,) = only(out, fx.Plan)  # and decides from there at once
+    assert plan.basis.keep_through == 3 and plan.basis.at_point.hover_index == 7 and plan.basis.serving == "b"
+    needed = run.s.binding.needed_s
+    run.tick(seq=3, xyz=(320.0, 200.0, 100.0), boot_s=70.0 + needed)
+    out = run.tick(seq=4, xyz=(340.0, 230.0, 100.0), boot_s=72.0 + needed)
+    assert [(s.hover_index, s.user_id, s.tasks) for s in only(out, fx.RecordService)] == [(7, "b", 12)]
+
+
+def test_a_replacement_that_flies_elsewhere_judges_the_hold_it_replaced() -> None:
+    world = FakeWorld()
+    run, out = _replacement_arriving_late(world, point(8, 250.0, 350.0, "b", 2))
+    assert run.s.watch is None and 3 not in run.s.judged  # item 3 is now point 8, to be flown
+    assert [e.event.kind for e in only(out, fx.Emit)][0] in ("user_served", "waypoint_reached")

@@ -579,7 +579,7 @@ class SortieLogic:
         up, gen, keep = uploaded.upload, uploaded.generation, uploaded.upload.keep_through
         judged = frozenset(q for q in s.judged if keep is not None and q <= keep)
         watch, binding = s.watch, s.binding
-        if watch is not None and (keep is None or watch.seq > keep):
+        if watch is not None and (keep is None or watch.seq > keep) and not self._flies_on(s, up, watch.seq):
             # the point watched was replaced: what it held so far is judged now
             s = self._judge(replace(s, watch=watch.abandon(f"replaced by plan {up.plan_id}")), out)
             watch, binding, judged = None, None, frozenset(q for q in s.judged if keep is not None and q <= keep)
@@ -594,6 +594,18 @@ class SortieLogic:
         if not up.path.points:
             out.append(fx.Emit(ev.Returning(f"nothing more to serve ({up.path.stop_reason}): return to launch")))
         return s
+
+    def _flies_on(self, s: Sortie, up: fx.Upload, seq: int) -> bool:
+        """Whether the new mission flies the point watched at ``seq`` as the old one did: a
+        decision that went up while the vehicle reached its next point, which the decision
+        also chose. The autopilot restarts the item, at the same place: the hold goes on,
+        bound as it was (judging it and watching it afresh would bind a second user at the
+        point in the same stay)."""
+        if up.keep_through is None or s.held is None:
+            return False  # a mission begun afresh: its items are not the old ones'
+        old, new = s.held.point_at(seq), up.mission.point_at(seq)
+        return (old is not None and new is not None
+                and (old.hover_index, old.x_m, old.y_m, old.z_m) == (new.hover_index, new.x_m, new.y_m, new.z_m))
 
     def _upload_failed(self, s: Sortie, up: fx.Upload, error: str, unknown: bool, now: float,
                        out: list[fx.Effect]) -> Sortie:
