@@ -6,7 +6,9 @@ the chance (users' moves, future task draws), so a node's value is an average ov
 rather than a single draw. The futures are drawn once per decision, and the n-th visit of
 each root child plays future n mod S: the candidate actions are then compared on the same
 futures (common random numbers), which removes most of the noise from their difference. With S = 0 every
-iteration draws a fresh future instead. Each node backs up the objective of
+iteration draws a fresh future instead, as it must when tasks arrive in time
+(``model.world.in_time``): an interval's arrivals then depend on how long it lasted, so on
+the path, which the shared futures' rows cannot follow. Each node backs up the objective of
 ``objective.py`` (by default the sortie's average reward).
 
 Each step is the world's own ``serve`` and ``advance`` (``model.world``), the users' moves
@@ -24,10 +26,11 @@ import numpy as np
 
 from ..model._jit import jit, jit_borrow
 from ..model import params as P
-from ..model.interval import remaining_intervals
-from ..model.mobility import draw_int
-from ..model.world import Scene, World, advance, clone, copy_into, draw_chance, serve, settle
-from .futures import FutureIndex, allowed_future, evaluate_step, fill_rows, greedy_future, point_user
+from ..model.interval import NO_USER, interval_duration_s, remaining_intervals
+from ..model.mobility import arrival_mean, draw_int, poisson_quantile
+from ..model.user_tree import refit_tree
+from ..model.world import Scene, World, advance, clone, copy_into, draw_chance, draw_chance_after, in_time, serve, settle
+from .futures import FutureIndex, allowed_future, evaluate_step, evaluate_tree, fill_rows, greedy_future, point_user
 from .objective import node_return
 from .tree import ROOT_INDEX, UNVISITED, TreeArrays
 
@@ -149,7 +152,8 @@ class Scratch(NamedTuple):
     a step (``qvals``, ``users_at`` (K,)), the steps' rewards (``rewards`` (H,)) and their
     suffix sums (``suffix`` (H + 1,)), the nodes entered (``path`` (H + 1,)), the users
     served (``touched`` (H,)) and their marks (``flag`` (I,)), a fresh step's chance
-    (``moves`` (I, 3), ``news`` (I,)), and the points a step leaves out (``skip`` (K,))."""
+    (``moves`` (I, 3), ``news`` (I,)), the points a step leaves out (``skip`` (K,)) and
+    where a fresh step's flight began (``origin`` (3,))."""
 
     w: World
     qvals: np.ndarray
@@ -162,6 +166,7 @@ class Scratch(NamedTuple):
     moves: np.ndarray
     news: np.ndarray
     skip: np.ndarray
+    origin: np.ndarray
 
 
 @jit
@@ -179,7 +184,7 @@ def search(scene: Scene, tree: TreeArrays, num_nodes: int, root: World, settings
     scratch = Scratch(clone(root), np.empty(num_actions), np.empty(num_actions, dtype=np.int64), np.empty(horizon),
                       np.empty(horizon + 1), np.empty(horizon + 1, dtype=np.int64), np.zeros(horizon, dtype=np.int64),
                       np.zeros(root.users.shape[0], dtype=np.bool_), np.empty_like(root.users),
-                      np.empty_like(root.tasks), np.zeros(num_actions, dtype=np.bool_))
+                      np.empty_like(root.tasks), np.zeros(num_actions, dtype=np.bool_), np.empty(3))
     return _iterate(scene, tree, num_nodes, root, settings, index, iterations, rng, scratch)
 
 
@@ -190,7 +195,7 @@ def _iterate(scene: Scene, tree: TreeArrays, num_nodes: int, root: World, settin
     here nothing is reference-counted, see ``model._jit.jit_borrow``)."""
     p = scene.p
     parent, action, children, visits, value_sum = tree
-    w, qvals, users_at, rewards, suffix, path, touched, flag, moves, news, skip = scratch
+    w, qvals, users_at, rewards, suffix, path, touched, flag, moves, news, skip, origin = scratch
     limit = int(p[P.MAX_INTERVALS])
     num_futures = index.moves.shape[0]
     steps = 0
@@ -269,16 +274,20 @@ def _iterate(scene: Scene, tree: TreeArrays, num_nodes: int, root: World, settin
                 user = users_at[a]
             if priced:
                 settle(scene, ws, a, user, energy, q)
+                duration = 0.0  # unused: the shared futures hold the arrivals
             else:
+                for c in range(3):
+                    origin[c] = ws.uav_xyz[c]
                 out = serve(scene, ws, a, user)
                 user, q = out.user, out.reward
+                duration = _duration(p, origin, scene.hover_points[a], ws.users, user, out.bits)
             touched[steps] = user
             flag[user] = True
             rewards[steps] = q
             if future >= 0:  # only the tasks: the next row has the users' moves
                 advance(scene, ws, index.moves[future, steps, :0], index.news[future, steps])
             else:
-                draw_chance(p, moves, news, rng)
+                draw_chance_after(p, moves, news, duration, rng)
                 advance(scene, w, moves, news)
             steps += 1
         suffix[steps] = 0.0
@@ -291,6 +300,15 @@ def _iterate(scene: Scene, tree: TreeArrays, num_nodes: int, root: World, settin
             visits[path[j]] += 1.0
             value_sum[path[j]] += ret
     return num_nodes
+
+
+@jit_borrow
+def _duration(p: np.ndarray, origin: np.ndarray, hover_xyz: np.ndarray, users: np.ndarray, user: int,
+              bits: float) -> float:
+    """How long a fresh step's interval lasted (only read when tasks arrive in time)."""
+    if not in_time(p):
+        return 0.0
+    return interval_duration_s(p, origin, hover_xyz, users[user] if user != NO_USER else hover_xyz, bits)
 
 
 @jit
@@ -346,6 +364,61 @@ def _paired(scene: Scene, root: World, first: int, second: int, settings: Search
                 flag[user] = True
                 total += q
                 advance(scene, ws, index.moves[s, steps, :0], index.news[s, steps])
+                steps += 1
+            out[s, k] = node_return(settings.return_kind, total, steps, total, steps, settings.past_sum,
+                                    settings.past_count)
+
+
+@jit
+def paired_fresh(scene: Scene, root: World, first: int, second: int, settings: SearchSettings, index: FutureIndex,
+                 moves: np.ndarray, uniforms: np.ndarray, out: np.ndarray) -> None:
+    """``paired_rollouts`` when the futures cannot be shared (tasks that arrive in time):
+    each step evaluated afresh (``evaluate_tree``), on S futures given as the users' moves
+    ``moves`` (S, H, I, 3) and the arrivals' uniforms ``uniforms`` (S, H, I), which both
+    actions of a pair use: each interval's arrivals are the Poisson quantiles of its
+    duration's mean (``poisson_quantile``), common random numbers whatever the timings.
+    ``index`` gives the root's values and a tree to refit (its futures are not read)."""
+    num_actions = scene.hover_points.shape[0]
+    _paired_fresh(scene, root, first, second, settings, index, moves, uniforms, out, clone(root),
+                  np.empty(num_actions), np.empty(num_actions, dtype=np.int64),
+                  np.empty(root.users.shape[0], dtype=np.int64), np.empty(3))
+
+
+@jit_borrow
+def _paired_fresh(scene: Scene, root: World, first: int, second: int, settings: SearchSettings, index: FutureIndex,
+                  moves: np.ndarray, uniforms: np.ndarray, out: np.ndarray, w: World, qvals: np.ndarray,
+                  users_at: np.ndarray, news: np.ndarray, origin: np.ndarray) -> None:
+    """``paired_fresh`` in the world and arrays it is given."""
+    p = scene.p
+    limit = int(p[P.MAX_INTERVALS])
+    horizon = moves.shape[1]
+    for s in range(moves.shape[0]):
+        for k in range(2):
+            copy_into(w, root)
+            total = 0.0
+            steps = 0
+            while (limit <= 0 or w.interval[0] < limit) and steps <= horizon:
+                if steps == 0:  # the root's step: the action paired
+                    if index.root_allowed[0] == 0:
+                        break
+                    a = first if k == 0 else second
+                    user = index.root_user[a]
+                else:  # greedy: the largest q, the first of equals
+                    refit_tree(w.users, index.tree)
+                    if evaluate_tree(scene, w, index.tree, index.home, qvals, users_at) == 0:
+                        break
+                    a = int(np.argmax(qvals))
+                    user = users_at[a]
+                for c in range(3):
+                    origin[c] = w.uav_xyz[c]
+                step_out = serve(scene, w, a, user)
+                total += step_out.reward
+                if steps < horizon:
+                    mean = arrival_mean(p, interval_duration_s(p, origin, scene.hover_points[a], w.users[user],
+                                                               step_out.bits))
+                    for i in range(news.shape[0]):
+                        news[i] = poisson_quantile(mean, uniforms[s, steps, i])
+                    advance(scene, w, moves[s, steps], news)
                 steps += 1
             out[s, k] = node_return(settings.return_kind, total, steps, total, steps, settings.past_sum,
                                     settings.past_count)

@@ -25,11 +25,12 @@ import numpy as np
 
 from ..model import Scenario, SortieState, pack
 from ..model.interval import remaining_intervals
-from ..model.world import Scene, World, scene_of
+from ..model.world import Scene, World, in_time, scene_of
 from ..policy import Decision
 from .futures import FutureIndex, RootValues, index_of, point_tables_of, root_values_of
 from .objective import RETURN_MEAN, RETURN_SORTIE, RETURN_SUM
-from .open_loop import ROLLOUT_EPSILON_GREEDY, ROLLOUT_RANDOM, SearchSettings, draw_futures, paired_rollouts, search
+from .open_loop import (ROLLOUT_EPSILON_GREEDY, ROLLOUT_RANDOM, SearchSettings, draw_futures, paired_fresh,
+                        paired_rollouts, search)
 from .tree import ROOT_INDEX, UNVISITED, Tree
 
 ROLLOUTS = {"random": ROLLOUT_RANDOM, "epsilon-greedy": ROLLOUT_EPSILON_GREEDY}
@@ -108,6 +109,9 @@ class MctsPlanner:
         self.config = config
         self.rng = rng
         self.tables = point_tables_of(self.params, self.hover_points)
+        self.in_time = bool(in_time(self.params))
+        """Tasks arrive in time: the futures cannot be shared (``open_loop``), each
+        iteration draws its own and the confirmation plays ``paired_fresh``."""
         self.tree = self._new_tree()
         self._expect: tuple[int, int] | None = None  # (interval, hover index) after our move
 
@@ -171,16 +175,20 @@ class MctsPlanner:
             return best
         if self.config.confidence_z <= 0:
             return best
-        index = self._index(scene, root, values, self.config.confirm_futures)
-        returns = np.empty((index.moves.shape[0], 2))
-        paired_rollouts(scene, root, int(self.tree.action[best]), greedy, settings, index, returns)
+        first = int(self.tree.action[best])
+        if self.in_time:
+            returns = self._paired_fresh(scene, root, values, settings, first, greedy)
+        else:
+            index = self._index(scene, root, values, self.config.confirm_futures)
+            returns = np.empty((index.moves.shape[0], 2))
+            paired_rollouts(scene, root, first, greedy, settings, index, returns)
         return best if paired_t(returns[:, 0] - returns[:, 1]) >= self.config.confidence_z else int(greedy_child)
 
     def _search(self, scene: Scene, root: World, values: RootValues, settings: SearchSettings, start: float) -> int:
         cfg = self.config
         deadline = None if cfg.budget_ms is None else start + cfg.budget_ms / 1e3
         target = cfg.iterations if cfg.iterations is not None else math.inf
-        index = self._index(scene, root, values, cfg.futures)
+        index = self._index(scene, root, values, 0 if self.in_time else cfg.futures)
         done = 0
         while done < target:
             batch = int(min(target - done, cfg.chunk if deadline is not None else target - done))
@@ -206,6 +214,19 @@ class MctsPlanner:
         news = np.empty((count, horizon, num_users), dtype=np.int64)
         draw_futures(self.params, moves, news, self.rng)
         return index_of(scene, root, moves, news, self.tables, values)
+
+    def _paired_fresh(self, scene: Scene, root: World, values: RootValues, settings: SearchSettings, first: int,
+                      second: int) -> np.ndarray:
+        """The confirmation's returns (S, 2) when tasks arrive in time (``paired_fresh``)."""
+        index = self._index(scene, root, values, 0)
+        count, horizon = self.config.confirm_futures, remaining_intervals(self.params, len(root.users),
+                                                                          int(root.interval[0]))
+        moves = np.empty((count, horizon, len(root.users), 3))
+        draw_futures(self.params, moves, np.empty((count, horizon, len(root.users)), dtype=np.int64), self.rng)
+        uniforms = self.rng.random((count, horizon, len(root.users)))
+        returns = np.empty((count, 2))
+        paired_fresh(scene, root, first, second, settings, index, moves, uniforms, returns)
+        return returns
 
     def describe(self) -> dict:
         return asdict(self.config)

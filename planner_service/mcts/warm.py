@@ -18,9 +18,9 @@ from ..model import AT_BASE, NO_MOVES, NO_NEWS, Scenario, SortieState, hover_poi
 from ..model.channel import channel_gain, upload_rate_bps
 from ..model.energy import flight_energy_j
 from ..model.interval import remaining_intervals, return_energy_j, served_user, user_outcome, within_budget
-from ..model.world import clone, evaluate, scene_of, step
+from ..model.world import clone, evaluate, in_time, scene_of, step
 from .futures import index_of, point_tables_of, root_values_of
-from .open_loop import SearchSettings, draw_futures, paired_rollouts
+from .open_loop import SearchSettings, draw_futures, paired_fresh, paired_rollouts
 from .paper import PaperMctsPlanner
 from .planner import MctsConfig, MctsPlanner
 
@@ -63,7 +63,8 @@ def warm_up(scenario: Scenario, algos: Iterable[str] = ALGOS, config: MctsConfig
 
 
 def _confirmation(scenario: Scenario, points: np.ndarray, state: SortieState, rng: np.random.Generator) -> None:
-    """The paired playouts ``MctsPlanner`` runs only when the search leaves greedy."""
+    """The paired playouts ``MctsPlanner`` runs only when the search leaves greedy (on
+    shared futures, or fresh ones when tasks arrive in time)."""
     p = pack(scenario)
     scene = scene_of(p, points, state.task_table)
     root = state.world()
@@ -73,10 +74,14 @@ def _confirmation(scenario: Scenario, points: np.ndarray, state: SortieState, rn
     moves = np.empty((2, horizon, len(state.users), 3))
     news = np.empty((2, horizon, len(state.users)), dtype=np.int64)
     draw_futures(p, moves, news, rng)
-    index = index_of(scene, root, moves, news, tables, values)
     settings = SearchSettings(1.0, 1, 0.1, 2, float(state.reward_sum), int(state.interval), 10)
     allowed = np.flatnonzero(np.isfinite(values.q))
-    paired_rollouts(scene, root, int(allowed[0]), int(allowed[-1]), settings, index, np.empty((2, 2)))
+    first, second, out = int(allowed[0]), int(allowed[-1]), np.empty((2, 2))
+    if in_time(p):
+        index = index_of(scene, root, moves[:0], news[:0], tables, values)
+        paired_fresh(scene, root, first, second, settings, index, moves, rng.random(news.shape), out)
+    else:
+        paired_rollouts(scene, root, first, second, settings, index_of(scene, root, moves, news, tables, values), out)
 
 
 def _one_step_and_path(scenario: Scenario, points: np.ndarray, state: SortieState) -> None:

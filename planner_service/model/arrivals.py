@@ -61,11 +61,4 @@ class TimedArrivals:
                 self.due_s[i] += self.period_s
 
 
-def interval_duration_s(p: np.ndarray, from_xyz: np.ndarray, hover_xyz: np.ndarray, e_hover_j: float) -> float:
-    """How long an interval lasts: the flight from ``from_xyz`` to ``hover_xyz`` at the
-    scenario's speed, then the upload, whose hover energy e_h = P_h S / R is P_h times it."""
-    flight_s = math.dist(from_xyz, hover_xyz) / p[P.SPEED]
-    return flight_s + e_hover_j / p[P.HOVER_POWER]
-
-
-__all__ = ["TimedArrivals", "interval_duration_s"]
+__all__ = ["TimedArrivals"]

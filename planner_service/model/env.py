@@ -14,15 +14,15 @@ from typing import Any
 
 import numpy as np
 
-from .arrivals import TimedArrivals, interval_duration_s
+from .arrivals import TimedArrivals
 from .errors import ScenarioError
-from .interval import AT_BASE, NO_USER, evaluate_actions
-from .mobility import draw_tasks
+from .interval import AT_BASE, NO_USER, evaluate_actions, interval_duration_s
+from .mobility import draw_tasks, draw_timed_arrivals
 from .layouts import base_position, hover_points, user_rows
 from .params import pack
 from .scenario import Scenario
 from .state import SortieState
-from .world import NO_NEWS, draw_chance, scene_of, step
+from .world import NO_MOVES, NO_NEWS, advance, draw_chance, in_time, scene_of, step
 
 
 @dataclass(frozen=True)
@@ -65,8 +65,9 @@ class SortieEnv:
         task schedule used instead of draws for its T intervals; ``users_xyz`` (I, 3),
         starting positions instead of the rows; ``arrivals_every_s`` (``backlog`` only): the
         users' new tasks come in time, a draw of the model's arrivals every so many seconds
-        of flight and hold (``arrivals.TimedArrivals``, from a generator spawned from this
-        one), instead of once per interval as the planners' model has them.
+        of flight and hold, each user at its phase (``arrivals.TimedArrivals``, from a
+        generator spawned from this one, as ``sim_bridge users`` draw them), whatever the
+        scenario's ``task_arrival_period_s`` says the planners' model is.
         """
         if seed is not None:
             self.rng = np.random.default_rng(seed)
@@ -122,10 +123,17 @@ class SortieEnv:
         world = st.world()
         from_xyz = st.uav_xyz.copy()
         scene = scene_of(self.params, self.hover_points, st.task_table)
-        out = step(scene, world, int(action), moves, news if self.arrivals is None else NO_NEWS)
+        per_interval = self.arrivals is None and not in_time(self.params)
+        out = step(scene, world, int(action), moves, news if per_interval else NO_NEWS)
+        if not per_interval:  # the interval's arrivals follow how long it lasted
+            served_at = np.array(user_xyz[out.user]) if out.user != NO_USER else hp  # where it was served
+            duration = interval_duration_s(self.params, from_xyz, hp, served_at, out.bits)
+            if self.arrivals is not None:
+                self.arrivals.run(self.params, world.tasks, duration)
+            else:
+                draw_timed_arrivals(self.params, news, duration, self.rng)
+                advance(scene, world, NO_MOVES, news)
         st.absorb(world)
-        if self.arrivals is not None:
-            self.arrivals.run(self.params, st.tasks, interval_duration_s(self.params, from_xyz, hp, out.e_hover_j))
         info = {
             "interval": st.interval - 1,
             "hover_point": int(action),

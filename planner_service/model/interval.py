@@ -121,6 +121,18 @@ def service_outcome(
 
 
 @jit_borrow
+def interval_duration_s(p: np.ndarray, from_xyz: np.ndarray, hover_xyz: np.ndarray, user_xyz: np.ndarray,
+                        bits: float) -> float:
+    """How long an interval lasts: the flight ``from_xyz`` -> ``hover_xyz`` at the
+    scenario's speed, then the upload of ``bits`` from ``user_xyz`` (S / R; none when
+    nobody is served, ``bits`` 0)."""
+    flight_s = math.sqrt(distance_sq_m2(from_xyz, hover_xyz)) / p[P.SPEED]
+    if bits <= 0.0:
+        return flight_s
+    return flight_s + bits / upload_rate_bps(p, channel_gain(p, hover_xyz, user_xyz))
+
+
+@jit_borrow
 def return_energy_j(p: np.ndarray, hover_xyz: np.ndarray) -> float:
     """Energy to fly from ``hover_xyz`` back to base."""
     dx = hover_xyz[0] - p[P.BASE_X]

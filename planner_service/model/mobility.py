@@ -1,5 +1,5 @@
 """Random-waypoint user moves (1)-(2), the per-interval task draws and the arrivals of the
-backlog task model.
+backlog task model (once per interval, or in time).
 
 Drawing and applying are separate so a planner can draw many futures up front and apply
 them later (common random numbers); ``move_users`` does both in the environment's order.
@@ -102,3 +102,37 @@ def draw_arrivals(p: np.ndarray, arrivals: np.ndarray, rng: np.random.Generator)
     mean = p[P.ARRIVAL_MEAN]
     for i in range(arrivals.shape[0]):
         arrivals[i] = rng.poisson(mean) if mean > 0.0 else 0
+
+
+@jit
+def arrival_mean(p: np.ndarray, duration_s: float) -> float:
+    """A user's mean new tasks in an interval of ``duration_s`` when they arrive in time
+    (``task_arrival_period_s`` > 0): lambda d / period."""
+    return p[P.ARRIVAL_MEAN] * duration_s / p[P.ARRIVAL_PERIOD]
+
+
+@jit
+def poisson_quantile(mean: float, u: float) -> int:
+    """The least n with P(N <= n) > u for N ~ Poisson(mean), u in [0, 1): a Poisson draw
+    from a uniform one, so that two playouts given the same uniforms draw alike whatever
+    means their timings give (common random numbers)."""
+    if mean <= 0.0:
+        return 0
+    term = math.exp(-mean)
+    total = term
+    n = 0
+    while total <= u and n < 10_000:
+        n += 1
+        term *= mean / n
+        total += term
+    return n
+
+
+@jit
+def draw_timed_arrivals(p: np.ndarray, arrivals: np.ndarray, duration_s: float, rng: np.random.Generator) -> None:
+    """New tasks of every user in an interval of ``duration_s`` seconds when they arrive in
+    time: Poisson of mean ``arrival_mean``, drawn as ``poisson_quantile`` of a uniform (as
+    the confirmation's paired playouts draw them); in place."""
+    mean = arrival_mean(p, duration_s)
+    for i in range(arrivals.shape[0]):
+        arrivals[i] = poisson_quantile(mean, rng.random())

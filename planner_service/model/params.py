@@ -57,7 +57,8 @@ BASE_Z = 43
 MAX_INTERVALS = 44
 TASK_MODEL = 45
 ARRIVAL_MEAN = 46
-SIZE = 47
+ARRIVAL_PERIOD = 47
+SIZE = 48
 
 REDRAW = 0.0
 """``p[TASK_MODEL]`` of the paper's task model: every user's count is redrawn each interval."""
@@ -115,4 +116,5 @@ def pack(s: Scenario) -> np.ndarray:
     p[MAX_INTERVALS] = s.max_intervals
     p[TASK_MODEL] = BACKLOG if s.task_model == "backlog" else REDRAW
     p[ARRIVAL_MEAN] = s.task_arrival_mean
+    p[ARRIVAL_PERIOD] = s.task_arrival_period_s
     return p

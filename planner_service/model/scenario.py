@@ -103,6 +103,14 @@ class Scenario:
     user's tasks are generated independently at a constant rate; 1 per interval adds, over
     a sortie of m = 10 intervals, the paper's mean count (10) on top of the first backlog.
     *decision*"""
+    task_arrival_period_s: float = setting(0.0, ge=0)
+    """``backlog`` only: 0, the new tasks arrive once per interval, whatever it lasted (the
+    model's interval as a time slot); > 0, they arrive in time, ``task_arrival_mean`` per
+    this many seconds: an interval of d seconds (its flight at ``speed_mps`` and its upload)
+    brings each user Poisson(lambda d / period) new tasks, so a short interval brings fewer
+    than a long one, as real users' data do. The planners' playouts then draw their futures
+    afresh (the shared futures' index assumes tasks that do not depend on the path's
+    timing). *decision*"""
 
     # --- energy (6)-(8) --------------------------------------------------------------
     hover_power_w: float = setting(1.0, ge=0)

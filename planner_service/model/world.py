@@ -20,7 +20,7 @@ import numpy as np
 from . import params as P
 from ._jit import jit, jit_borrow
 from .interval import NO_USER, evaluate_actions, served_user, user_outcome
-from .mobility import apply_moves, draw_arrivals, draw_moves, draw_tasks
+from .mobility import apply_moves, draw_arrivals, draw_moves, draw_tasks, draw_timed_arrivals
 
 
 class Scene(NamedTuple):
@@ -206,6 +206,25 @@ def step(scene: Scene, w: World, action: int, moves: np.ndarray, news: np.ndarra
 
 
 @jit
+def in_time(p: np.ndarray) -> bool:
+    """Whether new tasks arrive in time (``backlog`` with ``task_arrival_period_s`` > 0):
+    an interval's arrivals then depend on how long it lasted (``draw_chance_after``)."""
+    return p[P.TASK_MODEL] == P.BACKLOG and p[P.ARRIVAL_PERIOD] > 0.0
+
+
+@jit
+def draw_chance_after(p: np.ndarray, moves: np.ndarray, news: np.ndarray, duration_s: float,
+                      rng: np.random.Generator) -> None:
+    """``draw_chance`` for an interval known to have lasted ``duration_s``: the same draws
+    unless tasks arrive in time (``in_time``), when the arrivals follow its duration."""
+    if in_time(p):
+        draw_moves(p, moves, rng)
+        draw_timed_arrivals(p, news, duration_s, rng)
+    else:
+        draw_chance(p, moves, news, rng)
+
+
+@jit
 def draw_chance(p: np.ndarray, moves: np.ndarray, news: np.ndarray, rng: np.random.Generator) -> None:
     """Draw what happens between two intervals: every user's move, then every user's new
     task count (``redraw``) or new tasks (``backlog``). ``moves`` (I, 3) and ``news`` (I,)
@@ -218,4 +237,4 @@ def draw_chance(p: np.ndarray, moves: np.ndarray, news: np.ndarray, rng: np.rand
 
 
 __all__ = ["NO_MOVES", "NO_NEWS", "Outcome", "Scene", "World", "advance", "clone", "copy_into", "draw_chance",
-           "evaluate", "scene_of", "serve", "settle", "step", "world_from"]
+           "draw_chance_after", "evaluate", "in_time", "scene_of", "serve", "settle", "step", "world_from"]

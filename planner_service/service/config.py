@@ -291,10 +291,12 @@ SECTIONS: dict[str, type[Section]] = {
     "zenoh": ZenohConfig, "intake": IntakeConfig, "mavlink": MavlinkConfig, "planner": PlannerConfig,
     "journal": JournalConfig, "origin": OriginConfig, "safety": SafetyConfig, "sortie": SortieConfig}
 """The TOML tables besides ``[scenario]``, in the order ``to_toml`` writes them."""
-SCENARIO_DEFAULTS: tuple[tuple[str, Any], ...] = (("task_model", "backlog"),)
+SCENARIO_DEFAULTS: tuple[tuple[str, Any], ...] = (("task_arrival_period_s", 55.0), ("task_model", "backlog"))
 """The ``[scenario]`` keys the service sets besides the preset's: live users' requests are
 data waiting (docs/PROTOCOL.md), so the planner's futures keep their backlogs unless the
-configuration says otherwise (the paper's redraw)."""
+configuration says otherwise (the paper's redraw), and their new data come in time, not
+once per interval: ``task_arrival_mean`` tasks per 55 s, what an interval of the field
+preset lasts (docs/MODEL.md, "Task models")."""
 
 
 @dataclass(frozen=True)

@@ -112,8 +112,8 @@ def test_the_example_shows_every_key_with_its_default() -> None:
 def test_scenario_overrides_are_values_of_their_fields_type() -> None:
     # The service reads [scenario] keys by the scenario's own field types, once: values, not text.
     c = build_config({"scenario": {"speed_mps": 15, "allow_stay": "on"}}, {"scenario.num_users": "4"})
-    assert dict(c.scenario_overrides) == {"task_model": "backlog", "speed_mps": 15.0, "allow_stay": True,
-                                          "num_users": 4}
+    assert dict(c.scenario_overrides) == {"task_model": "backlog", "task_arrival_period_s": 55.0, "speed_mps": 15.0,
+                                          "allow_stay": True, "num_users": 4}
     assert all(not isinstance(v, str) for k, v in c.scenario_overrides if k != "task_model")
     s = c.scenario()
     assert (s.speed_mps, s.allow_stay, s.num_users, s.task_model) == (15.0, True, 4, "backlog")

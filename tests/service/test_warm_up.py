@@ -21,7 +21,7 @@ SCRIPT = r"""
 import json, sys
 from numba.core.registry import CPUDispatcher
 from planner_service.mcts import MctsConfig
-from planner_service.model import field
+from planner_service.service.config import build_config
 from planner_service.service.journal import RequestRow, ServiceRow, UserRow
 from planner_service.service.planning import Planner, VehicleFix, assemble, planning_battery_j
 
@@ -35,7 +35,7 @@ def signatures():
     return out
 
 algo, warm = sys.argv[1], sys.argv[2] == "warm"
-scenario = field()
+scenario = build_config({}, {}).scenario()  # the scenario the service flies
 planner = Planner(scenario, MctsConfig(iterations=None, budget_ms=60.0), 3, 8, algo)
 if warm:
     planner.warm_up()
