@@ -13,12 +13,13 @@ service (the service's decisions, counted from its log, over its services). Two 
 one seed meet the same users (each user draws from its own generators), so the algorithms
 are also compared seed by seed against the first.
 
-A third world, ``timed``, is planned offline too: the model's, but with the users' tasks
-arriving in time as ``sim_bridge users``' do (a draw every ``USERS_ARRIVAL_PERIOD_S`` of
-flight and hold, ``SortieEnv`` option ``arrivals_every_s``), while the planners' futures
-keep adding them once per interval. What the algorithms do there, against what they do in
-the model's own world, is the part of the flown figures that comes from that difference
-alone; ``--offline-only`` plans both worlds without flying (seconds, not minutes).
+A third world, ``timed``, is planned offline too: the scenario's, but with the users' tasks
+arriving as ``sim_bridge users``' do (a draw every ``USERS_ARRIVAL_PERIOD_S`` of flight and
+hold at each user's phase, ``SortieEnv`` option ``arrivals_every_s``), whatever law the
+planners' futures assume (the scenario's ``task_arrival_period_s``). What the algorithms do
+there, against what they do in the scenario's own world, is the part of the flown figures
+that comes from the difference of the two laws; ``--offline-only`` plans both worlds
+without flying (seconds, not minutes).
 """
 
 from __future__ import annotations

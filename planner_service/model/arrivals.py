@@ -1,17 +1,16 @@
-"""Tasks that arrive in time: the world the service flies, as the environment can simulate it.
+"""The users' own arrival law, as the environment can simulate it whatever the planners assume.
 
-Under ``task_model = "backlog"`` the model adds each user's new tasks once per interval
-(``world.advance``), whatever the interval lasted; the planners' futures are built on that.
-Real users (and ``sim_bridge users``) make their data in time: a draw of the model's
-arrivals once every ``period_s`` seconds, each user at its own phase. An interval of the
-model lasts its flight (distance at the scenario's speed) and its hold (the upload: e_h / P_h,
-the time the hover energy pays for), so a short hop to a small backlog brings fewer new tasks
-than a long one; the model's law gives both the same.
+Under ``task_model = "backlog"`` the model adds each user's new tasks once per interval,
+whatever it lasted (``task_arrival_period_s`` 0), or in time, Poisson of mean lambda d /
+period for an interval of d seconds (``task_arrival_period_s`` > 0; ``world.in_time``).
+Real users (and ``sim_bridge users``) make their data in time too, but as a draw of the
+model's arrivals once every ``period_s`` seconds, each user at its own phase: the same rate,
+not the same draws.
 
 ``TimedArrivals`` is that law for the environment (``SortieEnv.reset(options=
-{"arrivals_every_s": ...})``): the world's tasks come in time while the planners go on
-planning with their per-interval futures, so the gap between the two is measured offline,
-in seconds, rather than only in flight (``bench --flight``).
+{"arrivals_every_s": ...})``): the world's tasks come as the users make them while the
+planners plan with the scenario's law, so what a planner's law costs or gains against the
+users' is measured offline, in seconds, rather than only in flight (``bench --flight``).
 """
 
 from __future__ import annotations

@@ -46,8 +46,8 @@ class SortieEnv:
         self.rng = np.random.default_rng()
         self.state: SortieState | None = None
         self.arrivals: TimedArrivals | None = None
-        """The world's tasks arriving in time (``reset`` option ``arrivals_every_s``);
-        None: once per interval, as the planners' model has them."""
+        """The users' own arrival law (``reset`` option ``arrivals_every_s``); None: the
+        scenario's (once per interval, or in time: ``task_arrival_period_s``)."""
         self._done = True
         self._q = np.empty(len(self.hover_points))
 
