@@ -72,7 +72,8 @@ def fly(algo: str, seed: int, users: int, speedup: float, budget_ms: float,
 def plan_offline(algo: str, seed: int, users: int, budget_ms: float, echo: Callable[[str], None],
                  scenario: Any = None, timed: bool = False, iterations: int | None = None) -> dict[str, Any]:
     """The sortie planned offline on ``scenario`` (default: the demo's, ``offline_scenario``);
-    ``timed``: in the world whose tasks arrive in time (the module's ``timed``). MCTS decides
+    ``timed``: in the world whose tasks arrive as the users draw them (the module's
+    ``timed``), not by the scenario's law. MCTS decides
     on ``budget_ms``, as in flight, or on ``iterations`` (the same decisions every run)."""
     scenario = offline_scenario(users) if scenario is None else scenario.replace(num_users=users)
     options = {"arrivals_every_s": USERS_ARRIVAL_PERIOD_S} if timed else None
