@@ -37,6 +37,19 @@ def test_count_items_ack() -> None:
     assert [m.seq for m in sent[1:]] == [0, 1, 2, 3, 4]
 
 
+def test_an_accepted_before_the_last_item_went_out_is_not_this_uploads() -> None:
+    # A duplicated or late ACK of the upload before, on a lossy link, arriving once this
+    # upload's first items went out: the vehicle has not got them all, so it is not ours.
+    up, sent = machine()
+    up.begin()
+    for seq in range(len(ITEMS) - 1):
+        assert up.on_message(req(seq)) is None
+        assert up.on_message(ack(M.MAV_MISSION_ACCEPTED)) is None, f"stale ACCEPTED taken after item {seq}"
+    assert up.on_message(req(len(ITEMS) - 1)) is None
+    done = up.on_message(ack(M.MAV_MISSION_ACCEPTED))
+    assert done is not None and done.accepted
+
+
 def test_silence_repeats_then_gives_up() -> None:
     up, sent = machine(retries=2)
     up.begin()

@@ -52,6 +52,8 @@ class MissionUpload:
         self.target = target
         self.retries = retries
         self.last_sent: int | None = None
+        self.sent_last = False
+        """The last item went out at least once: only then can an ACCEPTED be this upload's."""
         self.silent = 0
         self.sent = 0
         self.done: UploadDone | None = None
@@ -74,8 +76,11 @@ class MissionUpload:
         if getattr(msg, "mission_type", MISSION_TYPE) != MISSION_TYPE:
             return None
         if kind == "MISSION_ACK":
-            if self.last_sent is None and msg.type == mavlink.MAV_MISSION_ACCEPTED:
-                return None  # a stale ACK of an earlier operation
+            if msg.type == mavlink.MAV_MISSION_ACCEPTED and not self.sent_last:
+                # An autopilot accepts an upload once it has every item: before the last went
+                # out, an ACCEPTED answers an earlier operation (a late or duplicated datagram
+                # of the upload before, on a lossy link), not this one.
+                return None
             if msg.type == mavlink.MAV_MISSION_INVALID_SEQUENCE:
                 # A repeated or reordered item: ArduPilot answers it so and goes on waiting
                 # for the item it asked for, asking again every second (MissionItemProtocol.cpp);
@@ -96,6 +101,7 @@ class MissionUpload:
                 return self.done
             self.silent = 0
             self.last_sent = msg.seq
+            self.sent_last |= msg.seq == len(self.items) - 1
             self._send(self.items[msg.seq].to_message(*self.target))
         return None
 
