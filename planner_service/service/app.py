@@ -12,8 +12,8 @@ The service is given its parts (``Parts``: journal, link factory, zenoh I/O, clo
 ``run_service`` builds them from the configuration.
 
 Shutdown: SIGINT/SIGTERM -> ``stopping`` -> intake closed (queryable undeclared, late
-requests refused, no new operation started) -> bounded wait for an upload in progress
-(``GRACE_S``; its outcome is journalled, as the mission the vehicle then holds must be; an
+requests refused, no new operation started) -> bounded wait for an upload or a read-back in
+progress (``GRACE_S``; its outcome is journalled, as the mission the vehicle then holds must be; an
 abandoned upload is cancelled with MISSION_ACK CANCELLED and the autopilot keeps the
 complete mission it held) -> tasks cancelled -> link, zenoh and journal closed (WAL
 checkpointed).
@@ -219,12 +219,12 @@ class Service:
         log.info("stopping: intake closed")
         self.intake.closed_reason = "the service is shutting down"
         self.zio.stop_intake()
-        uploads = [t for t in self._jobs if t.get_name() == "upload"]
-        if uploads:
-            done, pending = await asyncio.wait(uploads, timeout=GRACE_S)
+        mission_ops = [t for t in self._jobs if t.get_name() in ("upload", "readback")]
+        if mission_ops:
+            done, pending = await asyncio.wait(mission_ops, timeout=GRACE_S)
             if pending:
-                log.warning("an upload was still running after %.0f s: abandoned (the vehicle keeps its mission)",
-                            GRACE_S)
+                log.warning("an upload or read-back was still running after %.0f s: abandoned (the vehicle keeps "
+                            "its mission)", GRACE_S)
         await self._cancel_all()
         await self.link.close()
         self.zio.close()
@@ -303,12 +303,12 @@ class Service:
 
     def _job(self, name: str, coro: Awaitable[ins.Input | None]) -> None:
         """Run an operation off the logic and feed its outcome back when it ends. Once the
-        service is stopping only an upload's outcome is fed: the shutdown waits for it so
-        that the journal records the mission the vehicle now holds."""
+        service is stopping only an upload's or a read-back's outcome is fed: the shutdown
+        waits for them so that the journal records the mission the vehicle now holds."""
         async def run() -> None:
             outcome = await coro
-            if outcome is not None and (not self.stopping.is_set()
-                                        or isinstance(outcome, (ins.Uploaded, ins.UploadFailed))):
+            if outcome is not None and (not self.stopping.is_set() or isinstance(
+                    outcome, (ins.Uploaded, ins.UploadFailed, ins.ReadBackDone, ins.ReadBackFailed))):
                 self._feed(outcome)
         task = asyncio.ensure_future(run())
         task.set_name(name)

@@ -480,3 +480,25 @@ def test_a_replacement_that_flies_elsewhere_judges_the_hold_it_replaced() -> Non
     run, out = _replacement_arriving_late(world, point(8, 250.0, 350.0, "b", 2))
     assert run.s.watch is None and 3 not in run.s.judged  # item 3 is now point 8, to be flown
     assert [e.event.kind for e in only(out, fx.Emit)][0] in ("user_served", "waypoint_reached")
+
+
+def test_an_upload_failed_part_way_is_read_back_at_once_whatever_the_back_off() -> None:
+    # ArduPilot writes an upload's items as they arrive: one that failed part-way may have
+    # left the whole new mission (the RTL it lacked was already there). The read-back goes at
+    # once, not after the plans' back-off: until it answers no hold is judged, and at x40 a
+    # second of back-off is three points flown unrecorded.
+    world = FakeWorld()
+    run, _ = fly_to_first_point(world)
+    (plan,) = only(run.tick(seq=2, xyz=(120.0, 200.0, 100.0), boot_s=12.0), fx.Plan)
+    (up,) = only(run.feed(ins.Planned(plan.basis, path(point(9, 400.0, 300.0, "b", 2)))), fx.Upload)
+    out = run.feed(ins.UploadFailed(up, "MAV_MISSION_OPERATION_CANCELLED"))
+    assert run.s.retry_at > run.now, "the next plan still backs off"
+    (read,) = only(out, fx.ReadBack)
+    assert "failed part-way" in read.why
+    out = run.feed(ins.ReadBackDone(up.items, 3))
+    records = only(out, fx.RecordMission)
+    assert [(r.plan_id, r.result) for r in records] == [(up.plan_id, "accepted")]
+    # a read-back that fails is tried again after a wait
+    run.s = replace(run.s, doubt="test")
+    run.feed(ins.ReadBackFailed("NO_ANSWER"))
+    assert run.s.readback_at > run.now and not only(run.tick(), fx.ReadBack)

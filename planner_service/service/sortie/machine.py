@@ -154,6 +154,10 @@ class Sortie:
     commanding: str = ""
     failures: int = 0
     retry_at: float = 0.0
+    readback_at: float = 0.0
+    """The next read-back, apart from ``retry_at``: a doubt is resolved at once, whatever
+    the plans' back-off (holds flown meanwhile are not judged), and only a failed read-back
+    waits."""
     dirty: bool = True
     """Requests came in since the last plan."""
     last_plan_at: float = -math.inf
@@ -228,7 +232,7 @@ class SortieLogic:
             case ins.ReadBackFailed(error=error):
                 out.append(fx.Log("warning", f"could not read back the vehicle's mission ({s.doubt}): {error}; "
                                              f"trying again"))
-                s = replace(s, busy="", retry_at=now + self.rules.retry_s)
+                s = replace(s, busy="", readback_at=now + self.rules.retry_s)
             case ins.CommandDone(command=cmd):
                 s = self._command_done(replace(s, commanding=""), cmd, now, out)
             case ins.CommandFailed(command=cmd, error=error):
@@ -264,7 +268,7 @@ class SortieLogic:
         """Start whatever is due and not running: a read-back, a plan, a command."""
         if s.over is not None or s.degraded is not None:
             return s
-        if s.busy == "" and s.doubt is not None and v.connected and now >= s.retry_at:
+        if s.busy == "" and s.doubt is not None and v.connected and now >= s.readback_at:
             out.append(fx.ReadBack(s.doubt))
             return replace(s, busy="readback")
         if s.busy == "" and s.doubt is None and now >= s.retry_at:
@@ -637,7 +641,7 @@ class SortieLogic:
         hold being watched goes on being watched once the read-back shows our mission (a
         radio gap interrupts nothing), unless the vehicle restarted: then it was cut."""
         out.append(fx.Log("warning", f"{why}: the mission held will be read back before planning"))
-        s = replace(s, doubt=why, held_gen=None, version=s.version + 1, retry_at=0.0)
+        s = replace(s, doubt=why, held_gen=None, version=s.version + 1, retry_at=0.0, readback_at=0.0)
         if hold_interrupted and s.watch is not None:
             s = self._judge(replace(s, watch=s.watch.abandon(why)), out)
         return s
