@@ -414,8 +414,7 @@ def _paired_fresh(scene: Scene, root: World, first: int, second: int, settings: 
                 step_out = serve(scene, w, a, user)
                 total += step_out.reward
                 if steps < horizon:
-                    mean = arrival_mean(p, interval_duration_s(p, origin, scene.hover_points[a], w.users[user],
-                                                               step_out.bits))
+                    mean = arrival_mean(p, _duration(p, origin, scene.hover_points[a], w.users, user, step_out.bits))
                     for i in range(news.shape[0]):
                         news[i] = poisson_quantile(mean, uniforms[s, steps, i])
                     advance(scene, w, moves[s, steps], news)
