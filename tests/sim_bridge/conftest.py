@@ -74,6 +74,12 @@ def vehicle(spawn: Callable[..., Process]) -> Callable[..., tuple[Process, int]]
 
     def start(*extra: str) -> tuple[Process, int]:
         port = free_port(socket.SOCK_DGRAM)
+        if "--disarm-delay-s" not in extra:
+            # The stub disarms 10 simulated seconds after arming on the ground, as ArduCopter
+            # does: 33 ms of wall time at x300, less than a busy machine may take between a
+            # test's arm and its start (a CI run: no MISSION_ITEM_REACHED, the vehicle had
+            # disarmed). Off here; test_flight_missions.py checks the disarm itself.
+            extra = ("--disarm-delay-s", "0", *extra)
         process = spawn(["vehicle", "--mavlink", f"udpin:127.0.0.1:{port}", *extra], "listening")
         return process, port
 

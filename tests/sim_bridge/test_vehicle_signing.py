@@ -70,6 +70,7 @@ def test_the_right_key_uploads_downloads_arms_and_flies(vehicle, stations, key_p
     assert gcs.upload(items) == M.MAV_MISSION_ACCEPTED
     assert same_items(gcs.download(), as_stored(items, "ardupilot"))
     assert gcs.arm() == M.MAV_RESULT_ACCEPTED
+    time.sleep(0.2)  # a busy machine's pause between two commands: 60 simulated seconds armed
     assert gcs.set_mode(ARDUPILOT_AUTO) == M.MAV_RESULT_ACCEPTED
     assert gcs.command(M.MAV_CMD_MISSION_START, 0, 0) == M.MAV_RESULT_ACCEPTED
     reached = gcs.recv(["MISSION_ITEM_REACHED"], 20.0)
