@@ -14,7 +14,9 @@ from __future__ import annotations
 
 import argparse
 import multiprocessing
+import os
 import shutil
+import signal
 import subprocess
 import sys
 import tempfile
@@ -43,6 +45,20 @@ def outcomes(junit: Path) -> dict[str, str]:
     return result
 
 
+def _run(cmd: list[str]) -> str:
+    """One pytest run's output; interrupted, its process group is killed with it (the
+    test processes it started die with it: planner_service.service.processes)."""
+    proc = subprocess.Popen(cmd, cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                            start_new_session=True)
+    try:
+        out, _ = proc.communicate()
+        return out
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+
+
 def hunt(tests: list[str], runs: int, hogs: int, keep: Path, pytest_args: list[str]) -> dict[str, list[str]]:
     """Every test's outcome in every run, in order."""
     spinners = [multiprocessing.Process(target=_spin, daemon=True) for _ in range(hogs)]
@@ -58,8 +74,7 @@ def hunt(tests: list[str], runs: int, hogs: int, keep: Path, pytest_args: list[s
             # -p no:randomly and friends are not installed; the order is the one given
             cmd = [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "-m", "",
                    f"--basetemp={folder / 'tmp'}", f"--junitxml={junit}", *pytest_args, *tests]
-            proc = subprocess.run(cmd, cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-            (folder / "pytest.log").write_text(proc.stdout)
+            (folder / "pytest.log").write_text(_run(cmd))
             found = outcomes(junit) if junit.exists() else {}
             for test_id, outcome in found.items():
                 seen[test_id].append(outcome)

@@ -1,16 +1,22 @@
 """Child processes for the demo and the end-to-end bench: each in its own process group
 with its stderr in a log file, started ready (a line in its log) and always stopped
-(SIGINT, then SIGKILL to the group after a bounded wait)."""
+(SIGINT, then SIGKILL to the group after a bounded wait). On Linux a child is also killed
+when the process that started it dies without stopping it (a killed test run): an orphaned
+vehicle stub would go on flying, writing its state and track files where the next run's
+test of the same name writes its own."""
 
 from __future__ import annotations
 
+import ctypes
 import os
 import signal
 import socket
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
+from typing import Callable
 
 from .errors import ServiceError
 
@@ -28,6 +34,24 @@ def free_port(kind: int = socket.SOCK_STREAM) -> int:
         return sock.getsockname()[1]
 
 
+PR_SET_PDEATHSIG = 1
+_prctl = ctypes.CDLL(None).prctl if sys.platform == "linux" else None
+"""Looked up here, not in the child: a lookup there (dlopen's lock) could hang a child
+forked while another thread of ours held that lock."""
+
+
+def die_with_parent() -> None:
+    """In the child before exec: SIGKILL when the parent's thread that started it ends."""
+    if _prctl is not None:
+        _prctl(PR_SET_PDEATHSIG, signal.SIGKILL)
+
+
+def tied_to_parent() -> Callable[[], None] | None:
+    """``die_with_parent`` for a child started from the main thread; None from another,
+    whose end (not the process's) would kill the child."""
+    return die_with_parent if threading.current_thread() is threading.main_thread() else None
+
+
 class Child:
     """``python -m MODULE ARGS`` with stderr in ``log_path``."""
 
@@ -37,7 +61,8 @@ class Child:
         self.log_path = log_path
         self._log = open(log_path, "w")
         self.proc = subprocess.Popen([sys.executable, "-m", module, *args], cwd=REPO, env=env,
-                                     stdout=subprocess.DEVNULL, stderr=self._log, start_new_session=True)
+                                     stdout=subprocess.DEVNULL, stderr=self._log, start_new_session=True,
+                                     preexec_fn=tied_to_parent())
 
     def log(self) -> str:
         return self.log_path.read_text(errors="replace")

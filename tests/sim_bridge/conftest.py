@@ -12,7 +12,7 @@ from typing import Callable, Iterator
 
 import pytest
 
-from planner_service.service.processes import free_port
+from planner_service.service.processes import free_port, tied_to_parent
 from tests.support.gcs import GroundStation
 
 REPO = Path(__file__).resolve().parents[2]
@@ -28,7 +28,7 @@ class Process:
         self._log = open(log_path, "w")
         self.proc = subprocess.Popen(
             [sys.executable, "-m", "sim_bridge", *args], cwd=REPO, env=env,
-            stdout=subprocess.DEVNULL, stderr=self._log,
+            stdout=subprocess.DEVNULL, stderr=self._log, preexec_fn=tied_to_parent(),
         )
         deadline = time.monotonic() + 20.0
         while ready not in self.log():

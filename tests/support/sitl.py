@@ -36,6 +36,8 @@ from typing import Any, Iterator
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavutil  # noqa: E402
 
+from planner_service.service.processes import tied_to_parent  # noqa: E402
+
 REPO = Path(__file__).resolve().parents[2]
 ENV = "ARDUPILOT_SITL"
 HOME = "47.397742,8.545594,488,0"
@@ -151,7 +153,7 @@ class Sitl:
         self._boots += 1
         out = open(self.folder / f"sitl-{self._boots}.out", "wb")
         self.proc = subprocess.Popen(args, cwd=self.folder, stdout=out, stderr=subprocess.STDOUT,
-                                     start_new_session=True)
+                                     start_new_session=True, preexec_fn=tied_to_parent())
         out.close()
         self._linked.clear()
         if self._monitor is None or not self._monitor.is_alive():
