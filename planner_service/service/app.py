@@ -385,7 +385,7 @@ class Service:
         battery = self._vehicle().battery_fraction
         try:
             self.journal.record_service(e.request_id, e.hover_index, e.xyz, e.tasks, e.bits, e.reward,
-                                        (battery or 0.0) * self.scenario.battery_j, self.wall())
+                                        (battery or 0.0) * self.scenario.battery_j, self.wall(), e.bound_tasks)
         except JournalError as err:
             log.error("could not record the service of request %d: %s", e.request_id, err)
             self._check_journal()

@@ -84,7 +84,7 @@ from typing import Any, Iterable, Iterator
 
 from .errors import JournalError
 
-SCHEMA_VERSION = 3
+SCHEMA_VERSION = 4
 """The layout this module writes (``meta.schema_version``)."""
 APPLICATION_ID = int.from_bytes(b"uavj", "big")
 """SQLite's ``PRAGMA application_id`` of a journal (0x7561766a, "uavj" in the header at
@@ -133,7 +133,8 @@ CREATE TABLE IF NOT EXISTS services (
     reward REAL NOT NULL,
     battery_j REAL NOT NULL,
     time_s REAL NOT NULL,
-    sortie INTEGER NOT NULL DEFAULT 1
+    sortie INTEGER NOT NULL DEFAULT 1,
+    bound_tasks INTEGER
 );
 CREATE TABLE IF NOT EXISTS missions (
     mission_id INTEGER PRIMARY KEY AUTOINCREMENT,
@@ -174,6 +175,11 @@ MIGRATE_2_TO_3 = [
 ]
 """Version 2's requests said nothing of what their users knew was served: NULL, taken as
 they are (``RequestRow.backlog``)."""
+MIGRATE_3_TO_4 = [
+    "ALTER TABLE services ADD COLUMN bound_tasks INTEGER",
+]
+"""Version 3's services did not say the backlog their hold was bound to: NULL, taken as the
+tasks served (``ServiceRow.bound``)."""
 
 
 @dataclass(frozen=True)
@@ -251,6 +257,15 @@ class ServiceRow:
     reward: float
     battery_j: float
     time_s: float
+    bound_tasks: int | None = None
+    """The user's backlog when the hold was bound to its request: the u_i(t) of the
+    fairness rule (3). ``tasks`` is what the hold carried, less when it was cut short (the
+    battery's reserve, a hold seen only in part); None in rows written before it was kept."""
+
+    @property
+    def bound(self) -> int:
+        """The backlog the service was bound to (the tasks served where it was not kept)."""
+        return self.tasks if self.bound_tasks is None else self.bound_tasks
 
 
 @dataclass(frozen=True)
@@ -435,6 +450,9 @@ class Journal:
             if version in (1, 2):
                 for statement in MIGRATE_2_TO_3:
                     self._db.execute(statement)
+            if version in (1, 2, 3):
+                for statement in MIGRATE_3_TO_4:
+                    self._db.execute(statement)
             elif version == 0:
                 self._db.execute("INSERT INTO sorties (number, started_at_s) VALUES (1, ?)", (now_s,))
             self._db.execute("INSERT OR REPLACE INTO meta (key, value) VALUES ('schema_version', ?)",
@@ -568,9 +586,10 @@ class Journal:
         return request_id, older
 
     def record_service(self, request_id: int, hover_index: int, xyz: tuple[float, float, float], tasks: int,
-                       bits: float, reward: float, battery_j: float, now_s: float) -> int:
+                       bits: float, reward: float, battery_j: float, now_s: float, bound_tasks: int | None = None) -> int:
         """The vehicle served ``tasks`` tasks of ``request_id`` (the request in force when
-        the hold began) at hovering point ``hover_index``. They are consumed from that
+        the hold began, with ``bound_tasks`` left then: default ``tasks``, a whole service)
+        at hovering point ``hover_index``. They are consumed from that
         request's backlog: if it is still in force (pending) and nothing is left it becomes
         ``served``, else it stays pending with the rest. If the user sent a newer request
         meanwhile (it is ``replaced``), the service is recorded against the request it was
@@ -588,13 +607,16 @@ class Journal:
         if not 1 <= tasks <= row.backlog:
             raise JournalError(f"record_service: {tasks} tasks served of request {request_id}, whose backlog is "
                                f"{row.backlog} ({row.served_tasks} of its {row.tasks} already served)")
+        bound = tasks if bound_tasks is None else bound_tasks
+        if bound < tasks:
+            raise JournalError(f"record_service: {tasks} tasks served of a hold bound to {bound}")
         try:
             with self._transaction():  # which requests it empties is read after the insert
                 service_id = int(self._db.execute(
                     "INSERT INTO services (request_id, user_id, tasks, bits, hover_index, x_m, y_m, z_m, reward, "
-                    "battery_j, time_s, sortie) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                    "battery_j, time_s, sortie, bound_tasks) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
                     (request_id, row.user_id, tasks, bits, hover_index, *xyz, reward, battery_j, now_s,
-                     self.sortie)).lastrowid)
+                     self.sortie, bound)).lastrowid)
                 for r in self._db.execute(f"SELECT {_REQ} FROM requests WHERE sortie = ? AND user_id = ? AND "
                                           "status = 'pending'", (self.sortie, row.user_id)).fetchall():
                     left = RequestRow(*r)
@@ -754,7 +776,7 @@ class Journal:
     def services(self, sortie: int | None = None) -> list[ServiceRow]:
         return [ServiceRow(*r) for r in self._rows(
             "SELECT service_id, request_id, user_id, tasks, bits, hover_index, x_m, y_m, z_m, reward, "
-            "battery_j, time_s FROM services WHERE sortie = ? ORDER BY service_id", (self._n(sortie),))]
+            "battery_j, time_s, bound_tasks FROM services WHERE sortie = ? ORDER BY service_id", (self._n(sortie),))]
 
     def missions(self, sortie: int | None = None) -> list[MissionRow]:
         return [_mission(r) for r in self._rows(

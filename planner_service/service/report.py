@@ -54,7 +54,7 @@ def sortie_summary(journal: Journal, scenario: Scenario, final_battery_j: float 
         "served": [s.user_id for s in services],
         "served_users": len({s.user_id for s in services}),
         "hover_points": [s.hover_index for s in services],
-        "fairness_violations": fairness_violations(scenario, [(s.user_id, s.tasks) for s in services]),
+        "fairness_violations": fairness_violations(scenario, [(s.user_id, s.bound) for s in services]),
         "energy_violation": None if final_battery_j is None else bool(final_battery_j < floor),
         "requests": {"accepted": len(requests), **{k: statuses.get(k, 0) for k in ("served", "replaced", "not_served", "pending")}},
         "not_served_reasons": dict(reasons),

@@ -9,7 +9,9 @@ from pathlib import Path
 import pytest
 
 from planner_service.service.errors import JournalError
+from planner_service.model import preset
 from planner_service.service.journal import Journal, SortieRow
+from planner_service.service.report import sortie_summary
 
 
 def test_newer_request_replaces_older(tmp_path: Path) -> None:
@@ -118,7 +120,7 @@ def test_a_version_1_journal_is_migrated(tmp_path: Path, landed: bool) -> None:
     db.executescript(V1_SCHEMA + ("INSERT INTO meta VALUES ('sortie_over', 'the vehicle landed');" if landed else ""))
     db.close()
     j = Journal(path, now_s=500.0)
-    assert j.get_meta("schema_version") == "3" and j.get_meta("sortie_over") is None
+    assert j.get_meta("schema_version") == "4" and j.get_meta("sortie_over") is None
     assert j.sortie == 1
     if landed:  # ended when its last request was closed, for the reason it gave
         assert j.current_sortie() == SortieRow(1, 100.0, 110.0, "the vehicle landed")
@@ -129,7 +131,7 @@ def test_a_version_1_journal_is_migrated(tmp_path: Path, landed: bool) -> None:
     last = j.last_mission()
     assert last is not None and last.plan_id == 7 and j.last_plan_id() == 7
     j.close()
-    assert Journal(path).get_meta("schema_version") == "3"  # opening again changes nothing
+    assert Journal(path).get_meta("schema_version") == "4"  # opening again changes nothing
 
 
 # Version 2 (sorties, before ``requests.served_seen``), as the previous service wrote it.
@@ -151,23 +153,48 @@ def test_a_version_2_journal_is_migrated_its_requests_taken_as_they_are(tmp_path
     db.executescript(V2_SCHEMA)
     db.close()
     j = Journal(path, now_s=500.0)
-    assert j.get_meta("schema_version") == "3" and j.sortie == 1
+    assert j.get_meta("schema_version") == "4" and j.sortie == 1
     assert [(r.request_id, r.status, r.served_seen, r.backlog) for r in j.requests()] == [
         (1, "served", None, 0), (2, "pending", None, 6)]
     # an old request said nothing of what its user knew: it is taken as it is, whatever was served
     j.record_service(2, 4, (1.0, 2.0, 100.0), 2, 2e5, 0.1, 9e4, 120.0)
+    # an old service did not say the backlog it was bound to: the tasks it carried
+    assert [(s.tasks, s.bound_tasks, s.bound) for s in j.services()] == [(5, None, 5), (2, 2, 2)]
     assert [(b.user_id, b.backlog) for b in j.user_backlogs()] == [("u1", 0), ("u2", 4)]
     rid, _ = j.accept("u2", 3.0, 4.0, 0.0, 6, None, 130.0, served_seen=0)  # a new one does say
     assert j.request(rid) is not None and j.request(rid).backlog == 4  # type: ignore[union-attr]
     j.close()
 
 
+def test_the_fairness_audit_judges_the_backlog_each_hold_was_bound_to(tmp_path: Path) -> None:
+    # A CI run: user-0's second service was bound to 16 tasks (more than beta = 15, so
+    # allowed by (3)); the battery's reserve cut the hold to 1 task. Judged on the tasks
+    # carried, the audit called that a violation; (3) is on the user's tasks, u_i(t).
+    scenario = preset("field")
+    beta = scenario.fairness_threshold_tasks
+    j = Journal(tmp_path / "j.sqlite", now_s=1.0)
+    first, _ = j.accept("user-0", 100.0, 100.0, 0.0, 11, None, 2.0)
+    j.record_service(first, 2, (50.0, 250.0, 100.0), 2, 2e5, 0.1, 6e4, 3.0, bound_tasks=11)
+    second, _ = j.accept("user-0", 100.0, 100.0, 0.0, beta + 1, None, 4.0, served_seen=2)
+    j.record_service(second, 7, (200.0, 200.0, 100.0), 1, 1e5, 0.1, 3e4, 5.0, bound_tasks=beta + 1)
+    assert [(s.tasks, s.bound) for s in j.services()] == [(2, 11), (1, beta + 1)]
+    assert sortie_summary(j, scenario, None)["fairness_violations"] == 0
+    third, _ = j.accept("user-1", 100.0, 100.0, 0.0, beta, None, 6.0)  # a real violation still counts:
+    j.record_service(third, 7, (200.0, 200.0, 100.0), 1, 1e5, 0.1, 3e4, 7.0, bound_tasks=beta)
+    fourth, _ = j.accept("user-1", 100.0, 100.0, 0.0, beta, None, 8.0, served_seen=1)  # a repeat of beta
+    j.record_service(fourth, 7, (200.0, 200.0, 100.0), 1, 1e5, 0.1, 3e4, 9.0, bound_tasks=beta)
+    assert sortie_summary(j, scenario, None)["fairness_violations"] == 1
+    with pytest.raises(JournalError, match="1 tasks served of a hold bound to 0"):
+        j.record_service(fourth, 7, (200.0, 200.0, 100.0), 1, 1e5, 0.1, 3e4, 9.0, bound_tasks=0)
+    j.close()
+
+
 def test_a_newer_or_foreign_journal_is_refused(tmp_path: Path) -> None:
     path = tmp_path / "j.sqlite"
     j = Journal(path)
-    j.set_meta("schema_version", "4")
+    j.set_meta("schema_version", "5")
     j.close()
-    with pytest.raises(JournalError, match="schema version 4; this service reads versions up to 3"):
+    with pytest.raises(JournalError, match="schema version 5; this service reads versions up to 4"):
         Journal(path)
     junk = tmp_path / "junk.sqlite"
     junk.write_bytes(b"not a database at all" * 100)

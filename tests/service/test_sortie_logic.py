@@ -156,6 +156,23 @@ def test_a_hold_cut_short_serves_what_it_carried() -> None:
     assert 0 < svc.tasks < 10
 
 
+def test_a_second_service_cut_short_records_the_backlog_it_was_bound_to() -> None:
+    # The fairness rule (3) lets a user be served again only with more than beta tasks: the
+    # binding checks that on the backlog. A hold then cut short (the battery's reserve, in a
+    # CI run: 1 task of 16 carried) is recorded with the backlog it was bound to, which the
+    # audit judges, beside the tasks it carried.
+    world = FakeWorld(served={"a": 1})
+    run, _ = fly_to_first_point(world)
+    beta = SCENARIO.fairness_threshold_tasks
+    world.ask("a", 120.0, 200.0, beta + 1, 5)
+    run.tick(seq=2, xyz=(120.0, 200.0, 100.0), boot_s=20.0)
+    assert run.s.binding.user_id == "a" and run.s.binding.tasks == beta + 1
+    needed = run.s.binding.needed_s
+    out = run.tick(seq=3, xyz=(140.0, 200.0, 100.0), boot_s=20.0 + needed / (beta + 1))  # the hold ended early
+    (svc,) = only(out, fx.RecordService)
+    assert svc.user_id == "a" and svc.tasks < beta < svc.bound_tasks == beta + 1
+
+
 def test_a_hold_longer_than_needed_ends_once_the_next_decision_is_on_board() -> None:
     world = FakeWorld()
     run, _ = fly_to_first_point(world)

@@ -83,6 +83,8 @@ class RecordService:
     held_s: float
     planned_request: bool
     """The request served is the one the plan was made for."""
+    bound_tasks: int
+    """The backlog the hold was bound to (``tasks`` or more: a hold cut short carries less)."""
 
 
 @dataclass(frozen=True)

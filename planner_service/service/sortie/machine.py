@@ -404,7 +404,7 @@ class SortieLogic:
         bits = tasks * self.rules.scenario.bits_per_task
         reward = self._service_reward(point, tasks)
         out.append(fx.RecordService(b.request_id, b.user_id, point.hover_index, (point.x_m, point.y_m, point.z_m),
-                                    tasks, bits, reward, w.held_s, b.planned))
+                                    tasks, bits, reward, w.held_s, b.planned, b.tasks))
         detail = f"{tasks} tasks at point {point.hover_index}" + ("" if tasks == b.tasks else f" of {b.tasks}")
         out.append(fx.Emit(ev.UserServed(f"{detail}; held {w.held_s:.1f} s", user_id=b.user_id,
                            request_id=b.request_id)))
