@@ -22,6 +22,7 @@ checkpointed).
 from __future__ import annotations
 
 import asyncio
+import math
 import logging
 import signal
 import time
@@ -409,7 +410,9 @@ class Service:
         fix = self._fix()
         t = self.link.telemetry
         stale_wall = max(self.mono() - t.battery_at, 0.0) if t.battery_at else 0.0
-        stale_vehicle = t.time_rate * (stale_wall + self.cfg.planner.budget_ms / 1e3 + self._upload_s())
+        # (the logic plans only once the rate is known: unknown, the time waited could be any flight)
+        rate = t.time_rate if t.time_rate is not None else math.inf
+        stale_vehicle = rate * (stale_wall + self.cfg.planner.budget_ms / 1e3 + self._upload_s())
         battery = planning_battery_j(self.scenario, fix.battery_j, stale_vehicle, self.cfg.safety.energy_margin_j)
         if basis.at_point is not None:  # the hold there is still to be paid
             pt = basis.at_point

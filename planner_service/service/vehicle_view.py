@@ -77,18 +77,22 @@ class VehicleView:
             fraction = t.battery_fraction
         if fraction is not None and self._ceiling is not None:
             ceiling = self._carried(self._ceiling, t, now)
+            if ceiling is None:
+                return None, "unknown"
             if fraction > ceiling:
                 return ceiling, "model"
         if fraction is not None:
             self._good = (fraction, t.battery_at or now)
             return fraction, "autopilot"
-        if self._good is None:
-            return None, "unknown"
-        return self._carried(self._good, t, now), "model"
+        carried = None if self._good is None else self._carried(self._good, t, now)
+        return (None, "unknown") if carried is None else (carried, "model")
 
-    def _carried(self, known: tuple[float, float], t: Telemetry, now: float) -> float:
-        """A fraction known at a time, less what the model says was spent since."""
+    def _carried(self, known: tuple[float, float], t: Telemetry, now: float) -> float | None:
+        """A fraction known at a time, less what the model says was spent since; None while
+        the vehicle's clock rate is unknown (what was spent since could be anything)."""
         fraction, at = known
+        if t.time_rate is None:
+            return None
         spent_j = self._power_w * t.time_rate * max(now - at, 0.0)
         return max(fraction - spent_j / self.scenario.battery_j, 0.0)
 
@@ -97,6 +101,6 @@ class VehicleView:
         restarted = boot < self._boot_s - 5.0
         self._boot_s = boot
         if restarted and t.airborne and self._good is not None:
-            self._ceiling = (self._carried(self._good, t, now), now)
+            self._ceiling = self._good  # carried on from when it was read, as it is looked at
         elif self._ceiling is not None and t.landed_known and not t.airborne and not t.armed:
             self._ceiling = None  # on the ground: a swapped battery reads as itself again

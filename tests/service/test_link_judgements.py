@@ -17,7 +17,7 @@ from planner_service.service.link import (Connected, Landed, LinkEvent, ModeChan
 from planner_service.service.link.state import DERIVED, SILENCE_S, VehicleState
 from planner_service.service.link.streams import (MISSING_AFTER_S, REREQUEST_S, UNAVAILABLE_AFTER_S, Streams,
                                                   stream_plan)
-from planner_service.service.link.telemetry import (ClockWatch, PositionInputs, assess_position, battery_fraction,
+from planner_service.service.link.telemetry import (ClockRate, ClockWatch, PositionInputs, assess_position, battery_fraction,
                                                     derived_airborne, energy_used_j)
 
 READY = PositionInputs(lat_e7=473977420, lon_e7=85455940, gps_fix=6, estimator_flags=0x33F, home_set=True)
@@ -80,6 +80,13 @@ def test_derived_airborne_has_a_hysteresis() -> None:
     assert derived_airborne(True, 0.2, 1.0, False)  # climbing off the ground
     assert derived_airborne(True, 0.8, 0.0, True)  # hovering low stays airborne
     assert not derived_airborne(True, 0.3, 0.1, True)  # down and still
+
+
+def test_the_vehicles_clock_rate_is_unknown_until_measured() -> None:
+    rate = ClockRate()
+    assert rate.update(100.0, 10.0) is None and rate.update(140.0, 10.5) is None, "half a second: unknown"
+    assert rate.update(180.0, 11.0) == pytest.approx(80.0)  # x80, after the first second
+    assert rate.update(200.0, 11.25) == pytest.approx(80.0), "then kept, and measured again every few seconds"
 
 
 # --- restarts take two readings ------------------------------------------------------------------------

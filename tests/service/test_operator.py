@@ -33,7 +33,7 @@ class NoRequests:
 
 LOGIC = SortieLogic(Rules(preset("field"), GeoOrigin(), Area(500.0, 120.0, 10.0)), NoRequests())
 READY = Vehicle(connected=True, position_ok=True, boot_s=1.0, landed_known=True, mode="STABILIZE",
-                battery_fraction=0.9, battery_source="autopilot")
+                battery_fraction=0.9, battery_source="autopilot", time_rate=1.0)
 NONE = new_sortie(1, LOGIC.rules)
 GIVEN = replace(NONE, authority=Authority.by_operator())
 REVOKED = replace(NONE, authority=GIVEN.authority.revoke("mode changed to LOITER"))

@@ -55,7 +55,7 @@ def rules(**kw: object) -> Rules:
 
 
 GROUND = Vehicle(connected=True, position_ok=True, xyz=(0.0, 0.0, 0.0), boot_s=1.0, landed_known=True,
-                 mode="STABILIZE", battery_fraction=1.0, battery_source="autopilot")
+                 mode="STABILIZE", battery_fraction=1.0, battery_source="autopilot", time_rate=1.0)
 
 
 def kinds(effects: list[fx.Effect]) -> list[str]:
@@ -171,6 +171,21 @@ def test_a_second_service_cut_short_records_the_backlog_it_was_bound_to() -> Non
     out = run.tick(seq=3, xyz=(140.0, 200.0, 100.0), boot_s=20.0 + needed / (beta + 1))  # the hold ended early
     (svc,) = only(out, fx.RecordService)
     assert svc.user_id == "a" and svc.tasks < beta < svc.bound_tasks == beta + 1
+
+
+def test_nothing_is_planned_while_the_vehicles_clock_rate_is_unknown() -> None:
+    # A service restarted in the air beside a simulator at x80 planned its first seconds as
+    # if the vehicle's clock ran at wall speed: the battery a second old counted as a second
+    # of flight old, not 80, and the vehicle's own failsafe fired on the way home. Arriving
+    # at a point, the decision waits for the rate; a decision already being searched when
+    # the rate went unknown (a link reset) is dropped.
+    world = FakeWorld()
+    run, _ = fly_to_first_point(world)
+    out = run.tick(seq=2, xyz=(120.0, 200.0, 100.0), boot_s=20.0, time_rate=None)
+    assert run.s.watch.phase == "holding" and not only(out, fx.Plan)
+    (plan,) = only(run.tick(seq=2, xyz=(120.0, 200.0, 100.0), boot_s=21.0, time_rate=80.0), fx.Plan)
+    out = run.feed(ins.Planned(plan.basis, path(point(9, 400.0, 300.0, "b", 2))), time_rate=None)
+    assert not only(out, fx.Upload) and run.s.dirty
 
 
 def test_a_hold_longer_than_needed_ends_once_the_next_decision_is_on_board() -> None:

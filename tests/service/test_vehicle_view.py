@@ -14,11 +14,18 @@ from protocol import Area, GeoOrigin, local_to_global
 ORIGIN = GeoOrigin()
 FLYING = Telemetry(connected=True, position_ok=True, lat_deg=ORIGIN.lat_deg, lon_deg=ORIGIN.lon_deg, rel_alt_m=50.0,
                    armed=True, airborne=True, landed_known=True, mode="AUTO", boot_s=100.0, battery_at=1.0,
-                   battery_fraction=0.6, waiting_for="")
+                   battery_fraction=0.6, waiting_for="", time_rate=1.0)
 
 
 def view() -> VehicleView:
     return VehicleView(preset("field"), ORIGIN, Area(500.0, 120.0, 10.0))
+
+
+def test_a_battery_is_not_carried_on_while_the_vehicles_clock_rate_is_unknown() -> None:
+    v = view()
+    v.see(FLYING, 1.0)
+    later, _ = v.see(replace(FLYING, battery_fraction=None, time_rate=None), 2.0)
+    assert later.battery_fraction is None and later.battery_source == "unknown"
 
 
 def test_an_unknown_battery_is_carried_on_by_the_model_then_unknown() -> None:

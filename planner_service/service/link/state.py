@@ -189,7 +189,7 @@ class VehicleState:
 
     def _position(self, msg: Any) -> bool:
         boot_s = msg.time_boot_ms / 1e3
-        verdict = self._clock_watch.observe(boot_s, self.telemetry.time_rate)
+        verdict = self._clock_watch.observe(boot_s, self.telemetry.time_rate or 1.0)
         if verdict == "suspect":
             return False  # ignored unless the next report confirms a restart
         if verdict == "restart":

@@ -73,8 +73,9 @@ class Telemetry:
     mode: str = ""
     mission_seq: int = 0
     mission_total: int = 0
-    time_rate: float = 1.0
-    """Vehicle seconds per wall second (a simulator may run faster), from its timestamps."""
+    time_rate: float | None = None
+    """Vehicle seconds per wall second (a simulator may run faster), from its timestamps;
+    None until measured (``ClockRate``)."""
     boot_s: float | None = None
     """The vehicle's clock at its latest report (time_boot_ms / 1000)."""
     missing: tuple[str, ...] = ()
@@ -151,20 +152,25 @@ def derived_airborne(armed: bool, rel_alt_m: float, climb_mps: float, was_airbor
 
 class ClockRate:
     """Vehicle seconds per wall second, measured from the vehicle's own timestamps over a
-    window of a few seconds (so the service never assumes the two clocks run alike)."""
+    window of a few seconds (so the service never assumes the two clocks run alike). None
+    until the first window, a shorter one, has passed: a service restarted in the air beside
+    a simulator at x80 that took the rate as 1 meanwhile planned its first decisions as if a
+    battery reading a second old were a second of flight old, not 80 (a CI run: the
+    vehicle's battery failsafe fired on the way home)."""
 
+    FIRST_WINDOW_S = 1.0
     WINDOW_S = 3.0
 
     def __init__(self) -> None:
         self._anchor: tuple[float, float] | None = None
-        self.rate = 1.0
+        self.rate: float | None = None
 
-    def update(self, vehicle_s: float, wall_s: float) -> float:
+    def update(self, vehicle_s: float, wall_s: float) -> float | None:
         if self._anchor is None or vehicle_s < self._anchor[0]:
             self._anchor = (vehicle_s, wall_s)
             return self.rate
         dv, dw = vehicle_s - self._anchor[0], wall_s - self._anchor[1]
-        if dw >= self.WINDOW_S:
+        if dw >= (self.FIRST_WINDOW_S if self.rate is None else self.WINDOW_S):
             self.rate = max(dv / dw, 0.0)
             self._anchor = (vehicle_s, wall_s)
         return self.rate

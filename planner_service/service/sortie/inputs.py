@@ -33,8 +33,8 @@ class Vehicle:
     battery_fraction: float | None = None
     """The best estimate: the autopilot's reading, else the model's fallback; None: unknown."""
     battery_source: Literal["autopilot", "model", "unknown"] = "unknown"
-    time_rate: float = 1.0
-    """Vehicle seconds per wall second (a simulator may run faster)."""
+    time_rate: float | None = None
+    """Vehicle seconds per wall second (a simulator may run faster); None: not measured yet."""
 
 
 

@@ -420,6 +420,8 @@ class SortieLogic:
         r = self.rules
         if not (v.connected and v.position_ok) or v.battery_fraction is None:
             return None
+        if v.time_rate is None:
+            return None  # how much flight a second of waiting costs is not known yet
         if s.flown and not v.landed_known:
             return None  # in the air or landed meanwhile? know first
         if not v.airborne:
@@ -469,8 +471,9 @@ class SortieLogic:
 
     def _planned(self, s: Sortie, planned: ins.Planned, v: ins.Vehicle, now: float, out: list[fx.Effect]) -> Sortie:
         basis, path = planned.basis, planned.path
-        if basis.version != s.version or s.over is not None or s.doubt is not None or s.degraded is not None:
-            return replace(s, dirty=True)  # stale: the state it was made on is gone
+        if (basis.version != s.version or s.over is not None or s.doubt is not None or s.degraded is not None
+                or v.time_rate is None):
+            return replace(s, dirty=True)  # stale: the state it was made on is gone (or its clock)
         if basis.at_point is not None:
             s = replace(s, decided_at=basis.keep_through)
         held = s.held
@@ -540,7 +543,9 @@ class SortieLogic:
 
     def _margin_s(self, v: ins.Vehicle) -> float:
         """How much longer than its upload needs a hold is flown: the configured margin and a
-        command's latency in vehicle time (the service ends a hold a command after it sees it)."""
+        command's latency in vehicle time (the service ends a hold a command after it sees it;
+        planning waits for the clock's rate, ``_plan_wanted``)."""
+        assert v.time_rate is not None, "planned before the vehicle's clock rate was measured"
         return self.rules.hold_margin_s + CONTROL_LATENCY_S * v.time_rate
 
     def _bound_hold_s(self, s: Sortie, seq: int, planned_s: float, margin_s: float) -> float:
