@@ -5,7 +5,7 @@ print each test's pass rate (docs/TESTING.md).
 
 Each run is one pytest process (the tests in it one after another) with its own
 ``--basetemp`` under ``--keep``, so a failure's processes' logs, journals and tracks are
-there to read afterwards; the runs that passed are deleted. A hog is a process that spins
+there to read afterwards; of the runs that passed only pytest's output is kept. A hog is a process that spins
 on one core for as long as the hunt lasts: two of them on this two-core machine leave the
 tests what a busy CI machine leaves them.
 """
@@ -83,7 +83,7 @@ def hunt(tests: list[str], runs: int, hogs: int, keep: Path, pytest_args: list[s
                   f"{'failed: ' + ', '.join(failed) if failed else 'all passed' if found else 'no results'}",
                   flush=True)
             if not failed and found:
-                shutil.rmtree(folder)
+                shutil.rmtree(folder / "tmp")  # the output stays: its printed figures
     finally:
         for s in spinners:
             s.terminate()
