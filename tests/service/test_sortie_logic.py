@@ -251,6 +251,48 @@ def test_a_link_gap_read_back_as_ours_keeps_the_hold() -> None:
     assert plan.basis.keep_through == 2
 
 
+def test_holds_flown_while_in_doubt_are_judged_once_the_read_back_shows_our_mission() -> None:
+    # On a lossy link a read-back takes seconds, tens of seconds of flight at x40: a CI run
+    # recorded 2 services of a sortie whose vehicle held at five points. The reports seen in
+    # the doubt are kept and judged once the vehicle is known to fly our mission.
+    world = FakeWorld()
+    run, up = fly_to_first_point(world)
+    (rb,) = only(run.feed(ins.LinkRestored("AUTO")), fx.ReadBack)
+    for t in range(10, 80):  # the whole hold at point 3 (item 2), in doubt
+        run.tick(seq=2, xyz=(120.0, 200.0, 100.0), boot_s=float(t))
+    run.tick(seq=3, xyz=(160.0, 200.0, 100.0), boot_s=82.0)  # and on to item 3
+    assert not only(run.effects, fx.RecordService) and run.s.watch.phase == "approaching"
+    out = run.feed(ins.ReadBackDone(up.items, 3))
+    (svc,) = only(out, fx.RecordService)
+    assert (svc.user_id, svc.tasks, svc.hover_index) == ("a", 10, 3) and svc.held_s == pytest.approx(69.0)
+    assert run.s.watch is not None and run.s.watch.seq == 3 and run.s.doubted == ()
+
+
+def test_reports_in_doubt_count_up_to_where_an_upload_that_went_through_changed_the_item() -> None:
+    world = FakeWorld()
+    run, _ = fly_to_first_point(world)
+    (plan,) = only(run.tick(seq=2, xyz=(120.0, 200.0, 100.0), boot_s=10.0), fx.Plan)
+    (up,) = only(run.feed(ins.Planned(plan.basis, path(point(9, 400.0, 300.0, "b", 2)))), fx.Upload)
+    run.feed(ins.UploadFailed(up, "no ACK", outcome_unknown=True))
+    for t in range(11, 80):
+        run.tick(seq=2, xyz=(120.0, 200.0, 100.0), boot_s=float(t))
+    run.tick(seq=3, xyz=(160.0, 210.0, 100.0), boot_s=82.0)  # item 3: point 7 before, point 9 now
+    out = run.feed(ins.ReadBackDone(up.items, 3))  # the upload went through
+    assert not only(out, fx.RecordService) and run.s.watch.phase == "holding" and run.s.watch.last_in_s == 79.0
+    (svc,) = only(run.tick(seq=3, xyz=(170.0, 215.0, 100.0), boot_s=83.0), fx.RecordService)
+    assert (svc.hover_index, svc.held_s) == (3, 69.0)
+
+
+def test_reports_in_doubt_count_for_nothing_when_the_vehicle_holds_another_mission() -> None:
+    world = FakeWorld()
+    run, up = fly_to_first_point(world)
+    run.feed(ins.LinkRestored("AUTO"))
+    for t in range(10, 80):
+        run.tick(seq=2, xyz=(120.0, 200.0, 100.0), boot_s=float(t))
+    out = run.feed(ins.ReadBackDone(up.items[:2], 3))  # not ours: nothing it flew is ours to record
+    assert not only(out, fx.RecordService) and run.s.doubted == ()
+
+
 def test_uncommanded_mode_change_ends_authority_and_no_command_follows() -> None:
     world = FakeWorld()
     run, _ = fly_to_first_point(world)

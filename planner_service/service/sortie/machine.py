@@ -15,7 +15,8 @@ What it decides, in the order a sortie goes:
   (``mission.replacement``): the hold goes on, the point after it is the new decision.
   A hold longer than the bound request needs is ended early (``set_current``).
 - **Doubt**: after a link gap, a vehicle restart or our own restart, the vehicle may hold
-  another mission: read it back before anything else; a lost mission in the air is
+  another mission: read it back before anything else, the reports seen meanwhile judged
+  once it shows our mission; a lost mission in the air is
   re-planned from where the vehicle is and resumed (with authority) or left to the operator.
 - **Authority** (``authority.py``): modes and arming only when granted; any change the
   service did not command ends it.
@@ -58,6 +59,8 @@ is planned at each point."""
 RESTART_GRACE_S = 5.0
 """Wall seconds within which a vehicle restart explains a mode change seen before it (the
 link believes a restart only after a second message)."""
+MAX_DOUBTED = 1200
+"""Reports kept while in doubt: a minute of the service's ticks (the oldest are dropped)."""
 START_LAPSE_S = 5.0
 """Wall seconds after an accepted start before a vehicle still on the ground, disarmed, is
 taken as not started."""
@@ -171,6 +174,8 @@ class Sortie:
     """The authority the next sortie begins with, when the operator gave it."""
     services: int = 0
     """Services recorded in this sortie (the interval count)."""
+    doubted: tuple[Sample, ...] = ()
+    """The vehicle's reports while in doubt (``_replay``), at most ``MAX_DOUBTED``."""
 
 
 Step = tuple[Sortie, list[fx.Effect]]
@@ -282,26 +287,50 @@ class SortieLogic:
 
     # --- holds: truth from the vehicle's position ---------------------------------------------
     def _watch(self, s: Sortie, v: ins.Vehicle, out: list[fx.Effect]) -> Sortie:
-        held = s.held
-        if held is None or s.held_gen is None or not (v.connected and v.position_ok) or math.isnan(v.boot_s):
+        if s.held is None or not (v.connected and v.position_ok) or math.isnan(v.boot_s):
             return s
         sample = Sample(v.boot_s, v.xyz, v.seq)
+        if s.held_gen is None:  # in doubt: kept, judged once the read-back shows whose mission it was
+            if s.doubt is not None and (not s.doubted or s.doubted[-1].boot_s < sample.boot_s):
+                s = replace(s, doubted=(*s.doubted, sample)[-MAX_DOUBTED:])
+            return s
+        return self._maybe_end_hold(self._seen(s, sample, v, out), out)
+
+    def _seen(self, s: Sortie, sample: Sample, v: ins.Vehicle, out: list[fx.Effect]) -> Sortie:
+        """One report of the vehicle flying ``held``: the watch fed, or begun at its item."""
+        held = s.held
+        assert held is not None
         if s.watch is not None:
             s = self._feed(s, s.watch, sample, v, out)
         if s.watch is None:
             # Points before the one flown that no watch ever saw (reports lost, or the
             # service was away): flown unseen, so no service is recorded for them.
             for seq, point in held.points:
-                if seq < v.seq and seq not in s.judged:
+                if seq < sample.seq and seq not in s.judged:
                     out.append(fx.Emit(ev.WaypointSkipped(f"point {point.hover_index}: not seen held (the vehicle "
-                                                           f"flies item {v.seq})", user_id=point.user_id)))
+                                                           f"flies item {sample.seq})", user_id=point.user_id)))
                     s = replace(s, judged=s.judged | {seq})
-            point = held.point_at(v.seq)
-            if point is not None and v.seq not in s.judged:
-                watch = HoldWatch(v.seq, (point.x_m, point.y_m, point.z_m), self.rules.hold_radius_m)
+            point = held.point_at(sample.seq)
+            if point is not None and sample.seq not in s.judged:
+                watch = HoldWatch(sample.seq, (point.x_m, point.y_m, point.z_m), self.rules.hold_radius_m)
                 s = self._feed(s, watch, sample, v, out)
-        return self._maybe_end_hold(s, out)
+        return s
 
+    def _replay(self, s: Sortie, before: HeldMission | None, v: ins.Vehicle, out: list[fx.Effect]) -> Sortie:
+        """The reports kept during a doubt, judged now that the read-back shows the vehicle
+        holds ``s.held``: a hold flown while the service could not tell whose mission the
+        vehicle flew is recorded as the reports show it (on a lossy link a read-back takes
+        seconds, tens of seconds of flight, in which whole holds were flown). ``before``: the
+        mission held when the doubt began; where the read-back shows another of ours (an
+        upload that went through), the reports count while the item flown is the same point
+        in both (when the vehicle switched over beyond that is unknown). A hold that arrived
+        in the doubt is bound to the request in force now, as the arrival is seen now."""
+        kept, s = s.doubted, replace(s, doubted=())
+        for sample in kept:
+            if before is not s.held and not _same_point(before, s.held, sample.seq):
+                break
+            s = self._seen(s, sample, v, out)
+        return s
     def _feed(self, s: Sortie, watch: HoldWatch, sample: Sample, v: ins.Vehicle, out: list[fx.Effect]) -> Sortie:
         before = watch
         watch = watch.feed(sample)
@@ -612,9 +641,7 @@ class SortieLogic:
         point in the same stay)."""
         if up.keep_through is None or s.held is None:
             return False  # a mission begun afresh: its items are not the old ones'
-        old, new = s.held.point_at(seq), up.mission.point_at(seq)
-        return (old is not None and new is not None
-                and (old.hover_index, old.x_m, old.y_m, old.z_m) == (new.hover_index, new.x_m, new.y_m, new.z_m))
+        return s.held.point_at(seq) is not None and _same_point(s.held, up.mission, seq)
 
     def _upload_failed(self, s: Sortie, up: fx.Upload, error: str, unknown: bool, now: float,
                        out: list[fx.Effect]) -> Sortie:
@@ -653,6 +680,7 @@ class SortieLogic:
 
     def _read_back(self, s: Sortie, items: tuple, gen: int, v: ins.Vehicle, out: list[fx.Effect]) -> Sortie:
         why = s.doubt
+        before = s.held
         s = replace(s, doubt=None)
         for candidate in (s.held, s.unconfirmed):
             if candidate is None or not same_mission(items, candidate.items, self.rules.flavour):  # type: ignore[arg-type]
@@ -661,9 +689,12 @@ class SortieLogic:
                 s = replace(s, held=candidate, judged=frozenset())
                 out += [fx.RecordMission(candidate.plan_id, candidate, "accepted"), fx.PublishPlan(candidate)]
             out.append(fx.Log("info", f"{why}: the vehicle holds plan {candidate.plan_id} (read back)"))
-            # A restarted vehicle may hold our mission and still hover where it came back.
-            return replace(s, held_gen=gen, unconfirmed=None, resume_pending=s.restarted and v.airborne,
-                           restarted=False)
+            # A restarted vehicle may hold our mission and still hover where it came back
+            # (what it flew across its restart is not judged: its holds were cut).
+            restarted = s.restarted
+            s = replace(s, held_gen=gen, unconfirmed=None, resume_pending=restarted and v.airborne, restarted=False)
+            return replace(s, doubted=()) if restarted else self._replay(s, before, v, out)
+        s = replace(s, doubted=())
         if s.watch is not None:
             s = self._judge(replace(s, watch=s.watch.abandon("the vehicle no longer holds our mission")), out)
         lost = s.held
@@ -886,3 +917,13 @@ def new_sortie(number: int, rules: Rules, plan_id: int = 0) -> Sortie:
     """The state of a sortie the service starts in (the configuration's authority)."""
     authority = Authority.by_configuration() if rules.start_mission else Authority()
     return Sortie(number=number, authority=authority, plan_id=plan_id)
+
+
+def _same_point(a: HeldMission | None, b: HeldMission | None, seq: int) -> bool:
+    """Item ``seq`` flies to the same planned point (or is the same non-point item) in both."""
+    if a is None or b is None:
+        return False
+    pa, pb = a.point_at(seq), b.point_at(seq)
+    if pa is None or pb is None:
+        return pa is pb and seq < min(len(a.items), len(b.items)) and a.items[seq] == b.items[seq]
+    return (pa.hover_index, pa.x_m, pa.y_m, pa.z_m) == (pb.hover_index, pb.x_m, pb.y_m, pb.z_m)
