@@ -12,6 +12,9 @@ $(STAMP): pyproject.toml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
 	$(PY) -m pip install --quiet -e '.[dev,experiments]'
+	# numba's cache of the planner's kernels, once: a first plan compiling them (a minute or
+	# more on a busy machine) would stall the demo, a service just started, or a timed test
+	$(PY) -m planner_service warm
 	touch $(STAMP)
 
 venv: $(STAMP)

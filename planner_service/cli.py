@@ -7,7 +7,7 @@ import sys
 
 from protocol.arguments import OneLineParser
 
-COMMANDS = ("serve", "demo", "plan", "experiment", "bench", "submit", "keygen", "operator", "export")
+COMMANDS = ("serve", "demo", "plan", "experiment", "bench", "submit", "keygen", "operator", "export", "warm")
 
 
 def build_parser() -> OneLineParser:

@@ -12,7 +12,7 @@ def run(python, env, *args, check=True):
 
 def test_help_lists_the_commands(python, python_env):
     out = run(python, python_env, "-m", "planner_service", "--help").stdout
-    for name in ("serve", "demo", "plan", "experiment", "bench", "submit", "keygen", "export"):
+    for name in ("serve", "demo", "plan", "experiment", "bench", "submit", "keygen", "export", "warm"):
         assert name in out
     out = run(python, python_env, "-m", "sim_bridge", "--help").stdout
     for name in ("vehicle", "users", "lossy-proxy", "router"):
@@ -60,3 +60,12 @@ def test_plan_with_a_clock_budget_only(python, python_env):
     assert summary["intervals"] >= 1 and summary["fairness_violations"] == 0
     bad = run(python, python_env, "-m", "planner_service", "plan", "--algo", "mcts-paper", "--budget-ms", "15", check=False)
     assert bad.returncode == 2 and "iterations" in bad.stderr
+
+
+def test_warm_leaves_the_planners_kernels_in_numbas_cache(python, python_env):
+    from pathlib import Path
+
+    out = run(python, python_env, "-m", "planner_service", "warm").stdout
+    assert out.startswith("planner kernels compiled or loaded in "), out
+    cache = Path(__file__).resolve().parent.parent / "planner_service" / "mcts" / "__pycache__"
+    assert any(cache.glob("*.nbi")), "no kernel in numba's cache beside the search's sources"
