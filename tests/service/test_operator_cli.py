@@ -6,6 +6,7 @@ Ctrl-C."""
 
 from __future__ import annotations
 
+import json
 import signal
 import subprocess
 import sys
@@ -18,7 +19,7 @@ import zenoh
 
 from planner_service.service.processes import REPO, free_port
 from protocol import Keys, OperatorReply, PendingRequest, State, Status, encode
-from protocol.client import PlannerClient, client_config
+from protocol.client import ClientError, PlannerClient, client_config
 from protocol.zenoh_config import session_config
 from tests.support.stack import Stack
 
@@ -85,6 +86,42 @@ def test_a_rogue_queryable_cannot_answer_for_the_service(stack: Stack) -> None:
     finally:
         queryable.undeclare()
         rogue.close()
+
+
+@pytest.mark.timeout(120)
+def test_a_rogue_queryable_that_echoes_the_command_is_not_believed(stack: Stack) -> None:
+    # Was: the client took the first reply that echoed its client_ref and command, so a rogue
+    # that reads the command and answers first said "accepted" for the service.
+    stack.service(zenoh__mode="router")
+    keys = Keys()
+    rogue = zenoh.open(client_config([stack.endpoint], "client"))
+    forged = {"n": 0}
+
+    def answer(query: Any) -> None:  # reads the command and echoes it: accepted, authority given
+        forged["n"] += 1
+        command = json.loads(query.payload.to_bytes())
+        query.reply(keys.operator, encode(OperatorReply(
+            command=command["command"], accepted=True, authority="operator", phase="flying", message="forged",
+            client_ref=command["client_ref"])))
+        query.drop()
+
+    queryable = rogue.declare_queryable(keys.operator, answer)
+    try:
+        time.sleep(0.5)
+        with PlannerClient([stack.endpoint]) as client:
+            with pytest.raises(ClientError) as err:
+                client.operator("start", timeout_s=5.0)
+        assert forged["n"] == 1 and err.value.field == "reply", err.value
+        assert err.value.message.startswith("2 different replies answer the operator's start (client_ref '")
+        assert "two queryables answer on uavmec/uav1/operator (a rogue one, or two services" in err.value.message
+        quiet = operator(stack.endpoint, "start")
+        assert quiet.returncode == 1 and quiet.stdout == "" and "forged" not in quiet.stderr
+        assert quiet.stderr.startswith("error: reply: 2 different replies answer the operator's start"), quiet.stderr
+        assert "Traceback" not in quiet.stderr
+    finally:
+        queryable.undeclare()
+        rogue.close()
+    assert stack.client is not None and stack.client.state().status.authority == "none"
 
 
 class FakeService:
