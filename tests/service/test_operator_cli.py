@@ -7,6 +7,7 @@ Ctrl-C."""
 from __future__ import annotations
 
 import json
+import os
 import signal
 import subprocess
 import sys
@@ -122,6 +123,40 @@ def test_a_rogue_queryable_that_echoes_the_command_is_not_believed(stack: Stack)
         queryable.undeclare()
         rogue.close()
     assert stack.client is not None and stack.client.state().status.authority == "none"
+
+
+@pytest.mark.timeout(60)
+def test_operator_status_into_a_closed_pipe_ends_quietly() -> None:
+    # Was: "operator status | head -1" ended in a BrokenPipeError traceback. Here the reader
+    # has gone before the answer comes: every line the command prints meets a closed pipe.
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    keys = Keys()
+    session = zenoh.open(session_config("peer", [endpoint]))
+
+    def answer(query: Any) -> None:
+        ref = json.loads(query.payload.to_bytes())["client_ref"]
+        query.reply(keys.operator, encode(OperatorReply(
+            command="status", accepted=True, authority="none", phase="idle", message="authority none: not given yet",
+            client_ref=ref, status=Status(vehicle="uav1", phase="idle"))))
+        query.drop()
+
+    queryable = session.declare_queryable(keys.operator, answer)
+    try:
+        heard = operator(endpoint, "status")
+        assert heard.returncode == 0 and heard.stdout.startswith("accepted: status: authority none"), heard
+        assert len(heard.stdout.splitlines()) > 5
+        read, write = os.pipe()
+        os.close(read)
+        try:
+            closed = subprocess.run([sys.executable, "-m", "planner_service", "operator", "status", "--connect",
+                                     endpoint], cwd=REPO, stdout=write, stderr=subprocess.PIPE, text=True, timeout=60)
+        finally:
+            os.close(write)
+    finally:
+        queryable.undeclare()
+        session.close()
+    assert closed.returncode == 141, closed.stderr
+    assert "Traceback" not in closed.stderr and "BrokenPipe" not in closed.stderr, closed.stderr
 
 
 class FakeService:
