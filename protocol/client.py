@@ -8,7 +8,9 @@ request: the same ``client_ref`` and, for an ack, the same user. A reply that do
 queryable that is not the service, a misrouted answer) is refused with ``ClientError("reply",
 ...)``, as are two answers that disagree. A rogue queryable that reads the request can still
 echo both: only access control (no user may declare a queryable on the request keys) stops
-it (docs/PROTOCOL.md, "Who may do what"). Given ``served_seen`` (what the user knows was
+it (docs/PROTOCOL.md, "Who may do what"). ``operator`` judges the operator queryable's
+replies the same way (its command's random ``client_ref`` and the command echoed; two
+answers that disagree are refused). Given ``served_seen`` (what the user knows was
 served to it in its sortie, from its last ack or ``user_place``), the request carries it,
 and the service never counts tasks already served in it (docs/PROTOCOL.md, "Requests").
 
@@ -190,12 +192,15 @@ class PlannerClient:
         """Send an operator's command (``start``, ``hold``, ``status``) and return the
         service's reply, accepted or refused (``reply.accepted``).
 
-        The command carries a fresh random ``client_ref``; only a reply that echoes it, for
-        this command, counts (every queryable on the key is asked, so a rogue one cannot
-        hide the service's answer, and its own answer is ignored). ``ClientError`` with
-        the error's field if the service answered an error, ``("service", ...)`` if no
-        reply came (under access control a user's certificate gets none: only operator
-        certificates may send commands)."""
+        The command carries a fresh random ``client_ref``, and the replier is judged as
+        ``submit`` judges an ack's: every queryable on the key is asked and every reply
+        collected (a rogue one cannot hide the service's answer), only a reply that echoes
+        the ``client_ref``, for this command, answers it, and two answers that disagree are
+        refused (``ClientError("reply", ...)``: a rogue queryable that reads the command and
+        echoes it, or two services for one vehicle). ``ClientError`` with the error's field
+        if the service answered an error, ``("service", ...)`` if no reply answers (under
+        access control a user's certificate gets none: only operator certificates may send
+        commands, and no one but the service may declare the queryable)."""
         if command not in ("start", "hold", "status"):
             raise ClientError("command", f"{command!r} is not start, hold or status")
         if len(reason) > 256:
@@ -203,24 +208,20 @@ class PlannerClient:
         ref = secrets.token_hex(8)
         payload = encode(OperatorCommand(command=command, reason=reason, client_ref=ref))  # type: ignore[arg-type]
         wait_s = timeout_s or self.timeout_s
-        foreign = 0
-        for reply in self.session.get(self.keys.operator, payload=payload, timeout=wait_s,
-                                      target=zenoh.QueryTarget.ALL, consolidation=zenoh.ConsolidationMode.NONE):
-            if reply.ok is None:
-                continue
-            try:
-                answer = decode_operator_reply(reply.ok.payload.to_bytes())
-            except ProtocolError:
-                foreign += 1
-                continue
-            if answer.client_ref != ref or (isinstance(answer, OperatorReply) and answer.command != command):
-                foreign += 1
-                continue
-            if isinstance(answer, ErrorReply):
-                raise ClientError(answer.field, answer.message)
-            return answer
-        ignored = f" ({foreign} replies that did not answer this command ignored)" if foreign else ""
-        raise ClientError("service", f"no reply on {self.keys.operator} within {wait_s:g} s{ignored}")
+        replies = self._replies(self.keys.operator, payload, wait_s)
+        answers = operator_answers(replies, command, ref)
+        if len(answers) > 1:
+            raise ClientError("reply", printable(
+                f"{len(answers)} different replies answer the operator's {command} (client_ref '{ref}'): two "
+                f"queryables answer on {self.keys.operator} (a rogue one, or two services for one vehicle)"))
+        if not answers:
+            foreign = len(replies)
+            ignored = f" ({foreign} replies that did not answer this command ignored)" if foreign else ""
+            raise ClientError("service", f"no reply on {self.keys.operator} within {wait_s:g} s{ignored}")
+        if isinstance(answers[0], ErrorReply):
+            raise ClientError(answers[0].field, answers[0].message)
+        return answers[0]
+
     def follow_place(self, user_id: str, callback: Callable[[UserPlace], None]) -> None:
         """``user_id``'s place in the plan, each time the service publishes it."""
         self._follow_places(self.keys.user(user_id), callback)
@@ -256,6 +257,23 @@ def request_for(user_id: str, x_m: float, y_m: float, tasks: int, z_m: float = 0
         if sortie is not None:
             extra["sortie"] = sortie
     return TaskRequest(user_id=user_id, x_m=x_m, y_m=y_m, tasks=tasks, z_m=z_m, client_ref=client_ref, **extra)
+
+
+def operator_answers(replies: list[bytes], command: str, client_ref: str) -> list[OperatorReply | ErrorReply]:
+    """The different replies of ``replies`` that answer the operator's ``command`` sent with
+    ``client_ref``: an operator reply to that command with that ref, or an error with that
+    ref. One is the answer; none or more than one, and there is none to believe."""
+    answers: list[OperatorReply | ErrorReply] = []
+    for data in replies:
+        try:
+            reply = decode_operator_reply(data)
+        except ProtocolError:
+            continue
+        if reply.client_ref != client_ref or (isinstance(reply, OperatorReply) and reply.command != command):
+            continue
+        if reply not in answers:
+            answers.append(reply)
+    return answers
 
 
 def answer(replies: list[bytes], user_id: str, client_ref: str) -> TaskAck | ErrorReply:

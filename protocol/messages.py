@@ -30,6 +30,7 @@ from typing import Annotated, Any, ClassVar, Literal, Union
 import msgspec
 
 from .area import Area
+from .duplicate_keys import refuse_duplicate_keys
 from .errors import ProtocolError
 
 SCHEMA_VERSION = 1
@@ -333,7 +334,8 @@ def decode(payload: bytes | bytearray | memoryview | str, kind: Any, area: Area 
     """Decode ``payload`` as ``kind`` (a message type or a Union of them) and validate it.
 
     With ``area`` every ``x_m``/``y_m`` must lie in the square and every ``z_m`` in
-    ``[0, area.max_altitude_m]``. Raises ``ProtocolError`` naming the first bad field.
+    ``[0, area.max_altitude_m]``. An object that names a key twice, at any depth, is refused
+    (``protocol.duplicate_keys``). Raises ``ProtocolError`` naming the first bad field.
     """
     if isinstance(payload, str):
         try:
@@ -357,6 +359,7 @@ def decode(payload: bytes | bytearray | memoryview | str, kind: Any, area: Area 
         raise ProtocolError("payload", "nested too deeply") from None
     if isinstance(message, _NoMessage):
         raise ProtocolError("kind", "'-' is not a message kind")
+    refuse_duplicate_keys(data)  # msgspec kept the last of two equal keys without a word
     _check_values(message, area, "")
     return message
 

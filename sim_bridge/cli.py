@@ -6,6 +6,7 @@ import importlib
 import sys
 
 from protocol.arguments import OneLineParser
+from protocol.closed_stdout import quiet_on_closed_stdout
 
 COMMANDS = {
     "vehicle": "sim_bridge.commands.vehicle",
@@ -32,6 +33,12 @@ def build_parser() -> OneLineParser:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Run the command; a reader of stdout that went away (``| head -1``) ends it quietly,
+    exit status 141 (``protocol.closed_stdout``)."""
+    return quiet_on_closed_stdout(lambda: _run(argv))
+
+
+def _run(argv: list[str] | None) -> int:
     args = build_parser().parse_args(argv)
     return int(args._run(args) or 0)
 

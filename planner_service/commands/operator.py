@@ -5,7 +5,7 @@ from its status, plan and event publications and its state query, until Ctrl-C; 
 after the last). ``start``: give the service authority to arm, switch modes and start the
 mission; ``hold``: take it back (the service commands nothing more, the vehicle keeps its
 mission); ``status``: ask. Each prints what the service did. Exit status: 0 accepted,
-1 refused or no answer, 2 a usage error. Under access control only an operator's
+1 refused or no answer, 2 a usage error, 141 the reader of its output went away. Under access control only an operator's
 certificate may send commands (docs/zenoh/operator-tls.json5)."""
 
 from __future__ import annotations

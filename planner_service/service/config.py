@@ -116,8 +116,10 @@ class IntakeConfig(Section):
     one is refused "busy: ..." (a user replacing its own pending request is still taken; a
     request of no tasks or one the fairness rule leaves out of the sortie holds no place)."""
     max_users: int = setting(200, ge=1)
-    """Distinct user ids in one sortie; a request from a new id beyond it is refused "full: ..."
-    (bounds the journal's users and the planner's size)."""
+    """Distinct user ids that hold a place in one sortie; beyond it a servable request from a
+    new id is refused "full: ..." (bounds the planner's size). A user takes a place with its
+    first request that can be served: a request of no tasks or one the fairness rule leaves
+    out of the sortie holds none, and is taken even when the bound is reached."""
     max_requests_per_s: float = setting(50.0, gt=0)
     """Accepted requests per second, over a one-second burst, on the monotonic clock; beyond
     it "busy: ..." (bounds the journal's growth and the fsyncs a flood costs)."""

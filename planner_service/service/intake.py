@@ -20,7 +20,8 @@ Bounds (``IntakeConfig``), so that a flood on the request keys cannot grow the j
 planner or the fsync load without limit: pending requests that can be served (a new one
 beyond it is refused "busy: ..."; replacing one's own is always allowed; a request that
 cannot be served in this sortie -- no tasks, or the fairness rule leaves its user out --
-holds no place), distinct users in the sortie ("full: ..."), accepted requests per second
+holds no place), distinct users in the sortie ("full: ..."; such a request holds no user's
+place either), accepted requests per second
 ("busy: ...", a one-second token bucket on the monotonic clock: a wall clock stepped back
 refuses nothing; the wall clock only stamps the journal).
 """
@@ -151,9 +152,10 @@ class Intake:
         self.unservable = unservable
         self.closed_reason: str | None = None
         """When set, every request is refused with this message (shutdown, sortie over)."""
-        self._users = journal.user_ids()
-        """Users of this sortie (at most ``limits.max_users``), kept here so that the check
-        does not scan the journal on every request."""
+        self._users = journal.counted_user_ids()
+        """Users that hold a place in this sortie (at most ``limits.max_users``): each took it
+        with its first request that could be served. Kept here so that the check does not
+        scan the journal on every request."""
         self._rate = RateLimit(limits.max_requests_per_s, monotonic())
         self.places: Mapping[str, Place] = {}
         """Every user's place in the current plan (``places.plan_places``), for the ack."""
@@ -161,7 +163,7 @@ class Intake:
     def new_sortie(self) -> None:
         """The journal began a new sortie: open, count that sortie's users, no plan yet."""
         self.closed_reason = None
-        self._users = self.journal.user_ids()
+        self._users = self.journal.counted_user_ids()
         self.places = {}
 
     def set_places(self, places: Mapping[str, Place]) -> None:
@@ -209,7 +211,8 @@ class Intake:
             position = next((i for i, r in enumerate(self.journal.pending(), 1) if r.request_id == request_id), 0)
         except JournalError as err:
             return Rejected(ErrorReply(field="journal", message=_sendable(str(err)), client_ref=request.client_ref))
-        self._users.add(request.user_id)
+        if why_not is None:  # a request of no tasks, or one the fairness rule leaves out, takes no place
+            self._users.add(request.user_id)
         place = self.places.get(request.user_id)
         ack = TaskAck(request_id=request_id, user_id=request.user_id, accepted_at_s=now, queue_position=position,
                       client_ref=request.client_ref, sortie=sortie, served_tasks=served,
@@ -220,10 +223,11 @@ class Intake:
     def _over_limit(self, user_id: str, servable: bool, pending: list[RequestRow],
                     services: dict[str, int]) -> str | None:
         """Why this valid request cannot be taken now, or None. Checked in this order so that
-        a refused request costs no rate token. Only requests that can be served count
-        against the pending bound (each user's own is left out: it is replaced)."""
+        a refused request costs no rate token. Only requests that can be served need a
+        user's place or count against the pending bound (each user's own is left out: it is
+        replaced), so that requests which cannot be served fill neither bound."""
         lim = self.limits
-        if user_id not in self._users and len(self._users) >= lim.max_users:
+        if servable and user_id not in self._users and len(self._users) >= lim.max_users:
             return (f"full: this sortie already has {len(self._users)} users (intake.max_users); "
                     f"a new user id is not taken")
         if servable:

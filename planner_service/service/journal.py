@@ -758,19 +758,24 @@ class Journal:
         return int(self._rows("SELECT COUNT(*) FROM requests WHERE sortie = ? AND status = 'pending'",
                               (self.sortie,))[0][0])
 
-    def user_ids(self) -> set[str]:
-        """Every user id with a request in the current sortie."""
-        return {r[0] for r in self._rows("SELECT DISTINCT user_id FROM requests WHERE sortie = ?", (self.sortie,))}
+    def counted_user_ids(self) -> set[str]:
+        """The user ids that hold a place in the current sortie (``intake.max_users``): every
+        user with a request that did not close as it arrived for having no tasks left."""
+        return {r[0] for r in self._rows(
+            f"SELECT DISTINCT user_id FROM requests WHERE sortie = ? AND {_COUNTED}", (self.sortie, *_COUNTED_ARGS))}
 
     def users(self, sortie: int | None = None) -> list[UserRow]:
-        """Every user heard from in the sortie, in order of first request; position from its
-        latest; services counted in that sortie."""
+        """Every user that holds a place in the sortie (``counted_user_ids``: a user that only
+        ever said it had nothing to offload is not one, so that such users cannot grow the
+        planner), in order of first request; position from its latest; services counted in
+        that sortie."""
         n = self._n(sortie)
         rows = self._rows(
             "SELECT r.user_id, r.x_m, r.y_m, r.z_m, "
             "(SELECT COUNT(*) FROM services s WHERE s.sortie = ? AND s.user_id = r.user_id) "
             "FROM requests r JOIN (SELECT user_id, MIN(request_id) AS first, MAX(request_id) AS last "
-            "FROM requests WHERE sortie = ? GROUP BY user_id) u ON r.request_id = u.last ORDER BY u.first", (n, n))
+            f"FROM requests WHERE sortie = ? GROUP BY user_id HAVING MAX({_COUNTED})) u ON r.request_id = u.last "
+            "ORDER BY u.first", (n, n, *_COUNTED_ARGS))
         return [UserRow(*r) for r in rows]
 
     def services(self, sortie: int | None = None) -> list[ServiceRow]:
@@ -935,6 +940,13 @@ _REQ = _req_columns()
 """The columns of a ``RequestRow``, as the journal stands."""
 NO_TASKS = "no tasks to offload"
 """The reason of a request of no tasks (closed as it arrives)."""
+_COUNTED = "NOT (status = 'not_served' AND substr(reason, 1, ?) = ?)"
+"""A request that gives its user a place in the sortie: any but one closed as it arrived
+for having no tasks left (``accept``; its reason starts with ``NO_TASKS``). The intake gives
+a place to a user's first request that can be served; under the model's rule (3), (9c),
+and without one, that is exactly a request with tasks left, as the rule leaves out only
+users already served, who hold a place. So a restart counts what the intake counted."""
+_COUNTED_ARGS = (len(NO_TASKS), NO_TASKS)
 
 
 def _mission(r: tuple[Any, ...]) -> MissionRow:

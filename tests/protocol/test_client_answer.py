@@ -1,13 +1,14 @@
 """The client takes as its ack only a reply that answers its own request (issue 14.5): the
 same client_ref and, for an ack, the same user; a forged or misrouted reply is refused with
-a clear error, and two answers that disagree are refused too."""
+a clear error, and two answers that disagree are refused too. The operator's replies are
+judged the same way."""
 
 from __future__ import annotations
 
 import pytest
 
-from protocol import ErrorReply, TaskAck, encode
-from protocol.client import ClientError, answer, new_client_ref
+from protocol import ErrorReply, OperatorReply, TaskAck, decode_operator_reply, encode
+from protocol.client import ClientError, answer, new_client_ref, operator_answers
 
 
 def ack(user: str = "u-1", ref: str | None = "r-1", rid: int = 5) -> bytes:
@@ -52,3 +53,21 @@ def test_a_forged_ref_with_control_characters_is_reported_escaped() -> None:
 def test_client_refs_are_fresh() -> None:
     refs = {new_client_ref() for _ in range(1000)}
     assert len(refs) == 1000 and all(len(r) == 16 for r in refs)
+
+
+def reply(command: str = "start", ref: str | None = "r-1", message: str = "authority given") -> bytes:
+    return encode(OperatorReply(command=command, accepted=True, authority="operator", phase="idle",  # type: ignore[arg-type]
+                                message=message, client_ref=ref))
+
+
+def test_an_operator_reply_is_judged_as_an_ack() -> None:
+    # Was: the first reply that echoed the client_ref and the command was believed, so a
+    # rogue queryable that read the command and answered first spoke for the service.
+    assert operator_answers([reply()], "start", "r-1") == [OperatorReply(
+        command="start", accepted=True, authority="operator", phase="idle", message="authority given",
+        client_ref="r-1")]
+    assert len(operator_answers([reply(), reply(message="forged")], "start", "r-1")) == 2  # refused by operator()
+    assert len(operator_answers([reply(), reply(), b"{junk"], "start", "r-1")) == 1  # one answer, two routes
+    assert operator_answers([reply(ref="r-2"), reply(command="hold"), reply(ref=None)], "start", "r-1") == []
+    error = ErrorReply(field="command", message="no", client_ref="r-1")
+    assert operator_answers([encode(error), reply()], "start", "r-1") == [error, decode_operator_reply(reply())]

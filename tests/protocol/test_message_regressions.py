@@ -4,11 +4,13 @@ payload accepted that the wire contract refuses."""
 
 from __future__ import annotations
 
+from typing import Any
+
 import pytest
 
 from protocol import (
-    Area, ErrorReply, Event, Keys, Plan, ProtocolError, State, Status, TaskRequest, decode, decode_reply,
-    decode_request, encode,
+    Area, ErrorReply, Event, Keys, Plan, ProtocolError, State, Status, TaskRequest, decode, decode_operator_command,
+    decode_operator_reply, decode_reply, decode_request, encode,
 )
 
 AREA = Area(side_m=500.0, max_altitude_m=150.0)
@@ -87,3 +89,39 @@ def test_an_empty_key_keeps_its_place_in_the_path() -> None:
     # {"": {"0": NaN}} was named "0", as if "0" were a top-level field.
     err = refused(b'{"client_ref": null, "": {"0": NaN}}')
     assert err.field == ".0"
+
+
+DUPLICATED = [
+    # (payload, decoder, the key named): the last of two equal keys used to win, silently
+    (b'{"kind": "operator_command", "command": "hold", "command": "start"}', decode_operator_command, "command"),
+    (b'{"kind": "operator_command", "command": "hold", "comm\\u0061nd": "start"}', decode_operator_command, "command"),
+    (b'{"kind": "operator_command", "\\u0063ommand": "hold", "command": "hold"}', decode_operator_command, "command"),
+    (b'{"kind": "task_request", ' + GOOD + b', "tasks": 900}', lambda p: decode_request(p, AREA), "tasks"),
+    (b'{"kind": "task_request", "kind": "task_request", ' + GOOD + b"}", lambda p: decode_request(p, AREA), "kind"),
+    (b'{"kind": "task_ack", "request_id": 1, "user_id": "u-1", "client_ref": "mine", "client_ref": "mine"}',
+     decode_reply, "client_ref"),
+    (b'{"kind": "operator_reply", "command": "start", "accepted": false, "authority": "none", "phase": "idle", '
+     b'"status": {"kind": "status", "mode": "AUTO", "mode": "LOITER"}}', decode_operator_reply, "status.mode"),
+    (b'{"kind": "plan", "points": [{"x_m": 1, "y_m": 2, "z_m": 3}, {"x_m": 1, "y_m": 2, "z_m": 3, "z_\\u006d": 3}]}',
+     lambda p: decode(p, Plan), "points[1].z_m"),
+]
+
+
+@pytest.mark.parametrize("payload, decoder, key", DUPLICATED)
+def test_an_object_that_names_a_key_twice_is_refused_naming_it(payload: bytes, decoder: Any, key: str) -> None:
+    # msgspec kept the last value: {"command": "hold", "command": "start"} ran start, while
+    # another reader of the same bytes (a log, a proxy) may take hold.
+    with pytest.raises(ProtocolError) as err:
+        decoder(payload)
+    assert (err.value.field, err.value.message) == (
+        key, "is named twice in one object (a duplicate key: which value counts would be a guess)")
+
+
+def test_escaped_keys_and_colons_without_a_duplicate_decode() -> None:
+    # The fast check counts colons; an escaped colon (\u003a) or an escaped key sends the
+    # payload to the exact check, which clears it.
+    command = decode_operator_command(b'{"kind": "operator_command", "comm\\u0061nd": "hold", '
+                                      b'"reason": "a\\u003ab:c", "client_ref": "x:y"}')
+    assert (command.command, command.reason, command.client_ref) == ("hold", "a:b:c", "x:y")
+    plan = decode(b'{"kind": "plan", "points": [{"x_m": 1, "y_m": 2, "z_m": 3}, {"x_m": 1, "y_m": 2, "z_m": 3}]}', Plan)
+    assert len(plan.points) == 2  # the same key in two objects is no duplicate

@@ -49,7 +49,7 @@ def test_pending_bound_refuses_a_new_user_but_not_a_replacement(tmp_path: Path) 
     again = intake.handle(request("a", tasks=9))  # a replaces its own: still taken
     assert isinstance(again, Accepted) and again.replaced == (1,)
     assert [r.user_id for r in journal.pending()] == ["b", "a"]
-    assert journal.user_ids() == {"a", "b"}  # the refused user left no row
+    assert {r.user_id for r in journal.requests()} == {"a", "b"}  # the refused user left no row
 
 
 def test_requests_of_no_tasks_hold_no_pending_place(tmp_path: Path) -> None:
@@ -109,6 +109,50 @@ def test_user_bound_counts_users_already_in_the_journal(tmp_path: Path) -> None:
     assert isinstance(refused, Rejected)
     assert refused.reply.message == "full: this sortie already has 2 users (intake.max_users); a new user id is not taken"
     assert isinstance(intake.handle(request("b")), Accepted)
+
+
+def test_requests_that_cannot_be_served_hold_no_user_place(tmp_path: Path) -> None:
+    # Was: 200 requests of "tasks": 0 from distinct ids took every place of intake.max_users,
+    # and every new user after them was refused "full" for the rest of the sortie.
+    intake, journal, _, mono = make(tmp_path, max_users=3)
+    for i in range(200):
+        mono.t += 1.0
+        out = intake.handle(request(f"idle-{i}", tasks=0))
+        assert isinstance(out, Accepted) and out.unservable == "no tasks to offload", (i, out)
+    for user in ("a", "b", "c"):
+        mono.t += 1.0
+        assert isinstance(intake.handle(request(user, tasks=4)), Accepted), user
+    mono.t += 1.0
+    refused = intake.handle(request("d", tasks=4))
+    assert isinstance(refused, Rejected)
+    assert refused.reply.message == "full: this sortie already has 3 users (intake.max_users); a new user id is not taken"
+    mono.t += 1.0
+    assert isinstance(intake.handle(request("d", tasks=0)), Accepted)  # nothing to serve: needs no place
+    mono.t += 1.0
+    assert isinstance(intake.handle(request("a", tasks=0)), Accepted)  # a's backlog done: it keeps its place
+    assert journal.counted_user_ids() == {"a", "b", "c"}
+    assert [u.user_id for u in journal.users()] == ["a", "b", "c"]  # the planner sees no idle user
+    journal.close()
+    intake, journal, _, mono = make(tmp_path, max_users=3)  # a restart counts the same places
+    assert isinstance(intake.handle(request("e", tasks=4)), Rejected)
+    assert isinstance(intake.handle(request("b", tasks=6)), Accepted)
+
+
+def test_a_request_the_rule_leaves_out_holds_no_user_place(tmp_path: Path) -> None:
+    # The model's rule leaves out only users already served (who hold a place); any rule that
+    # leaves out a new user's request gives it none either.
+    journal = Journal(tmp_path / "j.sqlite")
+    mono = Clock(1000.0)
+    intake = Intake(journal, Area(500.0, 120.0, 10.0), Clock(1_732_312_000.0), IntakeConfig(max_users=1),
+                    monotonic=mono, unservable=lambda tasks, services: "fairness: too few" if tasks < 3 else None)
+    for user in ("small-1", "small-2"):
+        mono.t += 1.0
+        out = intake.handle(request(user, tasks=2))
+        assert isinstance(out, Accepted) and out.unservable == "fairness: too few", out
+    mono.t += 1.0
+    assert isinstance(intake.handle(request("big", tasks=9)), Accepted)
+    mono.t += 1.0
+    assert isinstance(intake.handle(request("big-2", tasks=9)), Rejected)
 
 
 def test_rate_bound_is_a_one_second_bucket_on_the_monotonic_clock(tmp_path: Path) -> None:

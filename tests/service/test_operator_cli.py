@@ -6,6 +6,8 @@ Ctrl-C."""
 
 from __future__ import annotations
 
+import json
+import os
 import signal
 import subprocess
 import sys
@@ -18,7 +20,7 @@ import zenoh
 
 from planner_service.service.processes import REPO, free_port
 from protocol import Keys, OperatorReply, PendingRequest, State, Status, encode
-from protocol.client import PlannerClient, client_config
+from protocol.client import ClientError, PlannerClient, client_config
 from protocol.zenoh_config import session_config
 from tests.support.stack import Stack
 
@@ -85,6 +87,76 @@ def test_a_rogue_queryable_cannot_answer_for_the_service(stack: Stack) -> None:
     finally:
         queryable.undeclare()
         rogue.close()
+
+
+@pytest.mark.timeout(120)
+def test_a_rogue_queryable_that_echoes_the_command_is_not_believed(stack: Stack) -> None:
+    # Was: the client took the first reply that echoed its client_ref and command, so a rogue
+    # that reads the command and answers first said "accepted" for the service.
+    stack.service(zenoh__mode="router")
+    keys = Keys()
+    rogue = zenoh.open(client_config([stack.endpoint], "client"))
+    forged = {"n": 0}
+
+    def answer(query: Any) -> None:  # reads the command and echoes it: accepted, authority given
+        forged["n"] += 1
+        command = json.loads(query.payload.to_bytes())
+        query.reply(keys.operator, encode(OperatorReply(
+            command=command["command"], accepted=True, authority="operator", phase="flying", message="forged",
+            client_ref=command["client_ref"])))
+        query.drop()
+
+    queryable = rogue.declare_queryable(keys.operator, answer)
+    try:
+        time.sleep(0.5)
+        with PlannerClient([stack.endpoint]) as client:
+            with pytest.raises(ClientError) as err:
+                client.operator("start", timeout_s=5.0)
+        assert forged["n"] == 1 and err.value.field == "reply", err.value
+        assert err.value.message.startswith("2 different replies answer the operator's start (client_ref '")
+        assert "two queryables answer on uavmec/uav1/operator (a rogue one, or two services" in err.value.message
+        quiet = operator(stack.endpoint, "start")
+        assert quiet.returncode == 1 and quiet.stdout == "" and "forged" not in quiet.stderr
+        assert quiet.stderr.startswith("error: reply: 2 different replies answer the operator's start"), quiet.stderr
+        assert "Traceback" not in quiet.stderr
+    finally:
+        queryable.undeclare()
+        rogue.close()
+    assert stack.client is not None and stack.client.state().status.authority == "none"
+
+
+@pytest.mark.timeout(60)
+def test_operator_status_into_a_closed_pipe_ends_quietly() -> None:
+    # Was: "operator status | head -1" ended in a BrokenPipeError traceback. Here the reader
+    # has gone before the answer comes: every line the command prints meets a closed pipe.
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    keys = Keys()
+    session = zenoh.open(session_config("peer", [endpoint]))
+
+    def answer(query: Any) -> None:
+        ref = json.loads(query.payload.to_bytes())["client_ref"]
+        query.reply(keys.operator, encode(OperatorReply(
+            command="status", accepted=True, authority="none", phase="idle", message="authority none: not given yet",
+            client_ref=ref, status=Status(vehicle="uav1", phase="idle"))))
+        query.drop()
+
+    queryable = session.declare_queryable(keys.operator, answer)
+    try:
+        heard = operator(endpoint, "status")
+        assert heard.returncode == 0 and heard.stdout.startswith("accepted: status: authority none"), heard
+        assert len(heard.stdout.splitlines()) > 5
+        read, write = os.pipe()
+        os.close(read)
+        try:
+            closed = subprocess.run([sys.executable, "-m", "planner_service", "operator", "status", "--connect",
+                                     endpoint], cwd=REPO, stdout=write, stderr=subprocess.PIPE, text=True, timeout=60)
+        finally:
+            os.close(write)
+    finally:
+        queryable.undeclare()
+        session.close()
+    assert closed.returncode == 141, closed.stderr
+    assert "Traceback" not in closed.stderr and "BrokenPipe" not in closed.stderr, closed.stderr
 
 
 class FakeService:

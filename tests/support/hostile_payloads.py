@@ -349,16 +349,20 @@ def _unicode(text: str) -> bool:
     return True
 
 
+class _DuplicateKey(ValueError):
+    pass
+
+
 def _no_duplicates(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
     keys = [k for k, _ in pairs]
     if len(set(keys)) != len(keys):
-        raise ValueError("duplicate key")  # msgspec keeps the last: the oracle does not guess
+        raise _DuplicateKey("duplicate key")  # an object that names a key twice is refused
     return dict(pairs)
 
 
 def valid_request(payload: bytes, side_m: float, max_alt_m: float) -> dict[str, Any] | None:
     """The request's fields if ``payload`` is a valid task request (docs/PROTOCOL.md), else
-    None. Undecidable payloads (duplicate keys) raise ValueError."""
+    None (an object that names a key twice, at any depth, is not valid)."""
     if len(payload) > MAX_PAYLOAD_BYTES:
         return None
     try:
@@ -372,7 +376,7 @@ def valid_request(payload: bytes, side_m: float, max_alt_m: float) -> dict[str, 
         data = json.loads(text, parse_constant=lambda c: non_finite.append(c), object_pairs_hook=_no_duplicates)
     except RecursionError:
         return None
-    except json.JSONDecodeError:
+    except (json.JSONDecodeError, _DuplicateKey):
         return None
     if non_finite or not isinstance(data, dict) or set(data) - REQUEST_FIELDS:
         return None
