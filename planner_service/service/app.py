@@ -175,7 +175,7 @@ class Service:
         if last is not None:
             held = HeldMission.from_journal(last.plan_id, last.items, last.points, self.flavour)
             judged = held.served_since(last.time_s, [(s.user_id, s.time_s) for s in services])
-        return replace(state, over=(sortie.why or "ended") if sortie.over else None,
+        return replace(state, just_started=True, over=(sortie.why or "ended") if sortie.over else None,
                        flown=j.get_meta(FLOWN_KEY) == str(sortie.number), held=held, judged=judged,
                        last_hover_index=services[-1].hover_index if services else -1, services=len(services))
 

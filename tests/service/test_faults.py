@@ -79,14 +79,25 @@ def test_vehicle_restart_mid_sortie(stack: Stack, backend: str, flavour: str) ->
     back_at = time.time()
     second = stack.vehicle(*args)  # the same port, the same state file
     assert "restarted from" in second.log() and "airborne" in second.log()
+    # A restart ends the authority: the mission goes up again, and nothing more until the
+    # operator's start (the restarted vehicle holds where it came back).
+    revoked = stack.wait_event(lambda e: e.event == "authority_revoked" and e.time_s > back_at, 30.0,
+                               "the authority ended by the restart")
     uploaded = stack.wait_event(lambda e: e.event == "mission_uploaded" and e.time_s > back_at, 30.0,
                                 "a mission after the restart")
+    time.sleep(1.0)  # 40 s of the vehicle's time: the service commands nothing of its own
+    # (a mission uploaded may set its current item, 224: that moves no vehicle out of a hold)
+    assert not re.findall(r"command (?:176|300|400|20|21|22) ", second.log()), second.log()[-2000:]
+    assert not any(e.event == "mission_resumed" for e in stack.events)
+    client = stack.client
+    assert client is not None and client.operator("start", "resume after the restart", timeout_s=10.0).accepted
     resumed = stack.wait_event(lambda e: e.event == "mission_resumed", 30.0, "the mission resumed")
     stack.wait_event(lambda e: e.event == "landed", 120.0, "landing")
     assert users.stop() == 0 and service.stop() == 0
 
     kinds = [e.event for e in stack.events]
-    assert "vehicle_restarted" in kinds, kinds
+    # ended by the mode the vehicle came back in, or by the restart: whichever is seen first
+    assert "vehicle_restarted" in kinds and ("restarted" in revoked.detail or "mode changed" in revoked.detail), kinds
     check_sortie(stack, scenario, flavour, [first.log(), second.log()])
     print(f"\nvehicle restart ({backend}): new mission accepted {uploaded.time_s - back_at:.2f} s after the vehicle was started "
           f"again, resumed at {resumed.time_s - back_at:.2f} s ({uploaded.detail.split(';')[0]})")
@@ -109,7 +120,9 @@ def test_service_killed_mid_sortie_resumes_from_the_journal(stack: Stack) -> Non
     kill(first)
     assert stack.rows("SELECT COUNT(*) FROM services")[0][0] >= 1
     back_at = time.time()
-    stack.service(**SERVICE)
+    second = stack.service(**SERVICE)
+    # started with the vehicle in the air: what was done to it meanwhile is unknown
+    stack.wait_log(second, "authority ended: revoked: the service started with the vehicle in the air", 30.0)
     acked.append(client.submit("probe-2", 100.0, 400.0, 15).request_id)
     uploaded = stack.wait_event(lambda e: e.event == "mission_uploaded" and e.time_s > back_at, 30.0,
                                 "a mission after the restart")

@@ -91,13 +91,25 @@ def test_the_vehicles_clock_rate_is_unknown_until_measured() -> None:
 
 # --- restarts take two readings ------------------------------------------------------------------------
 def test_one_reading_from_the_past_is_only_a_suspicion() -> None:
-    watch = ClockWatch(slack_s=2.0)
-    assert [watch.observe(t) for t in (100.0, 100.25, 0.0, 100.5, 100.75)] == ["ok", "ok", "suspect", "ok", "ok"]
+    watch = ClockWatch(slack_s=2.0, confirm_s=0.5)
+    assert [watch.observe(t, 1.0, t) for t in (100.0, 100.25, 0.0, 100.5, 100.75)] == ["ok", "ok", "suspect", "ok",
+                                                                                         "ok"]
     assert watch.boot_s == 100.75
-    assert [watch.observe(t) for t in (1.0, 1.25, 1.5)] == ["suspect", "restart", "ok"]
+    assert [watch.observe(t, 1.0, 100.0 + t) for t in (1.0, 1.25, 1.5, 1.75)] == ["suspect", "suspect", "restart",
+                                                                                   "ok"]
     fast = ClockWatch(slack_s=2.0)
-    assert [fast.observe(100.0), fast.observe(85.0, rate=10.0)] == ["ok", "ok"]  # 10x: 20 vehicle s of slack
-    assert fast.observe(70.0, rate=1.0) == "suspect"
+    assert [fast.observe(100.0, 1.0, 0.0), fast.observe(85.0, 10.0, 0.1)] == ["ok", "ok"]  # 10x: 20 vehicle s of slack
+    assert fast.observe(70.0, 1.0, 0.2) == "suspect"
+
+
+def test_readings_in_one_moment_are_no_restart_however_many() -> None:
+    # A forged datagram held two GLOBAL_POSITION_INT of a new clock, 1000 and 1100 ms: it
+    # was taken as a restart, which gave back an authority the pilot's LOITER had ended.
+    watch = ClockWatch(slack_s=2.0, confirm_s=0.5)
+    watch.observe(500.0, 1.0, 10.0)
+    assert [watch.observe(t, 1.0, 10.01) for t in (1.0, 1.1, 1.2, 1.3)] == ["suspect"] * 4
+    assert watch.observe(501.0, 1.0, 10.6) == "ok", "the old clock again: the suspicion is dropped"
+    assert watch.observe(1.4, 1.0, 10.7) == "suspect" and watch.observe(1.9, 1.0, 11.3) == "restart"
 
 
 # --- the telemetry asked for ----------------------------------------------------------------------------
@@ -200,7 +212,7 @@ def test_forged_messages_from_another_component_change_nothing() -> None:
     assert [e for e in events if isinstance(e, (Restarted, Landed, StatusText, ModeChanged))] == []
 
 
-def test_a_restart_is_believed_only_on_two_reports() -> None:
+def test_a_restart_is_believed_only_on_reports_spread_over_time() -> None:
     clock = Clock()
     state, events = vehicle(clock)
     for t in range(8):
@@ -210,8 +222,10 @@ def test_a_restart_is_believed_only_on_two_reports() -> None:
     feed(state, position(82_000))
     assert not [e for e in events if isinstance(e, Restarted)]
     feed(state, position(500))
-    feed(state, position(750))  # the second: a real restart
-    assert [e for e in events if isinstance(e, Restarted)] and state.telemetry.position_boot_s == 0.75
+    assert not feed(state, position(600)), "a second report at once (one datagram) is no evidence"
+    clock.now += 0.5
+    feed(state, position(1_000))  # the new clock goes on: a real restart
+    assert [e for e in events if isinstance(e, Restarted)] and state.telemetry.position_boot_s == 1.0
     assert not state.telemetry.home_set and not state.telemetry.position_ok
 
 

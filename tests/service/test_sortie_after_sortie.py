@@ -3,7 +3,8 @@ service + simulated users as real processes, real zenoh and real MAVLink on loop
 
 - ``test_three_sorties_in_a_row`` (CI): three sorties; between the first two a request is
   refused with the reason and the service is restarted (it resumes "sortie 1 over" and
-  begins sortie 2 itself); during the second it is restarted again (it resumes sortie 2).
+  begins sortie 2 itself); during the second it is restarted again (it resumes sortie 2
+  without authority, in the air, until the operator's start).
   Every sortie: each request served, replaced or not served with a reason, fairness per
   sortie, the energy reserve held.
 - ``test_restore_between_and_during_sorties``: what a restarted service takes from the
@@ -128,6 +129,11 @@ def test_three_sorties_in_a_row(stack: Stack) -> None:
     assert second.stop() == 0  # a restart during sortie 2, in the air
     third = stack.service(**settings)
     assert "ready: sortie 2 (running)" in third.log()
+    # restarted in the air, it has no authority (what happened while it was away is not
+    # known) until the operator gives it: then sortie 2's landing is its own, and sortie 3
+    # begins with the configuration's
+    stack.wait_log(third, "authority ended: revoked: the service started with the vehicle in the air", 30.0)
+    assert client.operator("start", "the vehicle is seen flying our mission", timeout_s=10.0).accepted
     wait_sortie(stack, 2, True, 60.0)
     wait_sortie(stack, 3, False, 30.0)
     wait_sortie(stack, 3, True, 60.0)

@@ -15,6 +15,7 @@ from planner_service.service.planning import PlannedPath, PlannedPoint
 from planner_service.service.sortie import Rules, Sortie, SortieLogic, Vehicle, new_sortie
 from planner_service.service.sortie import effects as fx
 from planner_service.service.sortie import inputs as ins
+from planner_service.service.sortie.authority import Authority
 from protocol import Area, GeoOrigin
 from protocol.mission import NAV_RTL
 
@@ -208,13 +209,13 @@ def test_restart_read_back_and_a_lost_mission_resumed_from_where_it_is() -> None
     run, up = fly_to_first_point(world)
     (searching,) = only(run.tick(seq=2, xyz=(120.0, 200.0, 100.0), boot_s=20.0), fx.Plan)
     out = run.feed(ins.VehicleRestarted("its clock went back"), boot_s=1.0, mode="LOITER", seq=0)
-    assert [e.event.kind for e in only(out, fx.Emit)][0] == "vehicle_restarted"
+    assert [e.event.kind for e in only(out, fx.Emit)][:2] == ["authority_revoked", "vehicle_restarted"]
     assert not only(out, fx.RecordService), "a hold of no measurable length serves nothing"
     # The decision being searched was made on the mission the restart lost: dropped.
     out = run.feed(ins.Planned(searching.basis, path(point(9, 400.0, 300.0, "b", 2))))
     assert not only(out, fx.Upload)
     assert only(out, fx.ReadBack), "read back before anything else"
-    assert run.s.authority.granted, "a restart is not a pilot's mode change"
+    assert run.s.authority.state == "revoked", "a restart ends the authority"
     out = run.feed(ins.ReadBackDone((), 3))  # the mission is gone
     assert run.s.must_upload and run.s.resume_pending
     (plan,) = only(out, fx.Plan)
@@ -222,7 +223,12 @@ def test_restart_read_back_and_a_lost_mission_resumed_from_where_it_is() -> None
     (up2,) = only(run.feed(ins.Planned(plan.basis, path(point(7, 320.0, 200.0, "b", 2)))), fx.Upload)
     assert up2.current_seq == 2, "a fresh mission in the air is flown from its first point"
     out = run.feed(ins.Uploaded(up2, 4))
-    (cmd,) = only(out, fx.Command)
+    assert not only(out, fx.Command), "the mission is on board; only the operator resumes it"
+    run.s, out, ok, _ = run.logic.operator(run.s, ins.OperatorCommand("start"), run.v, run.now)
+    assert ok and run.s.authority.granted
+    (plan,) = only(out, fx.Plan)  # from where the vehicle is now, then resumed
+    (up3,) = only(run.feed(ins.Planned(plan.basis, path(point(7, 320.0, 200.0, "b", 2)))), fx.Upload)
+    (cmd,) = only(run.feed(ins.Uploaded(up3, 4)), fx.Command)
     assert (cmd.kind, cmd.seq) == ("resume", 2)
 
 
@@ -413,35 +419,60 @@ def test_a_hold_the_battery_cannot_carry_is_cut_to_what_keeps_the_reserve() -> N
     assert up.items[2].param1 == math.ceil(cut) and up.items[3].command == NAV_RTL
 
 
-def test_the_mode_a_restarted_autopilot_comes_back_in_is_not_a_pilots() -> None:
+def test_a_restart_never_gives_back_an_authority_the_pilot_ended() -> None:
+    # A forged restart (two reports of a new clock in one datagram) 0.5 s after the pilot's
+    # LOITER gave the authority back: the service switched the vehicle to AUTO again.
     world = FakeWorld()
     run, _ = fly_to_first_point(world)
-    run.feed(ins.ModeChanged("LOITER"), mode="LOITER", boot_s=1.0)  # heard before the restart is believed
+    run.feed(ins.ModeChanged("LOITER"), mode="LOITER", boot_s=1.0)
     assert run.s.authority.state == "revoked"
-    out = run.feed(ins.VehicleRestarted("its clock went back (seen twice)"))
-    assert run.s.authority.granted, "the restart changed the mode, not a pilot"
-    assert "authority_granted" in [e.event.kind for e in only(out, fx.Emit)]
-    run.now += 10.0  # a later restart explains nothing
-    run.feed(ins.ModeChanged("AUTO", commanded=True), mode="AUTO")
-    run.feed(ins.ModeChanged("LOITER"), mode="LOITER")
-    run.now += 10.0
-    run.feed(ins.VehicleRestarted("again"))
-    assert run.s.authority.state == "revoked"
+    out = run.feed(ins.VehicleRestarted("its clock went back"))
+    assert run.s.authority.state == "revoked" and "authority_granted" not in [e.event.kind for e in only(out, fx.Emit)]
+    assert not only(run.effects[-len(out):], fx.Command)
 
 
-def test_a_restart_believed_after_the_landing_it_caused_still_gives_the_next_sortie_its_authority() -> None:
-    # SITL killed in the air comes back on the ground, disarmed, in STABILIZE: its heartbeat
-    # (the mode, the landing) can be judged before two position reports show the restart.
-    # The restart explains both, whichever comes first (a CI run met this order).
+def test_a_restart_ends_the_authority_and_after_it_any_mode_change_is_unexplained() -> None:
+    # After a restart (forged or a brown-out) the pilot's LOITER and LAND ended nothing: the
+    # mode expected was unset, and unset explained every change.
+    world = FakeWorld()
+    run, _ = fly_to_first_point(world)
+    out = run.feed(ins.VehicleRestarted("its clock went back"))
+    assert run.s.authority.state == "revoked" and "authority_revoked" in [e.event.kind for e in only(out, fx.Emit)]
+    given = Authority.by_operator("again")
+    assert given.on_mode("LOITER", armed=True, mission_return=False).state == "revoked", "expected unknown"
+    assert given.on_mode("LAND", armed=False, mission_return=True).state == "revoked"
+    assert given.commanding("AUTO").on_mode("AUTO", armed=True, mission_return=False).granted
+
+
+def test_a_restart_that_landed_the_vehicle_leaves_the_next_sortie_to_the_operator() -> None:
+    # SITL killed in the air comes back on the ground, disarmed, in STABILIZE: the sortie
+    # ends, and the next begins without authority whichever of the mode, the landing and
+    # the restart is judged first.
     world = FakeWorld()
     run, _ = fly_to_first_point(world)
     run.feed(ins.ModeChanged("STABILIZE"), mode="STABILIZE", boot_s=1.0)
     run.feed(ins.Landed(), airborne=False, armed=False)
     assert run.s.over is not None and run.s.authority.state == "revoked"
-    run.feed(ins.VehicleRestarted("its clock went back (seen twice)"))
+    run.feed(ins.VehicleRestarted("its clock went back"))
     run.tick()
     run.feed(ins.SortieBegun(2))
-    assert run.s.authority.granted, run.s.authority
+    assert not run.s.authority.granted, run.s.authority
+
+
+def test_a_service_started_with_the_vehicle_in_the_air_has_no_authority() -> None:
+    world = FakeWorld()
+    run = Run(world)
+    run.s = replace(run.s, just_started=True)
+    assert run.s.authority.granted  # the configuration's
+    run.tick(airborne=None, landed_known=False)
+    assert run.s.authority.granted and run.s.just_started, "not known yet whether it flies"
+    out = run.tick(airborne=True, armed=True, landed_known=True, mode="AUTO")
+    assert run.s.authority.state == "revoked" and "in the air" in run.s.authority.detail
+    assert "authority_revoked" in [e.event.kind for e in only(out, fx.Emit)]
+    grounded = Run(world)
+    grounded.s = replace(grounded.s, just_started=True)
+    grounded.tick()
+    assert grounded.s.authority.granted and not grounded.s.just_started
 
 
 def test_the_holds_margins_are_paid_for_out_of_the_reserve() -> None:

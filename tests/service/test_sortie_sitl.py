@@ -253,7 +253,8 @@ def test_sitl_killed_and_restarted_mid_flight(copter: Sitl, stack: Stack, backen
     """SITL killed (SIGKILL, as a power loss) during a hold and started again over the same
     TCP port: ``link_lost`` at once, the link back by itself, the vehicle's restart seen,
     the mission read back, the vehicle found on the ground (SITL starts there) so sortie 1
-    is over, and sortie 2 begins on the new battery and flies a service; over the whole log
+    is over, and sortie 2 begins on the new battery without authority (the restart ended it:
+    nothing is armed until the operator's start) and, once started, flies a service; over the whole log
     (both boots, both sorties) nothing is recorded that SITL did not fly, and the cut hold
     once at most."""
     sitl = copter
@@ -272,10 +273,19 @@ def test_sitl_killed_and_restarted_mid_flight(copter: Sitl, stack: Stack, backen
     back_at = event_at(stack, "link_restored", restart_at)
     seen_at = event_at(stack, "vehicle_restarted", restart_at)
     over_at = event_at(stack, "landed", restart_at, "sortie 1")
-    begun_at = event_at(stack, "sortie_started", restart_at, "sortie 2")
+    begun_at = event_at(stack, "sortie_started", restart_at, "sortie 2: authority none")
+    # the restart ended the authority: nothing is armed until the operator's start
+    time.sleep(2.0)
+    assert logged_at(service_log(stack), r"mission started", restart_at) is None
+    client = stack.client
+    assert client is not None
+    granted_at = time.time()
+    assert client.operator("start", "after the autopilot's restart", timeout_s=10.0).accepted
     upload_at = event_at(stack, "mission_uploaded", begun_at)
     served_at = event_at(stack, "user_served", begun_at)
     log = service_log(stack)
+    started_at = logged_at(log, r"mission started", restart_at)
+    assert started_at is not None and started_at >= granted_at - 0.1, (started_at, granted_at)
     read_at = logged_at(log, r"\(read back\)|re-planning from where it is", restart_at - 0.5)
     position_at = logged_at(log, r"position: the autopilot has one", restart_at - 0.5)
     for child in reversed(stack.children):

@@ -98,6 +98,15 @@ class Stack:
         logs = "\n".join(f"--- {c.name}\n{c.log()[-3000:]}" for c in self.children)
         raise AssertionError(f"no {what} within {timeout_s} s\n{logs}")
 
+    def wait_log(self, child: Child, text: str, timeout_s: float) -> None:
+        """Wait for ``text`` in a child's log (its events can be missed by a subscriber in
+        the first moments after the child started)."""
+        deadline = time.monotonic() + timeout_s
+        while text not in child.log():
+            if time.monotonic() > deadline:
+                raise AssertionError(f"no {text!r} in {child.name}'s log within {timeout_s} s\n{child.log()[-3000:]}")
+            time.sleep(0.05)
+
     def rows(self, sql: str) -> list[tuple[Any, ...]]:
         """Read the journal as another process would (read-only, beside the WAL writer)."""
         db = sqlite3.connect(f"file:{self.journal_path}?mode=ro", uri=True)

@@ -189,12 +189,13 @@ class VehicleState:
 
     def _position(self, msg: Any) -> bool:
         boot_s = msg.time_boot_ms / 1e3
-        verdict = self._clock_watch.observe(boot_s, self.telemetry.time_rate or 1.0)
-        if verdict == "suspect":
-            return False  # ignored unless the next report confirms a restart
-        if verdict == "restart":
-            self._restarted(f"its clock went back to {boot_s:.1f} s (seen twice)")
         now = self.clock()
+        verdict = self._clock_watch.observe(boot_s, self.telemetry.time_rate or 1.0, now)
+        if verdict == "suspect":
+            return False  # ignored unless the reports that follow confirm a restart
+        if verdict == "restart":
+            self._restarted(f"its clock went back to {boot_s:.1f} s (reports over "
+                            f"{self._clock_watch.confirm_s:g} s)")
         rate = self._clock_rate.update(boot_s, now)
         self._pos = _replace(self._pos, lat_e7=int(msg.lat), lon_e7=int(msg.lon))
         self._set(lat_deg=msg.lat / 1e7, lon_deg=msg.lon / 1e7, rel_alt_m=msg.relative_alt / 1e3,

@@ -33,6 +33,10 @@ LANDED_CLIMB_MPS = 0.3
 RESTART_SLACK_S = 2.0
 """Vehicle seconds (times the vehicle's clock rate) by which its clock must go back to count
 as a restart rather than a reordered datagram."""
+RESTART_CONFIRM_S = 0.5
+"""Wall seconds over which the readings of a new clock must go on before a restart is
+believed: a rebooted autopilot streams its position for as long as it runs (an unsigned
+datagram can carry two readings, or twenty)."""
 
 
 @dataclass(frozen=True)
@@ -178,28 +182,34 @@ class ClockRate:
 
 class ClockWatch:
     """The vehicle's clock (time_boot_ms) and the restarts it shows. One reading that goes
-    back is only a suspicion (a reordered or forged datagram): a restart takes a second
-    reading in a row that agrees with the new clock. ``observe`` says "ok" (the reading
-    counts), "suspect" (ignore the message that carried it) or "restart"."""
+    back is only a suspicion (a reordered or forged datagram): a restart takes readings of
+    the new clock spread over ``confirm_s`` of wall time, with none of the old clock between
+    them (two messages in one datagram are no evidence of anything). ``observe`` says "ok"
+    (the reading counts), "suspect" (ignore the message that carried it) or "restart".
+    Unsigned, the link cannot tell a forged series from a restart: a restart only ever ends
+    the service's authority, and signing is the fix (docs/OPERATIONS.md)."""
 
-    def __init__(self, slack_s: float = RESTART_SLACK_S) -> None:
+    def __init__(self, slack_s: float = RESTART_SLACK_S, confirm_s: float = RESTART_CONFIRM_S) -> None:
         self.slack_s = slack_s
+        self.confirm_s = confirm_s
         self.boot_s: float | None = None
-        self._suspect: float | None = None
+        self._suspect: tuple[float, float] | None = None
+        """(vehicle clock, wall clock) of the first reading of the suspected new clock."""
 
-    def observe(self, boot_s: float, rate: float = 1.0) -> str:
+    def observe(self, boot_s: float, rate: float, wall_s: float) -> str:
         slack = self.slack_s * max(rate, 1.0)
         last = self.boot_s
         if last is None or boot_s >= last - slack:
             self.boot_s = boot_s if last is None else max(last, boot_s)
             self._suspect = None
             return "ok"
-        suspect = self._suspect
-        if suspect is not None and boot_s >= suspect - slack:
-            self.boot_s, self._suspect = boot_s, None
-            return "restart"
-        self._suspect = boot_s
-        return "suspect"
+        if self._suspect is None or boot_s < self._suspect[0] - slack:
+            self._suspect = (boot_s, wall_s)
+            return "suspect"
+        if wall_s - self._suspect[1] < self.confirm_s:
+            return "suspect"
+        self.boot_s, self._suspect = boot_s, None
+        return "restart"
 
     def reset(self) -> None:
         self.boot_s, self._suspect = None, None

@@ -2,10 +2,13 @@
 
 The service commands modes and arming only inside a sortie the operator authorised: by the
 configuration (``mavlink.start_mission``, for a stub or SITL) or by an operator command
-over zenoh. Any change it did not command (a pilot's mode switch, a failsafe's, another
-ground station's, a disarm in the air) ends that authority: it stops commanding and waits
-for the operator. A sortie that ended in a landing the service did not command does not get
-authority from the configuration again: it never re-arms after a pilot's landing.
+over zenoh. It is a latch: any change it did not command or cannot explain (a pilot's mode
+switch, a failsafe's, another ground station's, an autopilot restart, its own restart in
+the air) ends that authority, and only the operator gives it back: the service stops
+commanding and waits. A mode it does not know to expect (after a restart) explains no
+change. A sortie that ended in a landing the service did not command does not get authority
+from the configuration again: it never re-arms after a pilot's landing. The table of inputs
+and outcomes is in docs/OPERATIONS.md ("Authority").
 """
 
 from __future__ import annotations
@@ -23,7 +26,8 @@ class Authority:
     """Why: who granted it, or what ended it."""
     expected_mode: str | None = None
     """The mode the service last commanded (or the mission's own return): another mode ends
-    the authority."""
+    the authority. None: not known (nothing commanded yet, or after a restart): any change
+    ends it."""
 
     @property
     def granted(self) -> bool:
@@ -49,19 +53,21 @@ class Authority:
         return replace(self, expected_mode=mode)
 
     def on_mode(self, mode: str, *, armed: bool, mission_return: bool, commanded: bool = False) -> "Authority":
-        """The vehicle reports ``mode``. A mode the link asked for (a step of the service's
-        own command) and the mission's own return (its last item) are the service's;
-        changes while disarmed are the ground crew's and harmless (the service sets the
-        mode when it starts); anything else it did not command ends the authority."""
-        if not self.granted or mode == self.expected_mode:
+        """The vehicle reports a change to ``mode``. A mode the link asked for (a step of the
+        service's own command) and, in flight, the mission's own return (its last item,
+        from a mode the service commanded) are the service's. Anything else ends the
+        authority: a change while disarmed too (the ground crew's hand on the vehicle), and
+        any change at all while the mode expected is unknown."""
+        if not self.granted:
             return self
         if commanded:
             return replace(self, expected_mode=mode)
-        if not armed or self.expected_mode is None:
+        if self.expected_mode is not None and mode == self.expected_mode:
             return self
-        if mission_return:
+        if mission_return and armed and self.expected_mode is not None:
             return replace(self, expected_mode=mode)
-        return self.revoke(f"mode changed to {mode} (not commanded by the service; was {self.expected_mode})")
+        was = self.expected_mode or "not known"
+        return self.revoke(f"mode changed to {mode} (not commanded by the service; the mode expected: {was})")
 
 
 def next_sortie(previous: Authority, *, start_mission: bool, commanded_landing: bool) -> Authority:

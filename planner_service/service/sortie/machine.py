@@ -56,9 +56,6 @@ CONTROL_LATENCY_S = 0.1
 """Wall seconds from a hold's position report to the vehicle obeying the command that ends
 it (a tick of the loop and a command's round trip): that much more hovering, in vehicle time,
 is planned at each point."""
-RESTART_GRACE_S = 5.0
-"""Wall seconds within which a vehicle restart explains a mode change seen before it (the
-link believes a restart only after a second message)."""
 MAX_DOUBTED = 1200
 """Reports kept while in doubt: a minute of the service's ticks (the oldest are dropped)."""
 START_LAPSE_S = 5.0
@@ -167,13 +164,13 @@ class Sortie:
     degraded: str | None = None
     beginning: bool = False
     """The next sortie was asked of the journal (``BeginSortie``)."""
-    revoked_by_mode: tuple[Authority, float] | None = None
-    """The authority a mode change ended, and when: a vehicle restart seen just after gives it
-    back (the restart changed the mode)."""
     next_authority: Authority | None = None
     """The authority the next sortie begins with, when the operator gave it."""
     services: int = 0
     """Services recorded in this sortie (the interval count)."""
+    just_started: bool = False
+    """The service has just started (restored from its journal) and has not yet seen whether
+    the vehicle is in the air: if it is, the authority ends."""
     doubted: tuple[Sample, ...] = ()
     """The vehicle's reports while in doubt (``_replay``), at most ``MAX_DOUBTED``."""
 
@@ -206,16 +203,11 @@ class SortieLogic:
                     s = self._doubt(s, "the link was lost", out)
                 s = replace(s, retry_at=min(s.retry_at, now), failures=0)
             case ins.VehicleRestarted(why=why):
-                # The mode a restarted autopilot comes back in (it holds) is the restart's, not
-                # a pilot's: an authority ended by it in the seconds before is given back.
-                authority = s.authority
-                if s.revoked_by_mode is not None and now - s.revoked_by_mode[1] <= RESTART_GRACE_S:
-                    authority = s.revoked_by_mode[0]
-                    out.append(fx.Emit(ev.AuthorityGranted(f"the mode change was the autopilot's restart: "
-                                                            f"{authority.detail}"[:256])))
-                s = replace(s, restarted=True, authority=replace(authority, expected_mode=None), revoked_by_mode=None)
-                if s.over is not None:  # the sortie ended before the restart was believed: on its authority
-                    s = replace(s, commanded_landing=s.authority.granted)
+                # A restart only ever ends the authority: nothing the service commanded holds
+                # across it, and a restart is what an unsigned link can forge.
+                s = self._revoke(replace(s, restarted=True), f"the autopilot restarted ({why})", out)
+                if s.over is not None:  # the landing that ended the sortie was the restart's
+                    s = replace(s, commanded_landing=False)
                 out.append(fx.Emit(ev.VehicleRestarted(why[:256])))
                 s = self._doubt(s, f"the vehicle restarted: {why}", out, hold_interrupted=True)
             case ins.ModeChanged(mode=mode, commanded=commanded):
@@ -258,6 +250,13 @@ class SortieLogic:
 
     # --- the periodic look at the vehicle --------------------------------------------------------
     def _tick(self, s: Sortie, v: ins.Vehicle, now: float, out: list[fx.Effect]) -> Sortie:
+        if s.just_started and v.connected and v.landed_known:
+            s = replace(s, just_started=False)
+            if v.airborne:
+                # The service (re)started with the vehicle in the air: what was done to the
+                # vehicle while it was away (a pilot's switch and back) cannot be known.
+                s = self._revoke(s, f"the service started with the vehicle in the air (in {v.mode}): what "
+                                    f"happened to it meanwhile is not known", out)
         if v.airborne and not s.flown and s.over is None:
             s = replace(s, flown=True)
             out.append(fx.MarkFlown())
@@ -711,9 +710,6 @@ class SortieLogic:
         out.append(fx.Log("info", f"autopilot connected ({mode})"))
         if v.airborne:
             s = replace(s, started=True)
-            if s.authority.granted and mode in MISSION_MODES:
-                # the service restarted in flight: the mission mode it finds is the one it keeps
-                s = replace(s, authority=s.authority.commanding(mode))
         if s.held is not None:  # from the journal: does the vehicle still fly it?
             s = self._doubt(s, f"the service started with plan {s.held.plan_id} in its journal", out)
         return s
@@ -725,13 +721,24 @@ class SortieLogic:
         authority = s.authority.on_mode(mode, armed=v.armed or v.airborne, mission_return=mission_return,
                                         commanded=commanded)
         if authority.state == "revoked" and s.authority.granted:
-            s = replace(s, revoked_by_mode=(s.authority, now))
-            out += [fx.Emit(ev.AuthorityRevoked(authority.detail[:256])),
-                    fx.Log("warning", f"authority ended: {authority.detail}; no more commands until the operator "
-                                      f"grants it again")]
+            out += self._revoked_effects(authority)
         if mode in RETURNING_MODES:
             out.append(fx.Emit(ev.Returning(f"mode {mode}")))
         return replace(s, authority=authority)
+
+    def _revoke(self, s: Sortie, why: str, out: list[fx.Effect]) -> Sortie:
+        """End the authority, if the service has it: only the operator gives it back."""
+        if not s.authority.granted:
+            return s
+        authority = s.authority.revoke(why)
+        out += self._revoked_effects(authority)
+        return replace(s, authority=authority)
+
+    @staticmethod
+    def _revoked_effects(authority: Authority) -> list[fx.Effect]:
+        return [fx.Emit(ev.AuthorityRevoked(authority.detail[:256])),
+                fx.Log("warning", f"authority ended: {authority.detail}; no more commands until the operator "
+                                  f"grants it again")]
 
     # --- commands ------------------------------------------------------------------------------
     def _command_due(self, s: Sortie, v: ins.Vehicle, out: list[fx.Effect]) -> Sortie:
@@ -846,6 +853,8 @@ class SortieLogic:
                 out.append(fx.BeginSortie(v.battery_fraction or 0.0))
             return replace(s, next_authority=authority, beginning=True), out, True, \
                 f"{said}; sortie {s.number + 1} begins"
+        if v.airborne and v.mode in MISSION_MODES:  # handed over flying a mission: that mode is expected
+            authority = authority.commanding(v.mode)
         s = replace(s, authority=authority, failures=0, retry_at=0.0)
         out.append(fx.Emit(ev.AuthorityGranted(authority.detail[:256])))
         if v.airborne and v.mode in HOLDING_MODES:
