@@ -105,6 +105,8 @@ TRANSIENT_CODES = frozenset({5, 6, 19})
 """SQLite's primary result codes BUSY, LOCKED and CONSTRAINT: the file is still sound
 (another connection held a lock; a row broke a constraint), so the write is refused but
 the journal is not marked failed. Any other error of a write is the storage failing."""
+DAMAGE_CODES = frozenset({11, 26})
+"""SQLite's CORRUPT and NOTADB: what is wrong is the file itself, not the storage under it."""
 _STORAGE_WORDS = {
     13: "the disk (or the database's size limit) is full",  # SQLITE_FULL
     10: "an I/O error",  # SQLITE_IOERR
@@ -329,16 +331,17 @@ class Journal:
             self._unlock()
             if isinstance(err, JournalError):
                 raise
-            raise JournalError(f"cannot open the journal {self.path}: {err}") from None
+            raise JournalError(f"cannot open the journal {self.path}: {_words(err, self.path)}") from None
         self.sortie = int(number)
 
-    def _connect(self, path: str, check: bool = False) -> sqlite3.Connection:
+    def _connect(self, path: str, check: bool = False, doing: str = "open") -> sqlite3.Connection:
         """A connection in WAL mode; with ``check``, only after the file was found to be a
-        journal (switching to WAL writes the header of a file that is not)."""
+        journal (switching to WAL writes the header of a file that is not). ``doing`` is
+        what a refusal says the service was doing with the journal: "open" or "create"."""
         try:
             db = sqlite3.connect(path, isolation_level=None)
         except sqlite3.Error as err:
-            raise JournalError(f"cannot open the journal {path}: {err}") from None
+            raise JournalError(f"cannot {doing} the journal {self.path}: {_words(err, path)}") from None
         try:
             if check:
                 self._check_ours(db)
@@ -347,7 +350,7 @@ class Journal:
             db.execute("PRAGMA foreign_keys=ON")
         except sqlite3.Error as err:
             db.close()
-            raise JournalError(f"cannot open the journal {path}: {err}") from None
+            raise JournalError(f"cannot {doing} the journal {self.path}: {_words(err, path)}") from None
         except JournalError:
             db.close()
             raise
@@ -385,12 +388,12 @@ class Journal:
                 _remove(building)
                 os.close(fd)
                 return None
-            self._db = self._connect(building)
+            self._db = self._connect(building, doing="create")
             try:
                 self._open_schema(now_s)
                 self._db.execute("PRAGMA wal_checkpoint(TRUNCATE)")
             except sqlite3.Error as err:
-                raise JournalError(f"cannot create the journal {self.path}: {err}") from None
+                raise JournalError(f"cannot create the journal {self.path}: {_words(err, building)}") from None
             finally:
                 self._db.close()  # the last connection: the WAL is folded in and removed
             try:
@@ -417,6 +420,11 @@ class Journal:
             (app_id,) = db.execute("PRAGMA application_id").fetchone()
             tables = {name for (name,) in db.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
         except sqlite3.Error as err:
+            if _primary(err) in _STORAGE_WORDS and _primary(err) not in DAMAGE_CODES:
+                # the storage failed (a full disk: SQLite cannot make the WAL's shared
+                # memory), not the file: saying "not a journal" would send the pilot after
+                # a sound journal
+                raise JournalError(f"cannot open the journal {self.path}: {_words(err, self.path)}") from None
             raise JournalError(f"{self.path} is not a journal, or a damaged one: SQLite cannot read it ({err}); "
                                "refused, not written") from None
         if app_id == APPLICATION_ID:
@@ -517,8 +525,7 @@ class Journal:
     def _failure(self, what: str, err: sqlite3.Error) -> JournalError:
         """The ``JournalError`` for an SQLite error of ``what``; a storage failure (anything
         but a lock held elsewhere or a broken constraint) also marks the journal failed."""
-        code = getattr(err, "sqlite_errorcode", None)
-        primary = code & 0xFF if isinstance(code, int) else None
+        primary = _primary(err)
         name = getattr(err, "sqlite_errorname", None) or type(err).__name__
         if primary in TRANSIENT_CODES:
             return JournalError(f"{what}: {err} ({name}); nothing was written")
@@ -884,6 +891,32 @@ def _lock(path: str, shown: str, create: bool = False) -> int | None:
         os.close(fd)  # replaced, removed or (ours to build) moved into place since we opened it
         return None
     return fd
+
+
+def _primary(err: sqlite3.Error) -> int | None:
+    """SQLite's primary result code of ``err`` (its extended code's low byte), if it has one."""
+    code = getattr(err, "sqlite_errorcode", None)
+    return code & 0xFF if isinstance(code, int) else None
+
+
+def _words(err: sqlite3.Error, path: str) -> str:
+    """An SQLite error of opening or creating the file at ``path``, in words: what it means,
+    SQLite's name and text, and, for a full disk or an I/O error, the room left where the
+    file is (SQLite says "disk I/O error" when a full disk keeps it from making the WAL's
+    shared memory: the figure tells the two apart)."""
+    primary = _primary(err)
+    name = getattr(err, "sqlite_errorname", None) or type(err).__name__
+    words = _STORAGE_WORDS.get(primary)  # type: ignore[arg-type]
+    text = f"{words} ({name}: {err})" if words else f"{err} ({name})"
+    if primary in (10, 13):  # SQLITE_IOERR, SQLITE_FULL
+        try:
+            room = os.statvfs(os.path.dirname(os.path.abspath(path)))
+            free = room.f_bavail * room.f_frsize
+            text += f"; {free} bytes free" if free < 10**6 else f"; {free // 10**6} MB free"
+            text += " on its file system"
+        except OSError:
+            pass
+    return text
 
 
 def _remove(*paths: str) -> None:
