@@ -3,10 +3,15 @@ and ``python -m sim_bridge`` is one line on stderr naming the option, exit statu
 traceback, and nothing starts (a bad zenoh endpoint, a bad MAVLink URL such as
 ``--mavlink bogus:1``, which the service used to accept and then wait on for ever, a bad
 number, a missing file). A file that is not a journal is refused at start the same way,
-with exit status 1 (the command line was right; the file is not)."""
+with exit status 1 (the command line was right; the file is not), and so is a journal that
+cannot be created or written: on a full file system (a real tmpfs filled up, where this
+user may mount one) or where the kernel refuses the writes (RLIMIT_FSIZE), one line saying
+so, never a traceback, and an existing journal left as it was."""
 
 from __future__ import annotations
 
+import resource
+import shutil
 import subprocess
 import sys
 from concurrent.futures import ThreadPoolExecutor
@@ -98,3 +103,77 @@ def test_a_file_that_is_not_a_journal_stops_the_service_at_start(tmp_path: Path,
     assert out.returncode == 1 and len(lines) == 1 and "Traceback" not in out.stderr, out.stderr
     assert lines[0].startswith(f"error: {journal} is not a journal"), lines
     assert journal.read_bytes() == content  # left as it was
+
+
+SERVE_AT = ("--mavlink", "udpout:127.0.0.1:9", "--listen", "tcp/127.0.0.1:9")
+MAKE_JOURNAL = "import sys; from planner_service.service.journal import Journal; Journal(sys.argv[1]).close()"
+TMPFS = "256k"
+"""Room for a journal (about 60 kB while it is made), then filled up."""
+FILL_AND_SERVE = """
+mount -t tmpfs -o size="$6" tmpfs "$1" || exit 99
+cd "$2"
+if [ "$3" = existing ]; then "$4" -c "$5" "$1/journal.sqlite" && sha256sum "$1/journal.sqlite"; fi
+dd if=/dev/zero of="$1/fill" bs=4k 2>/dev/null
+"$4" -m planner_service serve --journal "$1/journal.sqlite" --mavlink udpout:127.0.0.1:9 --listen tcp/127.0.0.1:9
+status=$?
+if [ "$3" = existing ]; then sha256sum "$1/journal.sqlite"; fi
+ls -A "$1"
+exit $status
+"""
+
+
+def one_line_error(out: subprocess.CompletedProcess[str]) -> str:
+    """The one line a start refused by the journal prints (status 1, no traceback)."""
+    lines = out.stderr.strip().splitlines()
+    assert out.returncode == 1 and len(lines) == 1 and "Traceback" not in out.stderr, (out.returncode, out.stderr)
+    return lines[0]
+
+
+@pytest.mark.parametrize("journal", ["new", "existing"])
+def test_a_journal_on_a_full_file_system_stops_the_service_at_start(tmp_path: Path, python_env: dict[str, str],
+                                                                    journal: str) -> None:
+    mount = tmp_path / "tiny"
+    mount.mkdir()
+    unshare = shutil.which("unshare")
+    probe = subprocess.run([unshare or "unshare", "-m", "mount", "-t", "tmpfs", "-o", f"size={TMPFS}", "tmpfs",
+                            str(mount)], capture_output=True, text=True) if unshare else None
+    if probe is None or probe.returncode != 0:
+        pytest.skip("cannot mount a tmpfs in a private mount namespace here (needs unshare and CAP_SYS_ADMIN)")
+    out = subprocess.run(["unshare", "-m", "sh", "-c", FILL_AND_SERVE, "sh", str(mount), str(tmp_path), journal,
+                          sys.executable, MAKE_JOURNAL, TMPFS], env=python_env, capture_output=True, text=True,
+                         timeout=120)
+    line = one_line_error(out)
+    path = mount / "journal.sqlite"
+    print(f"\n{journal}: {line}")
+    if journal == "new":
+        assert line.startswith(f"error: cannot create the journal {path}: the disk (or the database's size limit) "
+                               "is full (SQLITE_FULL"), line
+        assert out.stdout.split() == ["fill"]  # nothing half-made left, nothing kept from the space
+    else:
+        assert line.startswith(f"error: cannot open the journal {path}: "), line  # not "is not a journal"
+        before, _, after, _, *names = out.stdout.split()
+        assert before == after and "journal.sqlite" in names  # left as it was
+    assert line.endswith("; 0 bytes free on its file system"), line
+
+
+@pytest.mark.parametrize("journal", ["new", "existing"])
+def test_a_journal_the_kernel_refuses_to_write_stops_the_service_at_start(tmp_path: Path, python_env: dict[str, str],
+                                                                         journal: str) -> None:
+    path = tmp_path / "journal.sqlite"
+    if journal == "existing":
+        subprocess.run([sys.executable, "-c", MAKE_JOURNAL, str(path)], env=python_env, check=True, timeout=60)
+    before = path.read_bytes() if journal == "existing" else None
+
+    def no_writes() -> None:  # the child's every write to a file past byte 0 fails (EFBIG)
+        resource.setrlimit(resource.RLIMIT_FSIZE, (0, 0))
+
+    out = subprocess.run([sys.executable, "-m", PS, "serve", "--journal", str(path), *SERVE_AT], cwd=tmp_path,
+                         env=python_env, capture_output=True, text=True, timeout=120, preexec_fn=no_writes)
+    line = one_line_error(out)
+    print(f"\n{journal}: {line}")
+    verb = "create" if journal == "new" else "open"
+    assert line.startswith(f"error: cannot {verb} the journal {path}: an I/O error (SQLITE_IOERR"), line
+    if journal == "new":
+        assert sorted(p.name for p in tmp_path.iterdir()) == []  # nothing half-made left
+    else:
+        assert path.read_bytes() == before

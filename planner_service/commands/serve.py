@@ -5,8 +5,11 @@ is documented in docs/planner.example.toml; any can be overridden with --set."""
 from __future__ import annotations
 
 import argparse
+import atexit
 import logging
+import os
 import sys
+from typing import NoReturn
 
 from protocol.arguments import existing_file, zenoh_endpoint
 
@@ -54,7 +57,28 @@ def run(args: argparse.Namespace) -> int:
         print(f"error: {where}: {printable(err.message, 400)}", file=sys.stderr)
         return 2
     try:
-        return run_service(config)
+        status = run_service(config)
     except ServiceError as err:
         print(f"error: {err}", file=sys.stderr)
-        return 1
+        status = 1
+    end_now(status)
+
+
+def end_now(status: int) -> NoReturn:
+    """End the process with ``status`` at once: the service has stopped and closed what it
+    owns (the link, the zenoh session, the journal, checkpointed) and logged its last line.
+    Only for the end of a ``serve`` process: it does not return to its caller.
+
+    Python's own exit would first join the planner's worker thread, which finishes the job
+    it is running however long it takes (the warm-up compiling every kernel: a minute on a
+    cold numba cache; a search: its budget), then collect the whole heap at finalization
+    (numba's compiled functions and types: 0.25 s after the last line on a quiet machine,
+    0.8 s beside two busy cores). Neither does anything for the service, and whoever waits for the exit (a
+    supervisor's stop or restart, a pilot's Ctrl-C) waits for both. The exit hooks the
+    libraries registered (logging's flush, MAVSDK's server, weakref finalizers) still run;
+    numba writes its cache files whole (to a temporary name, then renamed), so a compile
+    cut short leaves none half-written."""
+    atexit._run_exitfuncs()  # not the threads' join: that one is threading's, at normal exit only
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(status)

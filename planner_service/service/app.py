@@ -16,7 +16,9 @@ requests refused, no new operation started) -> bounded wait for an upload or a r
 progress (``GRACE_S``; its outcome is journalled, as the mission the vehicle then holds must be; an
 abandoned upload is cancelled with MISSION_ACK CANCELLED and the autopilot keeps the
 complete mission it held) -> tasks cancelled -> link, zenoh and journal closed (WAL
-checkpointed).
+checkpointed) -> "stopped" logged, and the ``serve`` process ends at once
+(``commands/serve.py``, ``end_now``: not waiting for the planner's thread to finish a
+warm-up or a search, nor for Python to collect the heap).
 """
 
 from __future__ import annotations
@@ -242,7 +244,10 @@ class Service:
 
     async def _warm_up(self) -> None:
         """Compile every kernel the planner uses before the first request needs them."""
+        start = time.monotonic()
         await asyncio.get_running_loop().run_in_executor(self.executor, self.planner.warm_up)
+        log.info("planner warmed up: its kernels compiled or loaded from numba's cache in %.1f s",
+                 time.monotonic() - start)
 
     async def _connect_loop(self) -> None:
         while True:

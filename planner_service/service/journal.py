@@ -45,14 +45,18 @@ is refused.
 
 The file (this module's own guarantees, apart from what the rows mean):
 
-- **One service per journal.** ``Journal`` takes an exclusive ``flock`` on ``PATH.lock``
-  (beside the real path of the file, symlinks resolved) before it touches the database and
-  holds it until ``close``; a second one is refused naming the holder's pid. The kernel drops
-  the lock when its process dies, so a SIGKILLed service leaves no stale lock. (SQLite's
+- **One service per journal.** ``Journal`` takes an exclusive ``flock`` on the database
+  file itself (the file its path leads to: symlinks and hard links to it share the lock)
+  before it touches the database, and holds it until ``close``; a second one is refused,
+  naming the holder's pid where ``/proc/locks`` shows it. No file stands for the lock, so
+  none can be deleted to get round it, and the kernel drops the lock when its process
+  dies: a SIGKILLed service leaves nothing stale. SQLite's own locks are POSIX byte-range
+  locks, which on Linux do not see a ``flock``, so readers still read. (SQLite's
   ``locking_mode = EXCLUSIVE`` would also keep out the readers the WAL is there for: the
   demo's summary, the tests, an operator's ``sqlite3``; and it names nobody.)
 - **Only a journal is a journal.** A path that does not exist is created fresh, atomically
-  (built as ``PATH.new``, then linked into place: a crash leaves no half-made journal). An
+  (built as ``PATH.new``, locked, then linked into place with the lock held: a crash leaves
+  no half-made journal, and two services starting together get one journal and one lock). An
   existing file must be an SQLite database carrying ``APPLICATION_ID`` (or, from before
   the id, the tables every layout has had: it is then stamped): an empty file, a file that is
   not SQLite, another application's database, or an SQLite file without our tables is
@@ -70,6 +74,7 @@ The file (this module's own guarantees, apart from what the rows mean):
 
 from __future__ import annotations
 
+import errno
 import fcntl
 import json
 import math
@@ -93,10 +98,15 @@ SQLITE_MAGIC = b"SQLite format 3\x00"
 LEGACY_TABLES = frozenset({"requests", "services", "missions", "meta"})
 """The tables every journal has had: a file without the application id (written before
 it existed) is taken as a journal only if it holds them all."""
+LOCK_TRIES = 5
+"""Looks at the journal's path before ``Journal`` gives up, when each finds it changed by
+another process (created, replaced, removed) between opening the file and locking it."""
 TRANSIENT_CODES = frozenset({5, 6, 19})
 """SQLite's primary result codes BUSY, LOCKED and CONSTRAINT: the file is still sound
 (another connection held a lock; a row broke a constraint), so the write is refused but
 the journal is not marked failed. Any other error of a write is the storage failing."""
+DAMAGE_CODES = frozenset({11, 26})
+"""SQLite's CORRUPT and NOTADB: what is wrong is the file itself, not the storage under it."""
 _STORAGE_WORDS = {
     13: "the disk (or the database's size limit) is full",  # SQLITE_FULL
     10: "an I/O error",  # SQLITE_IOERR
@@ -320,9 +330,8 @@ class Journal:
                 except OSError as err:
                     raise JournalError(f"cannot open the journal {self.path}: cannot create its folder: "
                                        f"{err.strerror or err}") from None
-                self._lock_fd = _lock(self.path)
-                if _must_create(self.path):
-                    self._create(now)
+                self._lock_fd = self._lock_or_create(now)
+                _check_file(self.path)
             self._db = self._connect(self.path, check=not memory)
         except BaseException:
             self._unlock()
@@ -337,16 +346,17 @@ class Journal:
             self._unlock()
             if isinstance(err, JournalError):
                 raise
-            raise JournalError(f"cannot open the journal {self.path}: {err}") from None
+            raise JournalError(f"cannot open the journal {self.path}: {_words(err, self.path)}") from None
         self.sortie = int(number)
 
-    def _connect(self, path: str, check: bool = False) -> sqlite3.Connection:
+    def _connect(self, path: str, check: bool = False, doing: str = "open") -> sqlite3.Connection:
         """A connection in WAL mode; with ``check``, only after the file was found to be a
-        journal (switching to WAL writes the header of a file that is not)."""
+        journal (switching to WAL writes the header of a file that is not). ``doing`` is
+        what a refusal says the service was doing with the journal: "open" or "create"."""
         try:
             db = sqlite3.connect(path, isolation_level=None)
         except sqlite3.Error as err:
-            raise JournalError(f"cannot open the journal {path}: {err}") from None
+            raise JournalError(f"cannot {doing} the journal {self.path}: {_words(err, path)}") from None
         try:
             if check:
                 self._check_ours(db)
@@ -355,38 +365,67 @@ class Journal:
             db.execute("PRAGMA foreign_keys=ON")
         except sqlite3.Error as err:
             db.close()
-            raise JournalError(f"cannot open the journal {path}: {err}") from None
+            raise JournalError(f"cannot {doing} the journal {self.path}: {_words(err, path)}") from None
         except JournalError:
             db.close()
             raise
         return db
 
-    def _create(self, now_s: float) -> None:
-        """A fresh journal at ``path``, built beside it and linked into place complete, so
-        that no crash leaves an empty or half-made file there (which would be refused)."""
-        building = f"{self.path}.new"  # ours alone: we hold the lock
-        for leftover in (building, f"{building}-wal", f"{building}-shm"):
+    def _lock_or_create(self, now_s: float) -> int:
+        """Lock the journal's file, first creating it if nothing is there: the descriptor
+        that holds the lock. Another process may create or move the file between our look
+        and our lock; each such race costs one more try."""
+        real = os.path.realpath(self.path)
+        for _ in range(LOCK_TRIES):
+            fd = _lock(real, self.path)
+            if fd is None:
+                fd = self._create(real, now_s)
+            if fd is not None:
+                return fd
+        raise JournalError(f"cannot open the journal {self.path}: {real} kept being created, replaced or removed "
+                           f"while this service tried to lock it ({LOCK_TRIES} tries); is another program using it?")
+
+    def _create(self, real: str, now_s: float) -> int | None:
+        """A fresh journal at ``real``, built beside it and linked into place complete, so
+        that no crash leaves an empty or half-made file there (which would be refused). The
+        file is locked before it is built and linked with the lock held: the descriptor
+        returned holds the journal's lock. None if another process made the journal first."""
+        building = f"{real}.new"
+        fd = _lock(building, self.path, create=True)
+        if fd is None:
+            return None  # another creator moved it away under us: look again
+        try:
+            _remove(f"{building}-wal", f"{building}-shm")  # ours: we hold their database's lock
+            info = os.fstat(fd)
+            if info.st_size or info.st_nlink != 1:
+                # a crashed creation's leftover (which may also be linked elsewhere): away
+                # with its name, never its contents, and start again
+                _remove(building)
+                os.close(fd)
+                return None
+            self._db = self._connect(building, doing="create")
             try:
-                os.unlink(leftover)
-            except FileNotFoundError:
-                pass
-            except OSError as err:
-                raise JournalError(f"cannot create the journal {self.path}: cannot remove {leftover}: "
-                                   f"{err.strerror or err}") from None
-        self._db = self._connect(building)
-        try:
-            self._open_schema(now_s)
-            self._db.execute("PRAGMA wal_checkpoint(TRUNCATE)")
-        except sqlite3.Error as err:
-            raise JournalError(f"cannot create the journal {self.path}: {err}") from None
-        finally:
-            self._db.close()  # the last connection: the WAL is folded in and removed
-        try:
-            os.link(building, self.path)  # fails if anything appeared there meanwhile
-            os.unlink(building)
-            _sync_folder(self.path)
-        except OSError as err:
-            raise JournalError(f"cannot create the journal {self.path}: {err.strerror or err}") from None
+                self._open_schema(now_s)
+                self._db.execute("PRAGMA wal_checkpoint(TRUNCATE)")
+            except sqlite3.Error as err:
+                raise JournalError(f"cannot create the journal {self.path}: {_words(err, building)}") from None
+            finally:
+                self._db.close()  # the last connection: the WAL is folded in and removed
+            try:
+                os.link(building, real)  # fails if anything appeared there meanwhile
+            except FileExistsError:
+                _remove(building)
+                os.close(fd)
+                return None
+            _remove(building)
+            _sync_folder(real)
+        except BaseException as err:
+            _remove_quietly(building, f"{building}-wal", f"{building}-shm")  # a full disk wants its room back
+            os.close(fd)
+            if isinstance(err, OSError):
+                raise JournalError(f"cannot create the journal {self.path}: {err.strerror or err}") from None
+            raise
+        return fd
 
     def _check_ours(self, db: sqlite3.Connection) -> None:
         """Refuse an SQLite database that is not a journal (another application's, or one
@@ -396,6 +435,11 @@ class Journal:
             (app_id,) = db.execute("PRAGMA application_id").fetchone()
             tables = {name for (name,) in db.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
         except sqlite3.Error as err:
+            if _primary(err) in _STORAGE_WORDS and _primary(err) not in DAMAGE_CODES:
+                # the storage failed (a full disk: SQLite cannot make the WAL's shared
+                # memory), not the file: saying "not a journal" would send the pilot after
+                # a sound journal
+                raise JournalError(f"cannot open the journal {self.path}: {_words(err, self.path)}") from None
             raise JournalError(f"{self.path} is not a journal, or a damaged one: SQLite cannot read it ({err}); "
                                "refused, not written") from None
         if app_id == APPLICATION_ID:
@@ -499,8 +543,7 @@ class Journal:
     def _failure(self, what: str, err: sqlite3.Error) -> JournalError:
         """The ``JournalError`` for an SQLite error of ``what``; a storage failure (anything
         but a lock held elsewhere or a broken constraint) also marks the journal failed."""
-        code = getattr(err, "sqlite_errorcode", None)
-        primary = code & 0xFF if isinstance(code, int) else None
+        primary = _primary(err)
         name = getattr(err, "sqlite_errorname", None) or type(err).__name__
         if primary in TRANSIENT_CODES:
             return JournalError(f"{what}: {err} ({name}); nothing was written")
@@ -830,44 +873,130 @@ class Journal:
 
     def _unlock(self) -> None:
         if self._lock_fd is not None:
-            os.close(self._lock_fd)  # closing releases the flock
+            os.close(self._lock_fd)  # closing our only descriptor of the lock releases it
             self._lock_fd = None
 
 
-def _lock_path(path: str) -> str:
-    """The lock file of the journal at ``path``: beside the file symlinks lead to, so that
-    two paths to one file share one lock."""
-    return os.path.realpath(path) + ".lock"
+def _lock(path: str, shown: str, create: bool = False) -> int | None:
+    """A descriptor of the file at ``path`` holding an exclusive ``flock`` on it; None if
+    no file is there (or, with ``create``, if the file made was moved away before it was
+    locked). ``JournalError`` naming the holder if another process has the lock; ``shown``
+    is the journal's path as the user gave it, for the messages.
 
-
-def _lock(path: str) -> int:
-    """Take the journal's lock (``JournalError`` naming the holder if another has it)."""
-    lock_path = _lock_path(path)
+    ``flock``, not ``fcntl``/``lockf``: SQLite takes POSIX byte-range locks on this same
+    file, and a process loses every POSIX lock it holds on a file when it closes any
+    descriptor of that file, which SQLite does (closing a connection, checking a path).
+    A ``flock`` belongs to this descriptor alone: closing SQLite's connections leaves it
+    held, and on Linux the two kinds do not see each other, so SQLite works as before. (Over
+    NFS the kernel makes a ``flock`` a POSIX lock; a journal belongs on local storage anyway,
+    as SQLite's WAL does not work over a network file system.)"""
+    flags = os.O_RDONLY | os.O_NONBLOCK | os.O_NOCTTY  # NONBLOCK: a FIFO there must not hang us
+    if create:
+        flags = os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW
     try:
-        fd = os.open(lock_path, os.O_RDWR | os.O_CREAT, 0o644)
+        fd = os.open(path, flags, 0o644)
+    except FileNotFoundError:
+        if create:
+            raise JournalError(f"cannot create the journal {shown}: the folder {os.path.dirname(path)} "
+                               "does not exist") from None
+        return None
     except OSError as err:
-        raise JournalError(f"cannot open the journal {path}: cannot create its lock file {lock_path}: "
-                           f"{err.strerror or err}") from None
+        verb = "create" if create else "open"
+        raise JournalError(f"cannot {verb} the journal {shown}: {path}: {err.strerror or err}") from None
     try:
         fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-    except OSError:
-        holder = os.pread(fd, 32, 0).decode("ascii", "replace").strip()
+    except OSError as err:
+        holder = _flock_holder(fd)
         os.close(fd)
-        who = f"pid {holder}" if holder.isdigit() else "another process"
-        raise JournalError(f"the journal {path} is in use by another service ({who}, holding {lock_path}): "
+        if err.errno not in (errno.EWOULDBLOCK, errno.EAGAIN):
+            raise JournalError(f"cannot lock the journal {shown}: {err.strerror or err}") from None
+        who = f"pid {holder}" if holder else "another process"
+        doing = "creating" if create else "using"
+        raise JournalError(f"the journal {shown} is in use by another service ({who} is {doing} it): "
                            "one service per journal; stop it or give this one another journal.path") from None
-    os.ftruncate(fd, 0)
-    os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
+    if not _names(path, fd):
+        os.close(fd)  # replaced, removed or (ours to build) moved into place since we opened it
+        return None
     return fd
 
 
-def _must_create(path: str) -> bool:
-    """True if nothing is at ``path`` (a fresh journal is made); ``JournalError`` for a
-    file that cannot be a journal: not a regular file, empty, or not SQLite."""
+def _primary(err: sqlite3.Error) -> int | None:
+    """SQLite's primary result code of ``err`` (its extended code's low byte), if it has one."""
+    code = getattr(err, "sqlite_errorcode", None)
+    return code & 0xFF if isinstance(code, int) else None
+
+
+def _words(err: sqlite3.Error, path: str) -> str:
+    """An SQLite error of opening or creating the file at ``path``, in words: what it means,
+    SQLite's name and text, and, for a full disk or an I/O error, the room left where the
+    file is (SQLite says "disk I/O error" when a full disk keeps it from making the WAL's
+    shared memory: the figure tells the two apart)."""
+    primary = _primary(err)
+    name = getattr(err, "sqlite_errorname", None) or type(err).__name__
+    words = _STORAGE_WORDS.get(primary)  # type: ignore[arg-type]
+    text = f"{words} ({name}: {err})" if words else f"{err} ({name})"
+    if primary in (10, 13):  # SQLITE_IOERR, SQLITE_FULL
+        try:
+            room = os.statvfs(os.path.dirname(os.path.abspath(path)))
+            free = room.f_bavail * room.f_frsize
+            text += f"; {free} bytes free" if free < 10**6 else f"; {free // 10**6} MB free"
+            text += " on its file system"
+        except OSError:
+            pass
+    return text
+
+
+def _remove(*paths: str) -> None:
+    """Unlink each of ``paths`` that exists."""
+    for path in paths:
+        try:
+            os.unlink(path)
+        except FileNotFoundError:
+            pass
+
+
+def _remove_quietly(*paths: str) -> None:
+    """``_remove``, on the way out of a failure that is the one to report."""
+    try:
+        _remove(*paths)
+    except OSError:
+        pass
+
+
+def _names(path: str, fd: int) -> bool:
+    """True if ``path`` still leads to the file open as ``fd``."""
+    try:
+        now = os.stat(path)
+    except OSError:
+        return False
+    held = os.fstat(fd)
+    return (now.st_dev, now.st_ino) == (held.st_dev, held.st_ino)
+
+
+def _flock_holder(fd: int) -> int | None:
+    """The pid that holds a ``flock`` on the file open as ``fd``, as ``/proc/locks`` shows
+    it; None where it does not (another system, another pid namespace)."""
+    info = os.fstat(fd)
+    device = f"{os.major(info.st_dev):02x}:{os.minor(info.st_dev):02x}:{info.st_ino}"
+    try:
+        with open("/proc/locks") as handle:
+            lines = handle.read().splitlines()
+    except OSError:
+        return None
+    for line in lines:
+        fields = line.split()  # "1: FLOCK ADVISORY WRITE 4242 fe:00:1234 0 EOF"; waiters have "->"
+        if len(fields) >= 6 and fields[1] == "FLOCK" and fields[5] == device and fields[4].isdigit():
+            pid = int(fields[4])
+            if pid > 0:
+                return pid
+    return None
+
+
+def _check_file(path: str) -> None:
+    """``JournalError`` for a file that cannot be a journal: not a regular file, empty, or
+    not SQLite."""
     try:
         info = os.stat(path)
-    except FileNotFoundError:
-        return True
     except OSError as err:
         raise JournalError(f"cannot open the journal {path}: {err.strerror or err}") from None
     if not stat.S_ISREG(info.st_mode):
@@ -883,7 +1012,6 @@ def _must_create(path: str) -> bool:
     if head != SQLITE_MAGIC:
         raise JournalError(f"{path} is not a journal: not an SQLite database (it begins {head[:16]!r}); "
                            "refused, not written")
-    return False
 
 
 def _identities(path: str) -> dict[str, tuple[int, int]]:

@@ -16,17 +16,23 @@ import hashlib
 import json
 import os
 import shutil
+import signal
+import socket
 import sqlite3
 import subprocess
 import sys
 import textwrap
+import threading
+import time
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import pytest
 
 from planner_service.service.errors import JournalError
 from planner_service.service.journal import APPLICATION_ID, Journal
-from planner_service.service.processes import REPO
+from planner_service.service.processes import REPO, free_port
+from tests.support.stack import Stack
 
 ROLLBACK_NOISE = "no transaction is active"
 CHILD_ENV = dict(os.environ, PYTHONPATH=str(REPO) + os.pathsep + os.environ.get("PYTHONPATH", ""))
@@ -55,15 +61,27 @@ def test_a_second_journal_on_the_same_file_is_refused_naming_the_holder(tmp_path
     path = tmp_path / "j.sqlite"
     first = Journal(path)
     try:
-        with pytest.raises(JournalError, match=rf"in use by another service \(pid {os.getpid()}, holding "):
+        with pytest.raises(JournalError, match=rf"in use by another service \(pid {os.getpid()} is using it\): "
+                                               "one service per journal"):
             Journal(path)
         link = tmp_path / "link.sqlite"
         link.symlink_to(path)  # another path to the same file shares the lock
         with pytest.raises(JournalError, match="in use by another service"):
             Journal(link)
+        hard = tmp_path / "hard.sqlite"
+        os.link(path, hard)  # so does another name of it: the lock is the file's own
+        with pytest.raises(JournalError, match="in use by another service"):
+            Journal(hard)
+        hard.unlink()
+        fill(first, 3)
+        sqlite3.connect(path).close()  # would drop a POSIX lock of this process on the file: not a flock
+        with pytest.raises(JournalError, match="in use by another service"):
+            Journal(path)
     finally:
         first.close()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["j.sqlite", "link.sqlite"]  # no lock file
     again = Journal(path)  # released by close
+    assert [r.user_id for r in again.pending()] == ["u0", "u1", "u2"]
     again.close()
 
 
@@ -71,9 +89,10 @@ def test_the_lock_names_another_process_and_dies_with_it(tmp_path: Path) -> None
     path = tmp_path / "j.sqlite"
     holder = subprocess.Popen(
         [sys.executable, "-c", textwrap.dedent(f"""
-            import time
+            import sqlite3, time
             from planner_service.service.journal import Journal
             j = Journal({str(path)!r})
+            sqlite3.connect({str(path)!r}).close()  # closing a descriptor of the file keeps the lock
             print("ready", flush=True)
             time.sleep(60)
         """)], stdout=subprocess.PIPE, text=True, env=CHILD_ENV)
@@ -82,8 +101,9 @@ def test_the_lock_names_another_process_and_dies_with_it(tmp_path: Path) -> None
         with pytest.raises(JournalError) as refused:
             Journal(path)
         message = str(refused.value)
-        assert f"the journal {path} is in use by another service (pid {holder.pid}" in message, message
+        assert f"the journal {path} is in use by another service (pid {holder.pid} is using it)" in message, message
         assert "one service per journal" in message
+        assert rows(path, "SELECT COUNT(*) FROM sorties") == [(1,)]  # a reader still reads beside it
         holder.kill()  # SIGKILL: no clean close, the kernel drops the lock
         holder.wait(10)
         j = Journal(path)  # no stale lock
@@ -95,6 +115,65 @@ def test_the_lock_names_another_process_and_dies_with_it(tmp_path: Path) -> None
             holder.wait(10)
 
 
+def test_services_creating_one_journal_at_once_get_one_journal_and_one_lock(tmp_path: Path) -> None:
+    for attempt in range(5):
+        path = tmp_path / f"j{attempt}.sqlite"
+        start, tried = threading.Barrier(4), threading.Barrier(4)
+
+        def open_one() -> str:
+            start.wait()
+            try:
+                j = Journal(path)
+            except JournalError as err:
+                tried.wait()
+                return str(err)
+            tried.wait()  # the others tried while this one held the journal
+            fill(j, 1)
+            j.close()
+            return "opened"
+
+        with ThreadPoolExecutor(4) as pool:
+            outcomes = list(pool.map(lambda _: open_one(), range(4)))
+        refused = [o for o in outcomes if o != "opened"]
+        assert outcomes.count("opened") == 1 and all("in use by another service" in r for r in refused), outcomes
+        assert rows(path, "SELECT user_id FROM requests") == [("u0",)]
+    left = sorted(p.name for p in tmp_path.iterdir() if not p.name.endswith(("-wal", "-shm")))  # the reader's
+    assert left == [f"j{n}.sqlite" for n in range(5)]  # no lock file, nothing half-built
+
+
+def test_no_file_deleted_beside_the_journal_lets_a_second_service_on(stack: Stack) -> None:
+    """Service A runs; every file beside its journal (the WAL and shared memory included:
+    whatever one might take for a lock) is deleted; service B, started on the same journal,
+    is refused at start with one line naming A, and A is the one still running."""
+    (stack.tmp / "data").mkdir()
+    stack.journal_path = stack.tmp / "data" / "journal.sqlite"
+    a = stack.service()
+    beside = [p for p in stack.journal_path.parent.iterdir() if p != stack.journal_path]
+    for p in beside:
+        p.unlink()
+    log = stack.tmp / "second.log"
+    with open(log, "w") as err:
+        b = subprocess.Popen([sys.executable, "-m", "planner_service", "serve", "--journal", str(stack.journal_path),
+                              "--mavlink", f"udpout:127.0.0.1:{free_port(socket.SOCK_DGRAM)}",
+                              "--listen", f"tcp/127.0.0.1:{free_port()}"],
+                             cwd=REPO, env=CHILD_ENV, stdout=subprocess.DEVNULL, stderr=err, start_new_session=True)
+    try:
+        deadline = time.monotonic() + 60.0
+        while b.poll() is None and "ready:" not in log.read_text() and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert b.poll() is not None, f"a second service ran on the journal A holds:\n{log.read_text()[-2000:]}"
+    finally:
+        if b.poll() is None:
+            os.killpg(b.pid, signal.SIGKILL)
+            b.wait(10)
+    lines = log.read_text().strip().splitlines()
+    assert b.returncode == 1 and len(lines) == 1, lines
+    assert lines[0] == (f"error: the journal {stack.journal_path} is in use by another service (pid {a.proc.pid} "
+                        "is using it): one service per journal; stop it or give this one another journal.path"), lines
+    assert a.proc.poll() is None, a.log()[-2000:]
+    print(f"\ndeleted {sorted(p.name for p in beside)}; the second service: {lines[0]}")
+
+
 # --- only a journal is a journal ----------------------------------------------------------------
 def test_a_new_path_is_created_whole_with_the_application_id(tmp_path: Path) -> None:
     path = tmp_path / "deep" / "j.sqlite"
@@ -103,7 +182,7 @@ def test_a_new_path_is_created_whole_with_the_application_id(tmp_path: Path) -> 
     j = Journal(path, now_s=5.0)
     fill(j, 2)
     j.close()
-    assert sorted(p.name for p in path.parent.iterdir()) == ["j.sqlite", "j.sqlite.lock"]
+    assert sorted(p.name for p in path.parent.iterdir()) == ["j.sqlite"]
     assert rows(path, "PRAGMA application_id") == [(APPLICATION_ID,)]
     assert rows(path, "SELECT number, started_at_s FROM sorties") == [(1, 5.0)]
 
