@@ -47,7 +47,7 @@ class Restored:
 
 @dataclass(frozen=True)
 class Restarted:
-    """The autopilot rebooted (its clock went back, seen twice): its mission and home are
+    """The autopilot rebooted (its clock went back, in reports over half a second): its mission and home are
     stale until read back; telemetry rates were requested again."""
 
     detail: str

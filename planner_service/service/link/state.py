@@ -6,8 +6,8 @@ for what needs I/O (asking for telemetry again, a new mission generation on a re
 Trust (issue: a forged datagram must change nothing): the autopilot is the (system,
 component) of the first heartbeat from a component 1 with a real autopilot type; from then
 on telemetry, STATUSTEXT and (in the backends) mission replies, reports and COMMAND_ACKs
-count only from that pair. A restart is believed only from two position reports in a row
-whose clock went back (``ClockWatch``); the first alone is ignored.
+count only from that pair. A restart is believed only from position reports of a clock gone
+back that go on over half a second of wall time (``ClockWatch``); until then they are ignored.
 """
 
 from __future__ import annotations
