@@ -14,6 +14,7 @@ import time
 import pytest
 
 from planner_service.service.config import load_config
+from protocol import GeoOrigin, HoverPoint, encode_path
 from tests.support.gcs import M, GroundStation
 from tests.support.sortie_checks import HOLD_RADIUS_M, TOLERANCE_S
 from tests.support.stack import Stack
@@ -82,3 +83,47 @@ def test_a_pilots_loiter_ends_the_authority_and_after_the_pilots_landing_nothing
     scenario = load_config(stack.tmp / "planner.toml").scenario()
     false = false_services(recorded, stub_track(stack.track), scenario, HOLD_RADIUS_M, TOLERANCE_S)
     assert not false, "\n".join(false)
+
+
+@pytest.mark.timeout(180)
+def test_a_second_stations_mission_ends_the_authority_and_is_left_to_fly(stack: Stack) -> None:
+    """Another ground station uploads its own mission (takeoff, two waypoints, return)
+    while the vehicle flies ours in AUTO: ArduPilot tells only the uploading station, but
+    MISSION_CURRENT's count changes; the service reads the mission back, finds it is not
+    its own, ends its authority and neither replaces that mission nor commands anything;
+    the vehicle flies it home, and the next sortie begins without authority."""
+    vehicle = stack.vehicle("--speedup", SPEEDUP, "--recharge-s", "30")
+    stack.service(mavlink__start_mission="true", planner__min_requests="5")
+    stack.users("--count", "10", "--speedup", SPEEDUP, "--seed", "1")
+    client = stack.client
+    assert client is not None
+    stack.wait_event(lambda e: e.event == "user_served", 90.0, "a first service")
+    theirs = encode_path([HoverPoint(400.0, 100.0, 60.0, 2.0), HoverPoint(450.0, 50.0, 60.0, 2.0)], GeoOrigin(),
+                         "ardupilot")
+    gcs = GroundStation(f"udpout:127.0.0.1:{stack.mav_port}")
+    try:
+        gcs.wait_vehicle()
+        uploaded_at = time.time()
+        assert gcs.upload(theirs) == M.MAV_MISSION_ACCEPTED
+    finally:
+        gcs.close()
+    revoked = stack.wait_event(lambda e: e.event == "authority_revoked" and e.time_s >= uploaded_at, 20.0,
+                               "the end of the authority")
+    assert "not ours" in revoked.detail, revoked.detail
+    landed = stack.wait_event(lambda e: e.event == "landed", 90.0, "the landing at the end of their mission")
+    assert "sortie 1" in landed.detail, landed.detail
+    deadline = time.monotonic() + 20.0
+    while not stack.rows("SELECT number FROM sorties WHERE number = 2"):
+        assert time.monotonic() < deadline, "the next sortie never began"
+        time.sleep(0.1)
+    time.sleep(3.0)  # the users go on asking: no arming, no command
+
+    log = vehicle.log()
+    after = log[log.rindex(f"mission of {len(theirs)} items accepted"):]  # theirs, the last the vehicle took
+    flown = after[len("mission of"):after.index("landed at")]
+    assert "mission of" not in flown, "the service replaced their mission in flight:\n" + after[-3000:]
+    assert flight_commands(after) == [], after[-3000:]
+    assert not ARMED.search(after), after[-3000:]
+    status = client.state().status
+    assert status.authority == "none" and not status.armed, status
+

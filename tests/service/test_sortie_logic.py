@@ -299,6 +299,33 @@ def test_reports_in_doubt_count_for_nothing_when_the_vehicle_holds_another_missi
     assert not only(out, fx.RecordService) and run.s.doubted == ()
 
 
+def test_another_stations_mission_ends_the_authority_and_is_left_alone() -> None:
+    # A second ground station uploaded its own 4-item mission while the vehicle flew ours in
+    # AUTO: the service saw nothing, and counted the landing as its own. MISSION_CURRENT's
+    # count shows it; the read-back tells whose it is.
+    world = FakeWorld()
+    run, up = fly_to_first_point(world)
+    assert not only(run.tick(seq=2, mission_total=len(up.items) - 1, boot_s=9.0), fx.ReadBack), "ours, less home"
+    out = run.tick(seq=1, mission_total=3, boot_s=10.0)
+    (rb,) = only(out, fx.ReadBack)
+    assert "counts 3 mission items" in rb.why
+    theirs = tuple(replace(i, x=i.x + 1000) for i in up.items[:4])
+    out = run.feed(ins.ReadBackDone(theirs, 3))
+    assert run.s.authority.state == "revoked" and "not ours" in run.s.authority.detail
+    assert run.s.held is None and not run.s.must_upload and not run.s.resume_pending
+    assert not only(out, fx.Plan) and not only(run.tick(seq=2, mission_total=3, boot_s=11.0), fx.Plan), \
+        "another station's mission is not replaced"
+
+
+def test_a_count_a_read_back_showed_to_be_ours_doubts_nothing_again() -> None:
+    world = FakeWorld()
+    run, up = fly_to_first_point(world)
+    (rb,) = only(run.tick(seq=2, mission_total=99, boot_s=10.0), fx.ReadBack)
+    run.feed(ins.ReadBackDone(up.items, 3))  # ours after all (the autopilot counts otherwise)
+    assert run.s.authority.granted and run.s.held is not None
+    assert not only(run.tick(seq=2, mission_total=99, boot_s=11.0), fx.ReadBack)
+
+
 def test_uncommanded_mode_change_ends_authority_and_no_command_follows() -> None:
     world = FakeWorld()
     run, _ = fly_to_first_point(world)

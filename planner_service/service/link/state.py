@@ -296,7 +296,7 @@ class VehicleState:
         """The vehicle rebooted: what it reported before (home, estimator, mission) is stale."""
         self._pos = PositionInputs(estimator_name=self.estimator)
         self._clock_rate = ClockRate()
-        self._set(home_set=False, gps_fix=-1, mission_seq=0, mission_total=0)
+        self._set(home_set=False, gps_fix=-1, mission_seq=0, mission_total=-1)
         log.warning("the autopilot restarted: %s", detail)
         self.on_restart()
         self.emit(Restarted(detail))

@@ -76,7 +76,9 @@ class Telemetry:
     altitude, climb)" where the autopilot gives no landed state; '' before either."""
     mode: str = ""
     mission_seq: int = 0
-    mission_total: int = 0
+    mission_total: int = -1
+    """Items of the mission held, as MISSION_CURRENT counts them (ArduPilot: less home);
+    0: none; -1: not said (yet, or since an upload or a restart)."""
     time_rate: float | None = None
     """Vehicle seconds per wall second (a simulator may run faster), from its timestamps;
     None until measured (``ClockRate``)."""

@@ -30,6 +30,9 @@ class Vehicle:
     mode: str = ""
     seq: int = -1
     """The mission item it flies (MISSION_CURRENT)."""
+    mission_total: int = -1
+    """The items of the mission it holds, as MISSION_CURRENT counts them (ArduPilot: less
+    home); 0: none; -1: not said."""
     battery_fraction: float | None = None
     """The best estimate: the autopilot's reading, else the model's fallback; None: unknown."""
     battery_source: Literal["autopilot", "model", "unknown"] = "unknown"

@@ -168,6 +168,10 @@ class Sortie:
     """The authority the next sortie begins with, when the operator gave it."""
     services: int = 0
     """Services recorded in this sortie (the interval count)."""
+    count_at_doubt: int | None = None
+    """The count of items that raised the doubt (``_count_check``)."""
+    count_explained: int | None = None
+    """A count of items a read-back showed to go with the mission held."""
     just_started: bool = False
     """The service has just started (restored from its journal) and has not yet seen whether
     the vehicle is in the air: if it is, the authority ends."""
@@ -265,6 +269,7 @@ class SortieLogic:
         s = self._maybe_begin(s, v, out)
         s = self._start_lapsed(s, v, now, out)
         s = self._watch(s, v, out)
+        s = self._count_check(s, v, out)
         s = self._safety(s, v, out)
         return self._next(s, v, now, out)
 
@@ -314,6 +319,21 @@ class SortieLogic:
                 watch = HoldWatch(sample.seq, (point.x_m, point.y_m, point.z_m), self.rules.hold_radius_m)
                 s = self._feed(s, watch, sample, v, out)
         return s
+
+    def _count_check(self, s: Sortie, v: ins.Vehicle, out: list[fx.Effect]) -> Sortie:
+        """MISSION_CURRENT's count of items against the mission held: another station's
+        upload shows there first (ArduPilot tells only the uploading station that it took a
+        plan), as does a mission lost. A count a read-back has shown to go with our mission
+        (an autopilot that counts home, or not) doubts nothing again."""
+        held = s.held
+        if (held is None or s.held_gen is None or s.busy or s.doubt is not None or not v.connected
+                or v.mission_total < 0 or v.mission_total == s.count_explained):
+            return s
+        if v.mission_total in (len(held.items), len(held.items) - 1):  # with or without home
+            return s
+        return self._doubt(replace(s, count_at_doubt=v.mission_total),
+                           f"the vehicle counts {v.mission_total} mission items, plan {held.plan_id} has "
+                           f"{len(held.items)}", out)
 
     def _replay(self, s: Sortie, before: HeldMission | None, v: ins.Vehicle, out: list[fx.Effect]) -> Sortie:
         """The reports kept during a doubt, judged now that the read-back shows the vehicle
@@ -691,19 +711,29 @@ class SortieLogic:
             # A restarted vehicle may hold our mission and still hover where it came back
             # (what it flew across its restart is not judged: its holds were cut).
             restarted = s.restarted
-            s = replace(s, held_gen=gen, unconfirmed=None, resume_pending=restarted and v.airborne, restarted=False)
+            s = replace(s, held_gen=gen, unconfirmed=None, resume_pending=restarted and v.airborne, restarted=False,
+                        count_explained=s.count_at_doubt)
             return replace(s, doubted=()) if restarted else self._replay(s, before, v, out)
         s = replace(s, doubted=())
         if s.watch is not None:
             s = self._judge(replace(s, watch=s.watch.abandon("the vehicle no longer holds our mission")), out)
         lost = s.held
         ours = f"plan {lost.plan_id}" if lost is not None else "a mission of ours"
+        gone = replace(s, held=None, held_gen=None, judged=frozenset(), unconfirmed=None, restarted=False,
+                       decided_at=None, count_explained=None)
+        if s.unconfirmed is None and len(items) > (1 if self.rules.flavour == "ardupilot" else 0):
+            # A mission no upload of ours explains (not one cut short: an upload of ours is
+            # then unconfirmed): another station's. Not ours to fly, nor to replace.
+            detail = f"{why}: the vehicle holds a mission of {len(items)} items that is not ours ({ours}): " \
+                     f"another station's; left to the operator"
+            out.append(fx.Log("warning", detail))
+            return self._revoke(replace(gone, must_upload=False, resume_pending=False), "the vehicle holds a "
+                                f"mission that is not ours ({len(items)} items, another station's)", out)
         detail = f"{why}: the vehicle holds {len(items)} items, not {ours}; re-planning from where it is"
         out.append(fx.Log("warning", detail))
         if not why or "restarted" not in why:
             out.append(fx.Emit(ev.VehicleRestarted(detail[:256])))
-        return replace(s, held=None, held_gen=None, judged=frozenset(), unconfirmed=None, must_upload=v.airborne,
-                       resume_pending=v.airborne, restarted=False, decided_at=None)
+        return replace(gone, must_upload=v.airborne, resume_pending=v.airborne)
 
     # --- link events -------------------------------------------------------------------------------
     def _connected(self, s: Sortie, v: ins.Vehicle, mode: str, out: list[fx.Effect]) -> Sortie:
