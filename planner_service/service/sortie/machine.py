@@ -350,6 +350,7 @@ class SortieLogic:
                 break
             s = self._seen(s, sample, v, out)
         return s
+
     def _feed(self, s: Sortie, watch: HoldWatch, sample: Sample, v: ins.Vehicle, out: list[fx.Effect]) -> Sortie:
         before = watch
         watch = watch.feed(sample)
