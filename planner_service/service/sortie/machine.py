@@ -15,8 +15,8 @@ What it decides, in the order a sortie goes:
   (``mission.replacement``): the hold goes on, the point after it is the new decision.
   A hold longer than the bound request needs is ended early (``set_current``).
 - **Doubt**: after a link gap, a vehicle restart or our own restart, the vehicle may hold
-  another mission: read it back before anything else, the reports seen meanwhile judged
-  once it shows our mission; a lost mission in the air is
+  another mission: read it back before anything else, the reports seen meanwhile (and
+  during an upload) judged once the mission it holds is known; a lost mission in the air is
   re-planned from where the vehicle is and resumed (with authority) or left to the operator.
 - **Authority** (``authority.py``): modes and arming only when granted; any change the
   service did not command ends it.
@@ -176,7 +176,8 @@ class Sortie:
     """The service has just started (restored from its journal) and has not yet seen whether
     the vehicle is in the air: if it is, the authority ends."""
     doubted: tuple[Sample, ...] = ()
-    """The vehicle's reports while in doubt (``_replay``), at most ``MAX_DOUBTED``."""
+    """The vehicle's reports while in doubt or an upload is in flight (``_replay``), at most
+    ``MAX_DOUBTED``."""
 
 
 Step = tuple[Sortie, list[fx.Effect]]
@@ -225,9 +226,9 @@ class SortieLogic:
                 s = self._failed(replace(s, busy="", last_plan_at=now), f"plan {s.plan_id + 1} not flown: {error}",
                                  now, out)
             case ins.Uploaded():
-                s = self._uploaded(replace(s, busy=""), event, out)
+                s = self._uploaded(replace(s, busy=""), event, v, out)
             case ins.UploadFailed(upload=up, error=error, outcome_unknown=unknown):
-                s = self._upload_failed(replace(s, busy=""), up, error, unknown, now, out)
+                s = self._upload_failed(replace(s, busy=""), up, error, unknown, v, now, out)
             case ins.ReadBackDone(items=items, generation=gen):
                 s = self._read_back(replace(s, busy=""), items, gen, v, out)
             case ins.ReadBackFailed(error=error):
@@ -294,8 +295,11 @@ class SortieLogic:
         if s.held is None or not (v.connected and v.position_ok) or math.isnan(v.boot_s):
             return s
         sample = Sample(v.boot_s, v.xyz, v.seq)
-        if s.held_gen is None:  # in doubt: kept, judged once the read-back shows whose mission it was
-            if s.doubt is not None and (not s.doubted or s.doubted[-1].boot_s < sample.boot_s):
+        if s.held_gen is None or s.busy == "upload":
+            # In doubt, or an upload in flight (the vehicle may fly the new mission before its
+            # ACK reaches us: on a lossy link seconds, minutes of flight at x40): kept, and
+            # judged once the mission the vehicle flies is known.
+            if (s.doubt is not None or s.busy == "upload") and (not s.doubted or s.doubted[-1].boot_s < sample.boot_s):
                 s = replace(s, doubted=(*s.doubted, sample)[-MAX_DOUBTED:])
             return s
         return self._maybe_end_hold(self._seen(s, sample, v, out), out)
@@ -335,19 +339,19 @@ class SortieLogic:
                            f"the vehicle counts {v.mission_total} mission items, plan {held.plan_id} has "
                            f"{len(held.items)}", out)
 
-    def _replay(self, s: Sortie, before: HeldMission | None, v: ins.Vehicle, out: list[fx.Effect]) -> Sortie:
-        """The reports kept during a doubt, judged now that the read-back shows the vehicle
-        holds ``s.held``: a hold flown while the service could not tell whose mission the
-        vehicle flew is recorded as the reports show it (on a lossy link a read-back takes
-        seconds, tens of seconds of flight, in which whole holds were flown). ``before``: the
-        mission held when the doubt began; where the read-back shows another of ours (an
-        upload that went through), the reports count while the item flown is the same point
-        in both (when the vehicle switched over beyond that is unknown). A hold that arrived
-        in the doubt is bound to the request in force now, as the arrival is seen now."""
+    def _replay(self, s: Sortie, v: ins.Vehicle, out: list[fx.Effect]) -> Sortie:
+        """The reports kept during a doubt or an upload, judged now that the vehicle is known
+        to hold ``s.held``: a hold flown meanwhile (on a lossy link a read-back or an upload
+        takes seconds, tens of seconds of flight at x40, in which whole holds were flown) is
+        recorded as the reports show it. Reports of the mission before, flown at the same
+        item before the switch to this one, are judged against this one's point: the
+        position decides, so at worst a hold there goes unrecorded, never a hold recorded
+        where the vehicle was not. A hold that arrived meanwhile is bound to the request in
+        force now, as its arrival is seen now."""
         kept, s = s.doubted, replace(s, doubted=())
+        if s.held is None:
+            return s
         for sample in kept:
-            if before is not s.held and not _same_point(before, s.held, sample.seq):
-                break
             s = self._seen(s, sample, v, out)
         return s
 
@@ -633,7 +637,7 @@ class SortieLogic:
         items = [replace(i, param1=encoded_hold_s(hold_s, self.rules.flavour)) if i.seq == seq else i for i in items]  # type: ignore[arg-type]
         return held, items
 
-    def _uploaded(self, s: Sortie, uploaded: ins.Uploaded, out: list[fx.Effect]) -> Sortie:
+    def _uploaded(self, s: Sortie, uploaded: ins.Uploaded, v: ins.Vehicle, out: list[fx.Effect]) -> Sortie:
         up, gen, keep = uploaded.upload, uploaded.generation, uploaded.upload.keep_through
         judged = frozenset(q for q in s.judged if keep is not None and q <= keep)
         watch, binding = s.watch, s.binding
@@ -651,7 +655,7 @@ class SortieLogic:
                                               f"newest_request={up.newest_request}; ends: {up.path.stop_reason}"))]
         if not up.path.points:
             out.append(fx.Emit(ev.Returning(f"nothing more to serve ({up.path.stop_reason}): return to launch")))
-        return s
+        return self._replay(s, v, out)
 
     def _flies_on(self, s: Sortie, up: fx.Upload, seq: int) -> bool:
         """Whether the new mission flies the point watched at ``seq`` as the old one did: a
@@ -663,7 +667,7 @@ class SortieLogic:
             return False  # a mission begun afresh: its items are not the old ones'
         return s.held.point_at(seq) is not None and _same_point(s.held, up.mission, seq)
 
-    def _upload_failed(self, s: Sortie, up: fx.Upload, error: str, unknown: bool, now: float,
+    def _upload_failed(self, s: Sortie, up: fx.Upload, error: str, unknown: bool, v: ins.Vehicle, now: float,
                        out: list[fx.Effect]) -> Sortie:
         out.append(fx.RecordMission(up.plan_id, up.mission, f"{'unknown' if unknown else 'failed'}: {error}"))
         if unknown:  # the vehicle may hold it: find out before anything else
@@ -674,6 +678,8 @@ class SortieLogic:
             # it in the mission held, or all of it if only its ACK was lost (PX4 switches over
             # only when the upload is complete). The read-back tells which.
             s = self._doubt(replace(s, unconfirmed=up.mission), f"plan {up.plan_id}'s upload failed part-way", out)
+        if s.doubt is None:  # not taken: the reports kept during it were of the mission held
+            s = self._replay(s, v, out)
         return self._failed(s, f"plan {up.plan_id} not flown: {error}", now, out)
 
     def _failed(self, s: Sortie, why: str, now: float, out: list[fx.Effect]) -> Sortie:
@@ -700,7 +706,6 @@ class SortieLogic:
 
     def _read_back(self, s: Sortie, items: tuple, gen: int, v: ins.Vehicle, out: list[fx.Effect]) -> Sortie:
         why = s.doubt
-        before = s.held
         s = replace(s, doubt=None)
         for candidate in (s.held, s.unconfirmed):
             if candidate is None or not same_mission(items, candidate.items, self.rules.flavour):  # type: ignore[arg-type]
@@ -714,7 +719,7 @@ class SortieLogic:
             restarted = s.restarted
             s = replace(s, held_gen=gen, unconfirmed=None, resume_pending=restarted and v.airborne, restarted=False,
                         count_explained=s.count_at_doubt)
-            return replace(s, doubted=()) if restarted else self._replay(s, before, v, out)
+            return replace(s, doubted=()) if restarted else self._replay(s, v, out)
         s = replace(s, doubted=())
         if s.watch is not None:
             s = self._judge(replace(s, watch=s.watch.abandon("the vehicle no longer holds our mission")), out)
