@@ -24,8 +24,8 @@ warm-up or a search, nor for Python to collect the heap).
 from __future__ import annotations
 
 import asyncio
-import math
 import logging
+import math
 import signal
 import time
 from concurrent.futures import ThreadPoolExecutor
