@@ -45,8 +45,8 @@ from .errors import JournalError, LinkError, PlanningError
 from . import events as ev
 from .intake import Accepted, Intake, fairness_rule
 from .journal import Journal, RequestRow
-from .link import (Connected, Landed, LinkEvent, LinkSettings, Lost, ModeChanged, Restarted, Restored, VehicleLink,
-                   open_link)
+from .link import (ArmedChanged, Connected, Landed, LinkEvent, LinkSettings, Lost, ModeChanged, Restarted, Restored,
+                   VehicleLink, open_link)
 from .link.base import RETURNING_MODES
 from .operator import read_command, reply_for
 from .places import plan_places, user_places
@@ -502,6 +502,8 @@ class Service:
                 self._feed(ins.VehicleRestarted(detail))
             case ModeChanged(mode=mode, commanded=commanded):
                 self._feed(ins.ModeChanged(mode, commanded))
+            case ArmedChanged(armed=armed, commanded=commanded):
+                self._feed(ins.ArmedChanged(armed, commanded))
             case Landed():
                 self._feed(ins.Landed())
             case _:

@@ -137,8 +137,10 @@ class MavlinkConfig(Section):
     flavour: Flavour = "ardupilot"
     """ardupilot (item 0 is home) or px4."""
     start_mission: bool = False
-    """Arm and start the mission once one is uploaded. Off by default: on a real aircraft
-    the operator arms; turn it on only where the operator allows it (the stub, SITL)."""
+    """Arm and start the mission once one is uploaded, in the first sortie the process
+    flies (later sorties wait for the operator's start). Off by default: on a real
+    aircraft the operator arms; turn it on only where the operator allows it (the stub,
+    SITL)."""
     item_timeout_s: float = setting(0.5, gt=0)
     """Longest wait for the autopilot's next request or ack before repeating the last
     message (the link waits about four measured round trips when that is shorter)."""

@@ -68,6 +68,9 @@ HOLD_COMMANDS = frozenset({NAV_WAYPOINT, NAV_LOITER_TIME})
 GROUND_M = 0.05
 """Below this height (m) the aircraft counts as on the ground."""
 EPS_S = 1e-9
+FALL_MPS = 15.0
+"""How fast a vehicle disarmed in the air falls (a small quadcopter's terminal speed is of
+this order; the stub does not model the acceleration, only that it comes down and lands)."""
 MAX_SUBSTEP_S = 1.0
 """The battery failsafe is checked at least this often (simulated seconds): the battery
 ends at most one sub-step's drain below the threshold when the aircraft turns home."""
@@ -643,6 +646,8 @@ class Flight:
             self._events.append(ModeChanged())
 
     def _advance_time(self, budget: float, events: list[FlightEvent]) -> float:
+        if not self.armed and not self.landed:
+            return self._fall(budget, events)
         if not self.armed:
             self.vel = (0.0, 0.0, 0.0)
             self._recharge(budget)
@@ -769,6 +774,17 @@ class Flight:
         if arrived:
             self._touchdown(events, in_mission)
         return used
+
+    def _fall(self, budget: float, events: list[FlightEvent]) -> float:
+        """Disarmed in the air (a pilot's forced disarming, a motor kill): the motors stop
+        and the vehicle falls straight down, using no energy, until it hits the ground."""
+        step = min(self.pos[2], FALL_MPS * budget)
+        self.pos = [self.pos[0], self.pos[1], self.pos[2] - step]
+        self.vel = (0.0, 0.0, -FALL_MPS)
+        if self.pos[2] <= 0.0:
+            self.pos[2] = 0.0
+            self._touchdown(events, in_mission=False)
+        return step / FALL_MPS if step > 0 else budget
 
     def _touchdown(self, events: list[FlightEvent], in_mission: bool) -> float:
         self.landed = True

@@ -12,7 +12,7 @@ import pytest
 from pymavlink.dialects.v20 import ardupilotmega as M
 
 from protocol.text import printable
-from planner_service.service.link import (Connected, Landed, LinkEvent, ModeChanged, PositionChanged, Restarted,
+from planner_service.service.link import (ArmedChanged, Connected, Landed, LinkEvent, ModeChanged, PositionChanged, Restarted,
                                           StatusText, TelemetryMissing)
 from planner_service.service.link.state import DERIVED, SILENCE_S, VehicleState
 from planner_service.service.link.streams import (MISSING_AFTER_S, REREQUEST_S, UNAVAILABLE_AFTER_S, Streams,
@@ -259,6 +259,24 @@ def test_commanded_and_foreign_mode_changes_are_told_apart() -> None:
     clock.now += 10.0
     state.on_heartbeat(1, 1, heartbeat(mode=9, armed=True))  # LAND by a pilot
     assert [e for e in events if isinstance(e, ModeChanged)] == [ModeChanged("RTL", True), ModeChanged("LAND", False)]
+
+
+def test_commanded_and_foreign_armings_are_told_apart() -> None:
+    clock = Clock()
+    state, events = vehicle(clock)
+    state.on_heartbeat(1, 1, heartbeat(mode=4, armed=False))
+    del events[:]
+    state.expect_armed(True)
+    clock.now += 1.0
+    state.on_heartbeat(1, 1, heartbeat(mode=4, armed=True))  # the service's arming
+    clock.now += 1.0
+    state.on_heartbeat(1, 1, heartbeat(mode=4, armed=True))  # no change, no event
+    state.on_heartbeat(1, 1, heartbeat(mode=4, armed=False))  # a pilot's disarming
+    state.expect_armed(True)
+    clock.now += 6.0  # later than the window: not the arming asked for
+    state.on_heartbeat(1, 1, heartbeat(mode=4, armed=True))
+    assert [e for e in events if isinstance(e, ArmedChanged)] == [
+        ArmedChanged(True, True), ArmedChanged(False, False), ArmedChanged(True, False)]
 
 
 def test_landed_state_is_derived_and_said_so_where_the_autopilot_gives_none() -> None:

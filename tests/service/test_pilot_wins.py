@@ -127,3 +127,38 @@ def test_a_second_stations_mission_ends_the_authority_and_is_left_to_fly(stack: 
     status = client.state().status
     assert status.authority == "none" and not status.armed, status
 
+
+
+@pytest.mark.timeout(180)
+def test_a_pilots_disarming_in_the_air_ends_the_authority_and_nothing_arms_again(stack: Stack) -> None:
+    """The pilot's emergency stop (a forced disarming in the air, from a second station):
+    the mode stays AUTO, so before only the mode was judged and the fall's landing counted
+    as the service's own. Now the disarming ends the authority, the vehicle comes down, and
+    the next sortie waits for the operator: the vehicle is never armed again."""
+    vehicle = stack.vehicle("--speedup", SPEEDUP, "--recharge-s", "30")
+    stack.service(mavlink__start_mission="true", planner__min_requests="5")
+    stack.users("--count", "10", "--speedup", SPEEDUP, "--seed", "1")
+    client = stack.client
+    assert client is not None
+    stack.wait_event(lambda e: e.event == "user_served", 90.0, "a first service")
+    gcs = GroundStation(f"udpout:127.0.0.1:{stack.mav_port}")
+    try:
+        gcs.wait_vehicle()
+        assert gcs.command(M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 21196) == M.MAV_RESULT_ACCEPTED
+    finally:
+        gcs.close()
+    revoked = stack.wait_event(lambda e: e.event == "authority_revoked", 10.0, "the end of the authority")
+    assert "disarmed (not commanded by the service)" in revoked.detail, revoked.detail
+    stack.wait_event(lambda e: e.event == "landed", 30.0, "the fall's landing")
+    deadline = time.monotonic() + 20.0
+    while not stack.rows("SELECT number FROM sorties WHERE number = 2"):  # once the battery is swapped
+        assert time.monotonic() < deadline, "the next sortie never began"
+        time.sleep(0.1)
+    time.sleep(3.0)  # the users go on asking: no arming, no command
+
+    log = vehicle.log()
+    after = log[log.rindex("disarmed (command)"):]
+    assert flight_commands(after) == [], after[-3000:]
+    assert not ARMED.search(after), after[-3000:]
+    status = client.state().status
+    assert status.authority == "none" and not status.armed, status

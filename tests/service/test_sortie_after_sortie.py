@@ -3,8 +3,9 @@ service + simulated users as real processes, real zenoh and real MAVLink on loop
 
 - ``test_three_sorties_in_a_row`` (CI): three sorties; between the first two a request is
   refused with the reason and the service is restarted (it resumes "sortie 1 over" and
-  begins sortie 2 itself); during the second it is restarted again (it resumes sortie 2
-  without authority, in the air, until the operator's start).
+  begins sortie 2 itself, with the configuration's authority, unused by this process);
+  during the second it is restarted again (it resumes sortie 2 without authority, in the
+  air, until the operator's start); sortie 3 waits for the operator's start too.
   Every sortie: each request served, replaced or not served with a reason, fairness per
   sortie, the energy reserve held.
 - ``test_restore_between_and_during_sorties``: what a restarted service takes from the
@@ -130,12 +131,18 @@ def test_three_sorties_in_a_row(stack: Stack) -> None:
     third = stack.service(**settings)
     assert "ready: sortie 2 (running)" in third.log()
     # restarted in the air, it has no authority (what happened while it was away is not
-    # known) until the operator gives it: then sortie 2's landing is its own, and sortie 3
-    # begins with the configuration's
+    # known) until the operator gives it; sortie 3 begins without (the configuration's is
+    # for a process's first sortie) and waits for the operator's start: nothing flies
     stack.wait_log(third, "authority ended: revoked: the service started with the vehicle in the air", 30.0)
     assert client.operator("start", "the vehicle is seen flying our mission", timeout_s=10.0).accepted
     wait_sortie(stack, 2, True, 60.0)
     wait_sortie(stack, 3, False, 30.0)
+    begun = stack.wait_event(started(3), 10.0, "sortie 3's start")
+    assert "authority none" in begun.detail, begun
+    armings = vehicle.log().count("armed at t=")
+    time.sleep(2.0)  # with the authority, the service arms within a second of its plan
+    assert vehicle.log().count("armed at t=") == armings, "armed in sortie 3 before the operator's start"
+    assert client.operator("start", "sortie 3", timeout_s=10.0).accepted
     wait_sortie(stack, 3, True, 60.0)
     assert third.stop() == 0
 
@@ -229,6 +236,8 @@ def test_soak(stack: Stack) -> None:
     t0 = time.monotonic()
     for n in range(1, SOAK_SORTIES + 1):
         wait_sortie(stack, n, False, 60.0)
+        if n > 1:  # the configuration's authority is for the first sortie only
+            assert stack.client.operator("start", f"sortie {n}", timeout_s=10.0).accepted
         wait_sortie(stack, n, True, 120.0)
         samples[n] = (time.monotonic() - t0, *_sample(service.proc.pid), *_sample(vehicle.proc.pid))
     wall = time.monotonic() - t0

@@ -15,7 +15,7 @@ from planner_service.service.planning import PlannedPath, PlannedPoint
 from planner_service.service.sortie import Rules, Sortie, SortieLogic, Vehicle, new_sortie
 from planner_service.service.sortie import effects as fx
 from planner_service.service.sortie import inputs as ins
-from planner_service.service.sortie.authority import Authority
+from planner_service.service.sortie.authority import Authority, next_sortie
 from protocol import Area, GeoOrigin
 from protocol.mission import NAV_RTL
 
@@ -379,13 +379,80 @@ def test_a_pilots_landing_ends_the_sortie_and_the_next_never_arms() -> None:
     assert ok and only(out, fx.Command)[0].kind == "start"
 
 
-def test_after_its_own_landing_the_next_sortie_starts_by_itself() -> None:
+def test_after_its_own_landing_the_next_sortie_waits_for_the_operator() -> None:
+    # The configuration's authority (start_mission) is for the first sortie of the process:
+    # it armed again 1.3 s after the next request when a landing had been counted as its own.
     world = FakeWorld()
     run, _ = fly_to_first_point(world)
-    run.feed(ins.Landed(), airborne=False, armed=False)
+    run.feed(ins.ModeChanged("RTL", commanded=True), mode="RTL")
+    run.feed(ins.ArmedChanged(False), armed=False, xyz=(0.0, 0.0, 0.3))
+    assert run.s.authority.granted, "the autopilot's disarming on touching down at our return"
+    run.feed(ins.Landed(), airborne=False)
     run.tick()
-    run.feed(ins.SortieBegun(2))
+    (plan,) = only(run.feed(ins.SortieBegun(2)), fx.Plan)
+    assert run.s.authority.state == "none"
+    (up,) = only(run.feed(ins.Planned(plan.basis, path(point(5, 200.0, 200.0, "c", 3)))), fx.Upload)
+    out = run.feed(ins.Uploaded(up, 5)) + run.tick()
+    assert not only(out, fx.Command), "no arming before the operator's start"
+    s, out, ok, _ = run.logic.operator(run.s, ins.OperatorCommand("start"), run.v, run.now)
+    assert ok and only(out, fx.Command)[0].kind == "start"
+
+
+@pytest.mark.parametrize("armed, airborne, xyz, why", [
+    (False, True, (120.0, 200.0, 100.0), "a disarming in the air (a motor kill)"),
+    (False, False, (0.0, 0.0, 0.0), "a disarming on the ground before the flight"),
+    (True, False, (0.0, 0.0, 0.0), "an arming by someone else"),
+])
+def test_an_arming_or_disarming_the_service_did_not_command_ends_the_authority(
+        armed: bool, airborne: bool, xyz: tuple[float, float, float], why: str) -> None:
+    world = FakeWorld()
+    if airborne:
+        run, _ = fly_to_first_point(world)
+    else:
+        world.ask("a", 120.0, 200.0, 10, 1)
+        run = Run(world)
+        run.tick(armed=not armed)
+    out = run.feed(ins.ArmedChanged(armed), armed=armed, airborne=airborne, xyz=xyz)
+    assert run.s.authority.state == "revoked", why
+    assert "authority_revoked" in [e.event.kind for e in only(out, fx.Emit)]
+    assert ("armed" if armed else "disarmed") in run.s.authority.detail
+    out = run.tick(armed=False, airborne=False)
+    assert not only(out, fx.Command), "nothing commanded after it"
+
+
+def test_the_services_own_arming_and_its_landings_disarming_keep_the_authority() -> None:
+    world = FakeWorld()
+    run, _ = fly_to_first_point(world)
     assert run.s.authority.granted
+    run.feed(ins.ArmedChanged(True, commanded=True), armed=True)
+    assert run.s.authority.granted
+    # The disarming reported while the vehicle flies its mission, away from its return: not ours.
+    assert run.s.authority.on_arming(False, commanded=False, landing=False).state == "revoked"
+    # At the mission's return item, low: the touchdown's disarming (its report may come later).
+    rtl = run.s.held.rtl_seq
+    run.feed(ins.ArmedChanged(False), armed=False, seq=rtl, xyz=(0.0, 0.0, 0.5))
+    assert run.s.authority.granted
+    # Found landed first, then disarmed: the landing's.
+    run2, _ = fly_to_first_point(FakeWorld())
+    run2.feed(ins.Landed(), airborne=False)
+    run2.feed(ins.ArmedChanged(False), armed=False)
+    assert run2.s.authority.granted
+
+
+def test_a_disarming_high_on_the_way_home_is_not_the_landings() -> None:
+    world = FakeWorld()
+    run, _ = fly_to_first_point(world)
+    run.feed(ins.ArmedChanged(False), armed=False, seq=run.s.held.rtl_seq, xyz=(50.0, 50.0, 60.0))
+    assert run.s.authority.state == "revoked"
+
+
+def test_a_service_started_beside_a_vehicle_armed_on_the_ground_has_no_authority() -> None:
+    world = FakeWorld()
+    run = Run(world)
+    run.s = replace(run.s, just_started=True)
+    out = run.tick(armed=True)
+    assert run.s.authority.state == "revoked" and "armed on the ground" in run.s.authority.detail
+    assert not only(out, fx.Command)
 
 
 def test_unknown_battery_neither_plans_nor_arms() -> None:
@@ -655,3 +722,16 @@ def test_an_upload_failed_part_way_is_read_back_at_once_whatever_the_back_off() 
     run.s = replace(run.s, doubt="test")
     run.feed(ins.ReadBackFailed("NO_ANSWER"))
     assert run.s.readback_at > run.now and not only(run.tick(), fx.ReadBack)
+
+
+def test_a_service_started_between_sorties_gives_the_configurations_authority_to_the_next() -> None:
+    # Restarted after sortie 1 landed: the configuration's authority is this process's first
+    # and unused, so sortie 2 begins with it; once used, it is not passed on again.
+    run = Run(FakeWorld())
+    run.s = replace(run.s, over="the vehicle landed", flown=True, just_started=True)
+    run.tick()
+    run.feed(ins.SortieBegun(2))
+    assert run.s.authority.granted and run.s.authority.unused
+    used = run.s.authority.commanding("AUTO")
+    assert not used.unused
+    assert next_sortie(used).state == "none"

@@ -12,7 +12,7 @@ from protocol.geodesy import GeoOrigin
 from protocol.mission import HoverPoint, encode_path, item_local
 from sim_bridge.vehicle.errors import VehicleError
 from sim_bridge.vehicle.events import BatteryLow, BatterySwapped, Disarmed, Landed, Reached
-from sim_bridge.vehicle.flight import Flight
+from sim_bridge.vehicle.flight import FALL_MPS, Flight
 from sim_bridge.vehicle.modes import Mode
 
 ORIGIN = GeoOrigin()
@@ -108,6 +108,24 @@ def test_commands() -> None:
     events = flight.step(5.0)
     assert kinds(events) == [Landed, Disarmed] and events[1].why == "landed"
     assert math.isclose(flight.pos[2], 0.0)
+
+
+def test_a_vehicle_disarmed_in_the_air_falls_and_lands() -> None:
+    # Before, a forced disarming left the stub hovering at its height, disarmed: no landing
+    # ever came, where SITL's copter falls.
+    flight = Flight(preset("field"), ORIGIN, "ardupilot")
+    flight.arm()
+    flight.set_mode(Mode.GUIDED)
+    assert flight.takeoff(30.0) is None
+    flight.step(20.0)
+    flight.drain()
+    energy = flight.energy_j
+    assert flight.disarm(force=True) is None and not flight.armed
+    events = flight.step(1.0)
+    assert flight.pos[2] == pytest.approx(30.0 - FALL_MPS) and not flight.landed and Landed not in kinds(events)
+    events = flight.step(5.0)
+    assert Landed in kinds(events) and flight.landed and flight.pos[2] == 0.0
+    assert flight.energy_j == energy, "the motors are off"
 
 
 def test_battery_swap_after_landing_and_disarming() -> None:

@@ -146,6 +146,11 @@ class VehicleLink(abc.ABC):
         await self.command(M.MAV_CMD_DO_SET_MODE, M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, main, sub,
                            what=f"set_mode({name})")
 
+    async def _arm(self, armed: bool) -> None:
+        """Arm or disarm: when the heartbeat shows it, it was commanded (``ArmedChanged``)."""
+        self.state.expect_armed(armed)
+        await self.command(M.MAV_CMD_COMPONENT_ARM_DISARM, 1 if armed else 0, what="arm()" if armed else "disarm()")
+
     async def resume(self) -> None:
         """Fly the mission held from its current item again, already armed and airborne
         (mode AUTO / AUTO.MISSION and MISSION_START): after the autopilot restarted in the

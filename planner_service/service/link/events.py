@@ -82,6 +82,16 @@ class ModeChanged:
 
 
 @dataclass(frozen=True)
+class ArmedChanged:
+    """The autopilot is now ``armed`` (or disarmed); ``commanded``: this link asked for it in
+    the last few seconds (False: a pilot, the ground crew, a failsafe, the autopilot's own
+    disarming after a landing, another ground station)."""
+
+    armed: bool
+    commanded: bool
+
+
+@dataclass(frozen=True)
 class Landed:
     """The vehicle was airborne and is now on the ground (``source``: EXTENDED_SYS_STATE or
     how it was derived)."""
@@ -114,9 +124,9 @@ class PositionChanged:
     waiting_for: str
 
 
-LinkEvent = Union[Connected, Lost, Restored, Restarted, Reached, Current, ModeChanged, Landed, StatusText,
-                  TelemetryMissing, PositionChanged]
+LinkEvent = Union[Connected, Lost, Restored, Restarted, Reached, Current, ModeChanged, ArmedChanged, Landed,
+                  StatusText, TelemetryMissing, PositionChanged]
 """Every event a link reports."""
 
-EVENT_TYPES: tuple[type, ...] = (Connected, Lost, Restored, Restarted, Reached, Current, ModeChanged, Landed,
-                                 StatusText, TelemetryMissing, PositionChanged)
+EVENT_TYPES: tuple[type, ...] = (Connected, Lost, Restored, Restarted, Reached, Current, ModeChanged, ArmedChanged,
+                                 Landed, StatusText, TelemetryMissing, PositionChanged)

@@ -652,7 +652,7 @@ class PymavlinkLink(VehicleLink):
                 # ArduCopter refuses to arm in AUTO (unless AUTO_OPTIONS allows it); GUIDED
                 # arms from a ground station and checks the position as AUTO will.
                 await self._set_mode("GUIDED")
-            await self.command(M.MAV_CMD_COMPONENT_ARM_DISARM, 1, what="arm()")
+            await self._arm(True)
             armed_here = True
             await self._resume()
         except LinkError as err:
@@ -665,7 +665,7 @@ class PymavlinkLink(VehicleLink):
         if self.telemetry.airborne:
             return
         try:
-            await self.command(M.MAV_CMD_COMPONENT_ARM_DISARM, 0, what="disarm()")
+            await self._arm(False)
             log.warning("start failed (%s): disarmed again", why)
         except LinkError as err:
             log.error("start failed (%s) and disarming failed too: %s", why, err)

@@ -373,13 +373,13 @@ class MavsdkLink(VehicleLink):
         try:
             if self.settings.flavour == "ardupilot" and t.mode != "GUIDED":
                 await self._set_mode("GUIDED")  # ArduCopter refuses to arm in AUTO (see the pymavlink backend)
-            await self.command(M.MAV_CMD_COMPONENT_ARM_DISARM, 1, what="arm()")
+            await self._arm(True)
             armed_here = True
             await self._resume()
         except LinkError as err:
             if (armed_here or self.telemetry.armed) and not was_armed and not self.telemetry.airborne:
                 try:
-                    await self.command(M.MAV_CMD_COMPONENT_ARM_DISARM, 0, what="disarm()")
+                    await self._arm(False)
                     log.warning("start failed (%s): disarmed again", err)
                 except LinkError as disarm:
                     log.error("start failed (%s) and disarming failed too: %s", err, disarm)

@@ -21,8 +21,8 @@ from pymavlink.dialects.v20 import ardupilotmega as M
 
 from protocol.text import printable
 
-from .events import (MAX_TEXT, Connected, Landed, LinkEvent, Lost, ModeChanged, PositionChanged, Restarted, Restored,
-                     StatusText, TelemetryMissing)
+from .events import (MAX_TEXT, ArmedChanged, Connected, Landed, LinkEvent, Lost, ModeChanged, PositionChanged,
+                     Restarted, Restored, StatusText, TelemetryMissing)
 from .modes import mode_name
 from .streams import Request, Streams, stream_plan
 from .telemetry import (ClockRate, ClockWatch, PositionInputs, Telemetry, assess_position, battery_fraction,
@@ -35,7 +35,8 @@ AIRBORNE_STATES = frozenset({M.MAV_LANDED_STATE_IN_AIR, M.MAV_LANDED_STATE_TAKEO
 NOT_AUTOPILOTS = frozenset({M.MAV_TYPE_GCS, M.MAV_TYPE_ONBOARD_CONTROLLER, M.MAV_TYPE_GIMBAL, M.MAV_TYPE_CAMERA,
                             M.MAV_TYPE_ADSB, M.MAV_TYPE_ANTENNA_TRACKER})
 COMMANDED_WINDOW_S = 5.0
-"""A mode reported within this many wall seconds of our asking for it was commanded by us."""
+"""A mode (an arming, a disarming) reported within this many wall seconds of our asking for
+it was commanded by us."""
 SILENCE_S = 1.3
 """Seconds without any message from the autopilot after which the next one is taken as
 possibly from a new boot, and its telemetry is asked for again (an autopilot sends a
@@ -67,6 +68,7 @@ class VehicleState:
         self._clock_rate = ClockRate()
         self._pos = PositionInputs(estimator_name=self.estimator)
         self._expected_mode: tuple[str, float] | None = None
+        self._expected_armed: tuple[bool, float] | None = None
         self._last_heard = 0.0
         self._lost = False
         self._missing_said: tuple[str, ...] = ()
@@ -157,7 +159,7 @@ class VehicleState:
             return False
         armed = bool(msg.base_mode & M.MAV_MODE_FLAG_SAFETY_ARMED)
         mode = mode_name(self.flavour, msg.custom_mode)
-        old_mode = self.telemetry.mode
+        old_mode, was_armed = self.telemetry.mode, self.telemetry.armed
         self._set(armed=armed, mode=mode, connected=not self._lost or first)
         if first:
             self._last_heard = self.clock()
@@ -169,12 +171,20 @@ class VehicleState:
             expected = self._expected_mode
             commanded = expected is not None and expected[0] == mode and self.clock() <= expected[1]
             self.emit(ModeChanged(mode, commanded))
+        if not first and armed != was_armed:
+            expected = self._expected_armed
+            commanded = expected is not None and expected[0] == armed and self.clock() <= expected[1]
+            self.emit(ArmedChanged(armed, commanded))
         self._derive_landed()
         return True
 
     def expect_mode(self, mode: str) -> None:
         """The link asked for ``mode``: when the heartbeat shows it, it was commanded."""
         self._expected_mode = (mode, self.clock() + COMMANDED_WINDOW_S)
+
+    def expect_armed(self, armed: bool) -> None:
+        """The link asked to arm (disarm): when the heartbeat shows it, it was commanded."""
+        self._expected_armed = (armed, self.clock() + COMMANDED_WINDOW_S)
 
     def on_message(self, name: str, msg_id: int, system: int, component: int, msg: Any) -> bool:
         """A telemetry message (not HEARTBEAT, not mission protocol); False when dropped."""

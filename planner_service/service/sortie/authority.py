@@ -1,14 +1,15 @@
 """Who may command the vehicle's modes and arming. Pure.
 
-The service commands modes and arming only inside a sortie the operator authorised: by the
-configuration (``mavlink.start_mission``, for a stub or SITL) or by an operator command
-over zenoh. It is a latch: any change it did not command or cannot explain (a pilot's mode
-switch, a failsafe's, another ground station's, an autopilot restart, its own restart in
+The service commands modes and arming only inside a sortie the operator authorised: by an
+operator command over zenoh, or by the configuration (``mavlink.start_mission``, for a stub
+or SITL) for the first sortie of the process only, before anyone else acted. It is a latch:
+any change it did not command or cannot explain (a pilot's mode switch, a failsafe's,
+another ground station's, an arming or disarming, an autopilot restart, its own restart in
 the air) ends that authority, and only the operator gives it back: the service stops
 commanding and waits. A mode it does not know to expect (after a restart) explains no
-change. A sortie that ended in a landing the service did not command does not get authority
-from the configuration again: it never re-arms after a pilot's landing. The table of inputs
-and outcomes is in docs/OPERATIONS.md ("Authority").
+change. Every later sortie waits for the operator's start: the service never arms again by
+itself after a landing, its own or a pilot's. The table of inputs and outcomes is in
+docs/OPERATIONS.md ("Authority").
 """
 
 from __future__ import annotations
@@ -28,6 +29,9 @@ class Authority:
     """The mode the service last commanded (or the mission's own return): another mode ends
     the authority. None: not known (nothing commanded yet, or after a restart): any change
     ends it."""
+    unused: bool = False
+    """The configuration's, and nothing commanded under it yet: a process started between
+    sorties gives it to the sortie it begins next."""
 
     @property
     def granted(self) -> bool:
@@ -35,7 +39,7 @@ class Authority:
 
     @classmethod
     def by_configuration(cls) -> "Authority":
-        return cls("operator", "given by the configuration (mavlink.start_mission = true)")
+        return cls("operator", "given by the configuration (mavlink.start_mission = true)", unused=True)
 
     @classmethod
     def by_operator(cls, reason: str = "") -> "Authority":
@@ -50,7 +54,7 @@ class Authority:
 
     def commanding(self, mode: str) -> "Authority":
         """The service commands ``mode`` now: that change is its own."""
-        return replace(self, expected_mode=mode)
+        return replace(self, expected_mode=mode, unused=False)
 
     def on_mode(self, mode: str, *, armed: bool, mission_return: bool, commanded: bool = False) -> "Authority":
         """The vehicle reports a change to ``mode``. A mode the link asked for (a step of the
@@ -61,7 +65,7 @@ class Authority:
         if not self.granted:
             return self
         if commanded:
-            return replace(self, expected_mode=mode)
+            return replace(self, expected_mode=mode, unused=False)
         if self.expected_mode is not None and mode == self.expected_mode:
             return self
         if mission_return and armed and self.expected_mode is not None:
@@ -70,12 +74,25 @@ class Authority:
         return self.revoke(f"mode changed to {mode} (not commanded by the service; the mode expected: {was})")
 
 
-def next_sortie(previous: Authority, *, start_mission: bool, commanded_landing: bool) -> Authority:
-    """The authority a new sortie begins with: from the configuration only after a landing
-    the service commanded (its mission's return, or its own return to launch) under its
-    authority; otherwise the operator must grant it again."""
-    if start_mission and commanded_landing and previous.state != "revoked":
-        return Authority.by_configuration()
+    def on_arming(self, armed: bool, *, commanded: bool, landing: bool) -> "Authority":
+        """The vehicle reports it is now ``armed`` (or disarmed). An arming or disarming the
+        link asked for is the service's, and so is a disarming at the end of a ``landing``
+        of the service's (the autopilot disarms on touching down). Anything else ends the
+        authority: a pilot's or another station's arming, a disarming in the air (a motor
+        kill) or on the ground (the ground crew's hand, the autopilot's own disarming of a
+        start that did not take off: which of them cannot be told apart)."""
+        if not self.granted or commanded or (not armed and landing):
+            return self
+        what = "armed" if armed else "disarmed"
+        return self.revoke(f"the vehicle was {what} (not commanded by the service)")
+
+
+def next_sortie(previous: Authority) -> Authority:
+    """The authority a new sortie begins with: none, the operator's start is awaited, after
+    a landing of the service's own too. The configuration's authority is for the first
+    sortie the process flies: one it started in, over already, passes it on unused."""
+    if previous.granted and previous.unused:
+        return previous
     if previous.state == "revoked":
         return Authority("none", f"not given yet: the operator's start is awaited (last sortie: {previous.detail})")
     return Authority()

@@ -90,6 +90,13 @@ class ModeChanged:
 
 
 @dataclass(frozen=True)
+class ArmedChanged:
+    armed: bool
+    commanded: bool = False
+    """The link asked for it (the start's arming, a failed start's disarming)."""
+
+
+@dataclass(frozen=True)
 class Landed:
     pass
 
@@ -169,8 +176,8 @@ class Degraded:
     why: str
 
 
-Input = (Tick | LinkConnected | LinkLost | LinkRestored | VehicleRestarted | ModeChanged | Landed | Planned
-         | PlanFailed | Uploaded | UploadFailed | ReadBackDone | ReadBackFailed | CommandDone | CommandFailed
-         | RequestIn | OperatorCommand | SortieBegun | Degraded)
+Input = (Tick | LinkConnected | LinkLost | LinkRestored | VehicleRestarted | ModeChanged | ArmedChanged | Landed
+         | Planned | PlanFailed | Uploaded | UploadFailed | ReadBackDone | ReadBackFailed | CommandDone
+         | CommandFailed | RequestIn | OperatorCommand | SortieBegun | Degraded)
 
 __all__ = ["Input", "Vehicle", "World", "Sequence"]

@@ -58,6 +58,9 @@ it (a tick of the loop and a command's round trip): that much more hovering, in 
 is planned at each point."""
 MAX_DOUBTED = 1200
 """Reports kept while in doubt: a minute of the service's ticks (the oldest are dropped)."""
+LANDING_HEIGHT_M = 2.0
+"""A disarming below this height (above home) on the service's own return is its landing's
+(the autopilot's report of the touchdown may follow it)."""
 START_LAPSE_S = 5.0
 """Wall seconds after an accepted start before a vehicle still on the ground, disarmed, is
 taken as not started."""
@@ -124,9 +127,6 @@ class Sortie:
     """The mission was started (by the service or, seen airborne, by someone)."""
     started_at: float = -math.inf
     authority: Authority = field(default_factory=Authority)
-    commanded_landing: bool = True
-    """The landing that ended the sortie was the service's (its mission's return, its own
-    return to launch) under its authority."""
     held: HeldMission | None = None
     held_gen: int | None = None
     """The link generation ``held`` is known to match; None while in doubt."""
@@ -211,12 +211,12 @@ class SortieLogic:
                 # A restart only ever ends the authority: nothing the service commanded holds
                 # across it, and a restart is what an unsigned link can forge.
                 s = self._revoke(replace(s, restarted=True), f"the autopilot restarted ({why})", out)
-                if s.over is not None:  # the landing that ended the sortie was the restart's
-                    s = replace(s, commanded_landing=False)
                 out.append(fx.Emit(ev.VehicleRestarted(why[:256])))
                 s = self._doubt(s, f"the vehicle restarted: {why}", out, hold_interrupted=True)
             case ins.ModeChanged(mode=mode, commanded=commanded):
                 s = self._mode(s, v, mode, commanded, now, out)
+            case ins.ArmedChanged(armed=armed, commanded=commanded):
+                s = self._arming(s, v, armed, commanded, out)
             case ins.Landed():
                 if s.flown:
                     s = self._end(s, "the vehicle landed", v, out)
@@ -257,10 +257,12 @@ class SortieLogic:
     def _tick(self, s: Sortie, v: ins.Vehicle, now: float, out: list[fx.Effect]) -> Sortie:
         if s.just_started and v.connected and v.landed_known:
             s = replace(s, just_started=False)
-            if v.airborne:
-                # The service (re)started with the vehicle in the air: what was done to the
-                # vehicle while it was away (a pilot's switch and back) cannot be known.
-                s = self._revoke(s, f"the service started with the vehicle in the air (in {v.mode}): what "
+            if v.airborne or (v.armed and not s.started and s.commanding != "start"):
+                # The service (re)started with the vehicle in the air, or armed by someone:
+                # what was done to the vehicle while it was away (a pilot's switch and back)
+                # cannot be known.
+                where = "in the air" if v.airborne else "armed on the ground"
+                s = self._revoke(s, f"the service started with the vehicle {where} (in {v.mode}): what "
                                     f"happened to it meanwhile is not known", out)
         if v.airborne and not s.flown and s.over is None:
             s = replace(s, flown=True)
@@ -762,6 +764,20 @@ class SortieLogic:
             out.append(fx.Emit(ev.Returning(f"mode {mode}")))
         return replace(s, authority=authority)
 
+    def _arming(self, s: Sortie, v: ins.Vehicle, armed: bool, commanded: bool, out: list[fx.Effect]) -> Sortie:
+        held = s.held
+        returning = ((held is not None and v.seq == held.rtl_seq)
+                     or (v.mode in RETURNING_MODES and v.mode == s.authority.expected_mode))
+        # The autopilot disarms on touching down; its report of the landing may come a
+        # heartbeat after the disarming's, so a disarming low on the service's own return
+        # is the landing's too.
+        landing = s.flown and (s.over is not None or not v.airborne
+                               or (returning and v.xyz[2] < LANDING_HEIGHT_M))
+        authority = s.authority.on_arming(armed, commanded=commanded, landing=landing)
+        if authority is not s.authority:
+            out += self._revoked_effects(authority)
+        return replace(s, authority=authority)
+
     def _revoke(self, s: Sortie, why: str, out: list[fx.Effect]) -> Sortie:
         """End the authority, if the service has it: only the operator gives it back."""
         if not s.authority.granted:
@@ -818,7 +834,7 @@ class SortieLogic:
                 out.append(fx.Emit(ev.MissionResumed(f"{cmd.why}; from item {cmd.seq}")))
                 return replace(s, resume_pending=False)
             case "return":
-                return replace(s, commanded_landing=True)
+                return s
             case "hold":
                 return s
             case "set_current":
@@ -927,10 +943,7 @@ class SortieLogic:
         if s.watch is not None:
             s = self._judge(replace(s, watch=s.watch.abandon(why)), out)
         out.append(fx.EndSortie(why))
-        # Under authority still held, the landing was the mission's or the service's own:
-        # any change by someone else would have ended the authority first.
-        return replace(s, over=why, version=s.version + 1, busy="" if s.busy == "plan" else s.busy,
-                       commanded_landing=s.authority.granted)
+        return replace(s, over=why, version=s.version + 1, busy="" if s.busy == "plan" else s.busy)
 
     def _maybe_begin(self, s: Sortie, v: ins.Vehicle, out: list[fx.Effect]) -> Sortie:
         """Begin the next sortie once the vehicle is ready again: on the ground, disarmed,
@@ -946,8 +959,7 @@ class SortieLogic:
         return replace(s, beginning=True)
 
     def _begun(self, s: Sortie, number: int, out: list[fx.Effect]) -> Sortie:
-        authority = s.next_authority or next_sortie(s.authority, start_mission=self.rules.start_mission,
-                                                    commanded_landing=s.commanded_landing)
+        authority = s.next_authority or next_sortie(s.authority)
         out.append(fx.Emit(ev.SortieStarted(f"sortie {number}: authority {authority.state} ({authority.detail})")))
         return Sortie(number=number, authority=authority, plan_id=s.plan_id, version=s.version + 1)
 
@@ -959,7 +971,9 @@ def marked_current(items: list[MissionItem], seq: int) -> list[MissionItem]:
 
 
 def new_sortie(number: int, rules: Rules, plan_id: int = 0) -> Sortie:
-    """The state of a sortie the service starts in (the configuration's authority)."""
+    """The state of the sortie the service starts in: the configuration's authority
+    (``start_mission``) is for it only, and it ends if the vehicle is found in the air or
+    armed (``Sortie.just_started``)."""
     authority = Authority.by_configuration() if rules.start_mission else Authority()
     return Sortie(number=number, authority=authority, plan_id=plan_id)
 
