@@ -434,7 +434,7 @@ def test_the_services_own_arming_and_its_landings_disarming_keep_the_authority()
     assert run.s.authority.granted
     # Found landed first, then disarmed: the landing's.
     run2, _ = fly_to_first_point(FakeWorld())
-    run2.feed(ins.Landed(), airborne=False)
+    run2.feed(ins.Landed(), airborne=False, xyz=(0.0, 0.0, 0.1))
     run2.feed(ins.ArmedChanged(False), armed=False)
     assert run2.s.authority.granted
 
@@ -443,6 +443,17 @@ def test_a_disarming_high_on_the_way_home_is_not_the_landings() -> None:
     world = FakeWorld()
     run, _ = fly_to_first_point(world)
     run.feed(ins.ArmedChanged(False), armed=False, seq=run.s.held.rtl_seq, xyz=(50.0, 50.0, 60.0))
+    assert run.s.authority.state == "revoked"
+
+
+def test_a_disarming_in_the_air_reported_landed_first_is_not_a_landing() -> None:
+    # ArduCopter's land detector calls a vehicle disarmed in the air landed at once: its
+    # EXTENDED_SYS_STATE may reach the service before the heartbeat showing the disarming.
+    world = FakeWorld()
+    run, _ = fly_to_first_point(world)
+    run.feed(ins.Landed(), airborne=False, xyz=(30.0, 50.0, 40.0))
+    assert run.s.over is not None
+    run.feed(ins.ArmedChanged(False), armed=False)
     assert run.s.authority.state == "revoked"
 
 

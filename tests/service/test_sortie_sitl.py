@@ -361,3 +361,39 @@ def test_a_pilots_loiter_ends_the_authority_and_after_the_pilots_landing_nothing
     assert services >= 1
     print(f"\npilot on SITL: modes {modes}, authority ended by {revoked.detail!r}; {services} services, 0 false; "
           "no command of the service after the pilot's LOITER")
+
+
+def test_a_pilots_forced_disarming_in_the_air_ends_the_authority_and_nothing_arms(copter: Sitl,
+                                                                                   stack: Stack) -> None:
+    """The pilot's emergency stop on the real autopilot: a forced disarming (param2 21196)
+    from SERIAL2 while SITL flies the service's mission in AUTO. No mode changes, and
+    ArduCopter calls a vehicle disarmed in the air landed at once: the disarming alone must
+    end the authority. SITL's copter falls; the service commands nothing after it and never
+    arms again (SITL's own log: no ARM record after the pilot's disarming)."""
+    sitl = copter
+    fly(stack, sitl, "pymavlink")
+    client = stack.client
+    assert client is not None
+    stack.wait_event(lambda e: e.event == "user_served", 150.0, "a first service")
+    gcs = GroundStation(sitl.url(2))
+    try:
+        gcs.wait_vehicle()
+        stopped_at = time.time()
+        assert gcs.command(M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 21196) == M.MAV_RESULT_ACCEPTED
+    finally:
+        gcs.close()
+    revoked = stack.wait_event(lambda e: e.event == "authority_revoked" and e.time_s >= stopped_at, 15.0,
+                               "the end of the authority")
+    assert "disarmed (not commanded by the service)" in revoked.detail, revoked.detail
+    time.sleep(5.0)  # 50 s of SITL's time: the users go on asking, the service goes on planning
+    status = client.state().status
+    assert status.authority == "revoked" and not status.armed, status
+    for child in reversed(stack.children):
+        assert child.stop() == 0, f"{child.name}: {child.log()[-2000:]}"
+    sitl.stop()  # flushes the dataflash log
+
+    log = sitl.read_log(("MODE", "ARM"))
+    arms = [(m["ArmState"], m.get("Method")) for m in log if m["mavpackettype"] == "ARM"]
+    states = [a for a, _ in arms]  # (the service's arming may come before the log starts)
+    assert 0 in states and states[states.index(0):] == [0], arms  # the pilot's disarming, then nothing
+    print(f"\nforced disarming on SITL: authority ended by {revoked.detail!r}; ARM records {arms}")

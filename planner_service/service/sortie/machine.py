@@ -768,11 +768,12 @@ class SortieLogic:
         held = s.held
         returning = ((held is not None and v.seq == held.rtl_seq)
                      or (v.mode in RETURNING_MODES and v.mode == s.authority.expected_mode))
-        # The autopilot disarms on touching down; its report of the landing may come a
-        # heartbeat after the disarming's, so a disarming low on the service's own return
-        # is the landing's too.
-        landing = s.flown and (s.over is not None or not v.airborne
-                               or (returning and v.xyz[2] < LANDING_HEIGHT_M))
+        # The autopilot disarms on touching down, and its report of the landing may come a
+        # heartbeat after the disarming's (a disarming low on the service's own return is
+        # the landing's too); but ArduCopter reports a vehicle disarmed in the air as landed
+        # at once (its land detector), so the height decides, not the landed state.
+        low = v.position_ok and v.xyz[2] < LANDING_HEIGHT_M
+        landing = s.flown and low and (s.over is not None or not v.airborne or returning)
         authority = s.authority.on_arming(armed, commanded=commanded, landing=landing)
         if authority is not s.authority:
             out += self._revoked_effects(authority)
