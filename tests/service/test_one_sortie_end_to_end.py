@@ -30,6 +30,9 @@ def test_whole_sortie(stack: Stack, backend: str, flavour: str) -> None:
     probe = stack.client.submit("probe-1", 250.0, 250.0, 12, client_ref="probe")
     assert probe.client_ref == "probe" and probe.request_id >= 1
     stack.wait_event(lambda e: e.event == "landed", 90.0, "landing")
+    stack.wait_disarmed(10.0)
+    # the autopilot's disarming at the service's own landing is explained: no authority ended
+    assert not [e.detail for e in stack.events if e.event == "authority_revoked"]
     assert users.stop() == 0 and service.stop() == 0
 
     (probe_status,) = stack.rows(f"SELECT status FROM requests WHERE request_id = {probe.request_id}")[0]

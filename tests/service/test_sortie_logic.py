@@ -386,9 +386,9 @@ def test_after_its_own_landing_the_next_sortie_waits_for_the_operator() -> None:
     run, _ = fly_to_first_point(world)
     run.feed(ins.ModeChanged("RTL", commanded=True), mode="RTL")
     run.feed(ins.ArmedChanged(False), armed=False, xyz=(0.0, 0.0, 0.3))
-    assert run.s.authority.granted, "the autopilot's disarming on touching down at our return"
-    run.feed(ins.Landed(), airborne=False)
+    run.feed(ins.Landed(), airborne=False)  # reported after the disarming
     run.tick()
+    assert run.s.authority.granted, "the autopilot's disarming on touching down at our return"
     (plan,) = only(run.feed(ins.SortieBegun(2)), fx.Plan)
     assert run.s.authority.state == "none"
     (up,) = only(run.feed(ins.Planned(plan.basis, path(point(5, 200.0, 200.0, "c", 3)))), fx.Upload)
@@ -428,22 +428,32 @@ def test_the_services_own_arming_and_its_landings_disarming_keep_the_authority()
     assert run.s.authority.granted
     # The disarming reported while the vehicle flies its mission, away from its return: not ours.
     assert run.s.authority.on_arming(False, commanded=False, landing=False).state == "revoked"
-    # At the mission's return item, low: the touchdown's disarming (its report may come later).
+    # At the mission's return item: the touchdown's disarming, its report within 2 s.
     rtl = run.s.held.rtl_seq
     run.feed(ins.ArmedChanged(False), armed=False, seq=rtl, xyz=(0.0, 0.0, 0.5))
+    run.now += 1.5
+    run.tick(airborne=False)
+    run.now += 5.0
+    run.tick()
     assert run.s.authority.granted
-    # Found landed first, then disarmed: the landing's.
+    # Reported landed first at the return item, then disarmed: the landing's.
     run2, _ = fly_to_first_point(FakeWorld())
-    run2.feed(ins.Landed(), airborne=False, xyz=(0.0, 0.0, 0.1))
+    run2.feed(ins.Landed(), airborne=False, seq=run2.s.held.rtl_seq, xyz=(0.0, 0.0, 0.1))
     run2.feed(ins.ArmedChanged(False), armed=False)
     assert run2.s.authority.granted
 
 
-def test_a_disarming_high_on_the_way_home_is_not_the_landings() -> None:
+def test_a_disarming_on_the_way_home_not_followed_by_a_landing_is_nobodys() -> None:
     world = FakeWorld()
     run, _ = fly_to_first_point(world)
     run.feed(ins.ArmedChanged(False), armed=False, seq=run.s.held.rtl_seq, xyz=(50.0, 50.0, 60.0))
-    assert run.s.authority.state == "revoked"
+    run.now += 1.0
+    run.tick()
+    assert run.s.authority.granted, "its landing's report may still come"
+    run.now += 1.5
+    out = run.tick()
+    assert run.s.authority.state == "revoked" and "not reported landed within 2 s" in run.s.authority.detail
+    assert "authority_revoked" in [e.event.kind for e in only(out, fx.Emit)]
 
 
 def test_a_disarming_in_the_air_reported_landed_first_is_not_a_landing() -> None:
@@ -454,7 +464,7 @@ def test_a_disarming_in_the_air_reported_landed_first_is_not_a_landing() -> None
     run.feed(ins.Landed(), airborne=False, xyz=(30.0, 50.0, 40.0))
     assert run.s.over is not None
     run.feed(ins.ArmedChanged(False), armed=False)
-    assert run.s.authority.state == "revoked"
+    assert run.s.authority.state == "revoked", "away from the mission's return: not ours"
 
 
 def test_a_service_started_beside_a_vehicle_armed_on_the_ground_has_no_authority() -> None:

@@ -201,6 +201,9 @@ def test_whole_sortie(copter: Sitl, stack: Stack, backend: str) -> None:
     started = time.monotonic()
     stack.wait_event(lambda e: e.event == "landed", 180.0, "the landing")
     wall_s = time.monotonic() - started
+    stack.wait_disarmed(15.0)
+    # ArduCopter's disarming at the service's own landing is explained: no authority ended
+    assert not [e.detail for e in stack.events if e.event == "authority_revoked"]
     for child in reversed(stack.children):
         assert child.stop() == 0, f"{child.name}: {child.log()[-2000:]}"
     heard = [text for _, text in sitl.texts]

@@ -107,6 +107,16 @@ class Stack:
                 raise AssertionError(f"no {text!r} in {child.name}'s log within {timeout_s} s\n{child.log()[-3000:]}")
             time.sleep(0.05)
 
+    def wait_disarmed(self, timeout_s: float) -> None:
+        """Wait until the service's status shows the vehicle disarmed (the autopilot's own
+        disarming after a landing comes a moment after the landing)."""
+        assert self.client is not None
+        deadline = time.monotonic() + timeout_s
+        while self.client.state().status.armed:
+            if time.monotonic() > deadline:
+                raise AssertionError(f"the vehicle still armed {timeout_s} s later")
+            time.sleep(0.1)
+
     def rows(self, sql: str) -> list[tuple[Any, ...]]:
         """Read the journal as another process would (read-only, beside the WAL writer)."""
         db = sqlite3.connect(f"file:{self.journal_path}?mode=ro", uri=True)

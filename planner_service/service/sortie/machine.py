@@ -58,9 +58,9 @@ it (a tick of the loop and a command's round trip): that much more hovering, in 
 is planned at each point."""
 MAX_DOUBTED = 1200
 """Reports kept while in doubt: a minute of the service's ticks (the oldest are dropped)."""
-LANDING_HEIGHT_M = 2.0
-"""A disarming below this height (above home) on the service's own return is its landing's
-(the autopilot's report of the touchdown may follow it)."""
+DISARM_LANDING_S = 2.0
+"""Wall seconds a disarming on the service's own return waits for the landing's report (it
+may follow the heartbeat showing the disarming) before it is taken as nobody's."""
 START_LAPSE_S = 5.0
 """Wall seconds after an accepted start before a vehicle still on the ground, disarmed, is
 taken as not started."""
@@ -175,6 +175,9 @@ class Sortie:
     just_started: bool = False
     """The service has just started (restored from its journal) and has not yet seen whether
     the vehicle is in the air: if it is, the authority ends."""
+    disarmed_at: float | None = None
+    """When a disarming on the service's own return, not yet reported landed, was seen
+    (``_disarm_check``)."""
     doubted: tuple[Sample, ...] = ()
     """The vehicle's reports while in doubt or an upload is in flight (``_replay``), at most
     ``MAX_DOUBTED``."""
@@ -216,7 +219,7 @@ class SortieLogic:
             case ins.ModeChanged(mode=mode, commanded=commanded):
                 s = self._mode(s, v, mode, commanded, now, out)
             case ins.ArmedChanged(armed=armed, commanded=commanded):
-                s = self._arming(s, v, armed, commanded, out)
+                s = self._arming(s, v, armed, commanded, now, out)
             case ins.Landed():
                 if s.flown:
                     s = self._end(s, "the vehicle landed", v, out)
@@ -273,6 +276,7 @@ class SortieLogic:
         s = self._start_lapsed(s, v, now, out)
         s = self._watch(s, v, out)
         s = self._count_check(s, v, out)
+        s = self._disarm_check(s, v, now, out)
         s = self._safety(s, v, out)
         return self._next(s, v, now, out)
 
@@ -764,20 +768,32 @@ class SortieLogic:
             out.append(fx.Emit(ev.Returning(f"mode {mode}")))
         return replace(s, authority=authority)
 
-    def _arming(self, s: Sortie, v: ins.Vehicle, armed: bool, commanded: bool, out: list[fx.Effect]) -> Sortie:
+    def _arming(self, s: Sortie, v: ins.Vehicle, armed: bool, commanded: bool, now: float,
+                out: list[fx.Effect]) -> Sortie:
         held = s.held
-        returning = ((held is not None and v.seq == held.rtl_seq)
-                     or (v.mode in RETURNING_MODES and v.mode == s.authority.expected_mode))
-        # The autopilot disarms on touching down, and its report of the landing may come a
-        # heartbeat after the disarming's (a disarming low on the service's own return is
-        # the landing's too); but ArduCopter reports a vehicle disarmed in the air as landed
-        # at once (its land detector), so the height decides, not the landed state.
-        low = v.position_ok and v.xyz[2] < LANDING_HEIGHT_M
-        landing = s.flown and low and (s.over is not None or not v.airborne or returning)
-        authority = s.authority.on_arming(armed, commanded=commanded, landing=landing)
+        returning = s.flown and ((held is not None and v.seq == held.rtl_seq)
+                                 or (v.mode in RETURNING_MODES and v.mode == s.authority.expected_mode))
+        if not armed and not commanded and returning and v.airborne and s.authority.granted:
+            # On the service's own return: the landing's disarming if the landing is
+            # reported too (its report may come after the disarming's): judged then.
+            return replace(s, disarmed_at=now)
+        authority = s.authority.on_arming(armed, commanded=commanded, landing=returning)
         if authority is not s.authority:
             out += self._revoked_effects(authority)
-        return replace(s, authority=authority)
+        return replace(s, authority=authority, disarmed_at=None)
+
+    def _disarm_check(self, s: Sortie, v: ins.Vehicle, now: float, out: list[fx.Effect]) -> Sortie:
+        """A disarming on the service's own return is its landing's once the vehicle is
+        reported on the ground within ``DISARM_LANDING_S``; otherwise nobody's."""
+        if s.disarmed_at is None:
+            return s
+        if v.armed or (v.landed_known and not v.airborne):
+            return replace(s, disarmed_at=None)
+        if now - s.disarmed_at < DISARM_LANDING_S:
+            return s
+        s = replace(s, disarmed_at=None)
+        return self._revoke(s, f"the vehicle was disarmed (not commanded by the service) and not reported "
+                               f"landed within {DISARM_LANDING_S:g} s", out)
 
     def _revoke(self, s: Sortie, why: str, out: list[fx.Effect]) -> Sortie:
         """End the authority, if the service has it: only the operator gives it back."""
