@@ -24,12 +24,13 @@ import errno
 import fcntl
 import hashlib
 import hmac
+import math
 import os
 import secrets
 import stat
 import time
 import zlib
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Callable
 
@@ -314,6 +315,49 @@ def _parse_slots(raw: bytes) -> tuple[int | None, int, int | None]:
 
 
 # --- signing pymavlink objects ------------------------------------------------------------------
+HEARD_S = 10.0
+"""A sender whose correctly signed messages passed within this many seconds is being heard:
+a packet in its name that fails the signature is then not its own."""
+DROP_REASONS = ("bad signature", "replayed", "stale stream", "unsigned")
+
+
+@dataclass(frozen=True)
+class Drop:
+    """One message the signature check dropped, and why, as far as its bytes tell."""
+
+    reason: str
+    """One of ``DROP_REASONS``."""
+    message: str
+    stream: tuple[int, int, int] | None = None
+    """(link id, system, component) a signed packet names; None unsigned."""
+    timestamp: int = 0
+    """The packet's signing timestamp (signed packets)."""
+    reference: int = 0
+    """replayed: the stream's last timestamp; stale stream: ours."""
+    sender_heard: bool = False
+    """bad signature: correctly signed messages of that system and component passed lately."""
+
+    def describe(self) -> str:
+        """The packet and what its drop means, in words: a replay is not a key problem."""
+        if self.stream is None:
+            return f"{self.message} unsigned: the sender does not sign"
+        link, system, component = self.stream
+        who = f"{self.message} from system {system} component {component} (link id {link})"
+        if self.reason == "replayed":
+            behind = (self.reference - self.timestamp) / TICKS_PER_S
+            return (f"{who}: its timestamp is {behind:.2f} s behind the last one heard on that stream: "
+                    f"a replay of captured packets (not a key problem)")
+        if self.reason == "stale stream":
+            behind = (self.reference - self.timestamp) / TICKS_PER_S
+            return (f"{who} opens a stream {behind:.0f} s behind our timestamp (more than "
+                    f"{NEW_STREAM_WINDOW // TICKS_PER_S} s allowed): old packets replayed, or a sender whose "
+                    f"clock is behind and who keeps no timestamp file (not a key problem)")
+        if self.sender_heard:
+            return (f"{who}: the signature does not match our key while that sender's correctly signed "
+                    f"messages pass: forged, or another station with another key using its ids")
+        return f"{who}: the signature does not match our key: the sender signs with another key (or it is forged)"
+
+
 @dataclass
 class SigningStats:
     """What the signature check let through and what it dropped, by reason and message."""
@@ -356,7 +400,12 @@ class Signer:
         self.stats = SigningStats()
         self.last_drop = ""
         """'<MESSAGE> (<reason>)' of the latest dropped message."""
-        self._reason: str | None = None
+        self.last_drops: dict[str, Drop] = {}
+        """The latest drop of each reason."""
+        self._failed: Drop | None = None
+        """What ``check_signature`` found wrong with the packet pymavlink asks about next."""
+        self._good_at: dict[tuple[int, int], float] = {}
+        """(system, component) -> when a correctly signed message of it last passed."""
         self._highest_heard = 0
         state = mavlink.MAVLinkSigning()
         state.secret_key = key
@@ -391,33 +440,37 @@ class Signer:
         """The spec's acceptance of a signed packet: the signature first, then the timestamp
         against the stream's last one (or, for a new stream, within a minute of ours)."""
         buf = bytes(msgbuf)
-        digest = hashlib.sha256(self.state.secret_key + buf[:-6]).digest()[:6]
-        if not hmac.compare_digest(digest, buf[-6:]):
-            self._reason = "bad signature"
-            return False
         link_id = buf[-SIGNATURE_LEN]
         timestamp = int.from_bytes(buf[-12:-6], "little")
         stream = (link_id, src_system, src_component)
+        digest = hashlib.sha256(self.state.secret_key + buf[:-6]).digest()[:6]
+        if not hmac.compare_digest(digest, buf[-6:]):
+            heard = self.clock() - self._good_at.get((src_system, src_component), -math.inf) <= HEARD_S
+            self._failed = Drop("bad signature", "", stream, timestamp, sender_heard=heard)
+            return False
         last = self.state.stream_timestamps.get(stream)
         if last is None and timestamp + NEW_STREAM_WINDOW < self.state.timestamp:
-            self._reason = "stale stream"
+            self._failed = Drop("stale stream", "", stream, timestamp, int(self.state.timestamp))
             return False
         if last is not None and timestamp <= last:
-            self._reason = "replayed"
+            self._failed = Drop("replayed", "", stream, timestamp, last)
             return False
         self.state.stream_timestamps[stream] = timestamp
         self._highest_heard = max(self._highest_heard, timestamp)
+        self._good_at[(src_system, src_component)] = self.clock()
         self.stats.accepted += 1
         return True
 
     def _allow_unsigned(self, mav: Any, msg_id: int) -> bool:
         """pymavlink asks this for every message that is unsigned or failed the check."""
-        reason, self._reason = self._reason or "unsigned", None
+        failed, self._failed = self._failed, None
         if msg_id in self.accept_unsigned:
             self.stats.unsigned_allowed += 1
             return True
         name = mavlink.mavlink_map[msg_id].msgname if msg_id in mavlink.mavlink_map else f"MSG {msg_id}"
-        self.stats.dropped[reason] = self.stats.dropped.get(reason, 0) + 1
+        drop = replace(failed, message=name) if failed is not None else Drop("unsigned", name)
+        self.last_drops[drop.reason] = drop  # before the count: a reader of the count finds it
+        self.stats.dropped[drop.reason] = self.stats.dropped.get(drop.reason, 0) + 1
         self.stats.dropped_types[name] = self.stats.dropped_types.get(name, 0) + 1
-        self.last_drop = f"{name} ({reason})"
+        self.last_drop = f"{name} ({drop.reason})"
         return False

@@ -295,6 +295,36 @@ def test_signed_accepted_unsigned_wrong_key_and_replays_dropped() -> None:
     assert vehicle.last_drop == "COMMAND_LONG (bad signature)"
 
 
+def test_each_drop_says_what_it_is() -> None:
+    """A replay is a replay (not a key problem), a bad signature in the name of a sender
+    whose signed messages pass is a forgery, one from a sender never heard points to the key."""
+    now = [T0]
+    vehicle = Signer(KEY, clock=lambda: now[0])
+    rx = sender(vehicle, 1, 1)
+    rx.robust_parsing = True
+    good = sender(Signer(KEY, clock=lambda: T0), 255, 190)
+    packet = arm_bytes(good)
+    receive(rx, packet)
+    later = arm_bytes(good)  # 1 tick later on the same stream
+    receive(rx, later)
+    receive(rx, packet)  # captured bytes sent again
+    replay = vehicle.last_drops["replayed"]
+    assert (replay.stream, replay.reference - replay.timestamp) == ((0, 255, 190), 1)
+    assert replay.describe() == ("COMMAND_LONG from system 255 component 190 (link id 0): its timestamp is 0.00 s "
+                                 "behind the last one heard on that stream: a replay of captured packets (not a key "
+                                 "problem)")
+    receive(rx, arm_bytes(sender(Signer(bytes(32), clock=lambda: T0), 255, 190)))
+    assert "forged" in vehicle.last_drops["bad signature"].describe()
+    now[0] += 11.0  # that sender not heard for longer than HEARD_S
+    receive(rx, arm_bytes(sender(Signer(bytes(32), clock=lambda: T0), 255, 190)))
+    assert vehicle.last_drops["bad signature"].describe().endswith("the sender signs with another key (or it is forged)")
+    receive(rx, arm_bytes(sender(Signer(KEY, link_id=4, clock=lambda: T0 - 120.0))))
+    assert "opens a stream 120 s behind our timestamp" in vehicle.last_drops["stale stream"].describe()
+    receive(rx, arm_bytes(sender(None)))
+    assert vehicle.last_drops["unsigned"].describe() == "COMMAND_LONG unsigned: the sender does not sign"
+    assert vehicle.stats.dropped == {"replayed": 1, "bad signature": 2, "stale stream": 1, "unsigned": 1}
+
+
 def test_a_forged_future_timestamp_does_not_lock_the_real_sender_out() -> None:
     """pymavlink's own check records a stream's timestamp before verifying the signature;
     a forger with a wrong key and a far-future timestamp would make every later real packet
