@@ -20,20 +20,24 @@ lock the real sender out. Here the signature is checked first, as the C library 
 
 from __future__ import annotations
 
+import errno
 import fcntl
 import hashlib
 import hmac
+import math
 import os
 import secrets
 import stat
 import time
-from dataclasses import dataclass, field
+import zlib
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Callable
 
 from pymavlink.dialects.v20 import common as mavlink
 
 from .errors import SigningError
+from .file_lock import flock_holder, names
 
 KEY_BYTES = 32
 MAVLINK_EPOCH_UNIX_S = 1420070400
@@ -130,8 +134,18 @@ def default_timestamp_path(key_path: str | os.PathLike[str], role: str) -> Path:
 class TimestampStore:
     """The reservation file: ``open`` -> start timestamp; ``advance`` as time passes; ``close``.
 
-    The file holds one decimal number: a timestamp this process will not exceed before it
-    stores a higher one. A lock beside it refuses a second process on the same file.
+    The file holds a timestamp this process will not exceed before it stores a higher one
+    (``close`` stores the last one used), in two slots of one line each, ``<15 digits>
+    <count of writes, 8 hex> <CRC-32, 8 hex>``, written in turn in place: a write cut by a
+    crash spoils at most the slot being written, whose value was not yet relied on, and the
+    other slot still holds the value before it. The valid slot written last counts. (A file of one bare decimal number, from before the slots, is read
+    as that number; an empty file, created and never written, as none.)
+
+    One process per file: an exclusive ``flock`` on the file itself, held from ``open`` to
+    ``close``, as the journal holds its own. No other file stands for the lock, so none can
+    be deleted to get round it, and the kernel drops it when its process dies (a killed
+    holder leaves nothing stale). This is why the slots are written in place: a file
+    replaced by a rename would be a new file, unlocked.
     """
 
     def __init__(self, path: str | os.PathLike[str], clock: Callable[[], float] = time.time,
@@ -141,6 +155,10 @@ class TimestampStore:
         self.reserve_ticks = reserve_ticks
         self.reserved = 0
         self._lock_fd: int | None = None
+        self._slot = 0
+        """The slot the next write goes to: never the one holding the reservation in force."""
+        self._count = 0
+        """Writes so far (kept in the file): the valid slot written last is the one in force."""
 
     def open(self) -> int:
         """Lock the file and return the first timestamp to use: the larger of the wall clock's
@@ -175,55 +193,171 @@ class TimestampStore:
 
     # --- internals ------------------------------------------------------------------------------
     def _lock(self) -> None:
-        lock_path = f"{self.path}.lock"
-        try:
-            fd = os.open(lock_path, os.O_RDWR | os.O_CREAT, 0o600)
-        except OSError as err:
-            raise SigningError(str(self.path),
-                               f"cannot create the lock file {lock_path}: {err.strerror or err}") from None
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except OSError:
+        """Open (creating it if need be) and lock the file; ``SigningError`` naming it, and the
+        holder's pid where ``/proc/locks`` shows it, if another process has it. Another
+        process may remove or replace the file between our open and our lock: then the lock
+        is on a file the path no longer leads to, and we look again."""
+        name = str(self.path)
+        for _ in range(LOCK_TRIES):
+            try:
+                fd = os.open(name, os.O_RDWR | os.O_CREAT | os.O_NOCTTY, 0o600)
+            except OSError as err:
+                raise SigningError(name, f"cannot open the timestamp file: {err.strerror or err}") from None
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except OSError as err:
+                holder = flock_holder(fd)
+                os.close(fd)
+                if err.errno not in (errno.EWOULDBLOCK, errno.EAGAIN):
+                    raise SigningError(name, f"cannot lock the timestamp file: {err.strerror or err}") from None
+                who = f"pid {holder}" if holder else "another process"
+                raise SigningError(name, f"is in use by {who}: each process signing with a key needs its own "
+                                         "timestamp file") from None
+            if names(name, fd):
+                self._lock_fd = fd
+                return
             os.close(fd)
-            raise SigningError(str(self.path), "is in use by another process: give each process sharing a key "
-                                               "its own timestamp file") from None
-        self._lock_fd = fd
+        raise SigningError(name, f"kept being removed or replaced while this process tried to lock it "
+                                 f"({LOCK_TRIES} tries); is another program using it?")
 
     def _unlock(self) -> None:
         if self._lock_fd is not None:
             os.close(self._lock_fd)  # closing releases the flock
             self._lock_fd = None
 
+    def _held(self) -> int:
+        if self._lock_fd is None:
+            raise SigningError(str(self.path), "the timestamp file is not open (open() it first)")
+        return self._lock_fd
+
     def _read(self) -> int:
         try:
-            text = self.path.read_text(encoding="ascii").strip()
-        except FileNotFoundError:
-            return 0
-        except (OSError, UnicodeDecodeError) as err:
-            raise SigningError(str(self.path), f"cannot read the timestamp file: {err}") from None
-        if not text.isdigit() or int(text) > MAX_TIMESTAMP:
-            raise SigningError(str(self.path), f"holds {text[:40]!r}, not a signing timestamp; delete it only if "
-                                               "this machine's clock is right (a stale timestamp gets our messages "
+            raw = os.pread(self._held(), 4 * SLOT_BYTES, 0)
+        except OSError as err:
+            raise SigningError(str(self.path), f"cannot read the timestamp file: {err.strerror or err}") from None
+        value, count, slot = _parse_slots(raw)
+        if value is None:
+            shown = raw[:40].decode("ascii", errors="replace")
+            raise SigningError(str(self.path), f"holds {shown!r}, not a signing timestamp; delete it only if this "
+                                               "machine's clock is right (a stale timestamp gets our messages "
                                                "ignored as replays)")
-        return int(text)
+        self._slot = 1 - slot if slot is not None else 0
+        self._count = count
+        self.reserved = value
+        return value
 
     def _store(self, value: int) -> None:
-        """Write ``value`` atomically (a crash leaves the old or the new number, never half)."""
-        tmp = self.path.with_name(self.path.name + ".tmp")
+        """Write ``value`` into the slot not in force, and sync it: only then is it in force."""
+        fd = self._held()
+        if not names(str(self.path), fd):
+            raise SigningError(str(self.path), "was removed or replaced while this process used it: its "
+                                               "reservation can no longer be kept there (restart the process)")
         try:
-            fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
-            try:
-                os.write(fd, f"{value}\n".encode("ascii"))
-                os.fsync(fd)
-            finally:
-                os.close(fd)
-            os.replace(tmp, self.path)
+            if os.fstat(fd).st_size != 2 * SLOT_BYTES:
+                # a new file, or the bare number of an older version: the reservation in force
+                # into slot 0 (read before, 0 for a new file), the new one into slot 1
+                os.pwrite(fd, _slot_line(self.reserved, self._count) + _slot_line(value, self._count + 1), 0)
+                os.ftruncate(fd, 2 * SLOT_BYTES)
+                self._slot = 0
+            else:
+                os.pwrite(fd, _slot_line(value, self._count + 1), self._slot * SLOT_BYTES)
+                self._slot = 1 - self._slot
+            self._count += 1
+            os.fsync(fd)
         except OSError as err:
             raise SigningError(str(self.path), f"cannot write the timestamp file: {err.strerror or err}") from None
         self.reserved = value
 
 
+def read_reservation(path: str | os.PathLike[str]) -> int | None:
+    """The reservation a timestamp file holds (None if it holds none), read without its lock:
+    for tools and tests, never for a process about to sign."""
+    with open(path, "rb") as handle:
+        return _parse_slots(handle.read(4 * SLOT_BYTES))[0]
+
+
+SLOT_DIGITS = 15
+"""Digits of a slot's timestamp: enough for any 48-bit value (2**48 has 15)."""
+SLOT_BYTES = SLOT_DIGITS + 1 + 8 + 1 + 8 + 1
+"""One slot: the timestamp, a space, the write's count (8 hex), a space, the CRC-32 of what
+comes before it (8 hex), a newline."""
+LOCK_TRIES = 5
+"""Looks at the timestamp file's path before giving up, when each finds it removed or
+replaced by another process between our open and our lock."""
+
+
+def _slot_line(value: int, count: int) -> bytes:
+    body = f"{value:0{SLOT_DIGITS}d} {count & 0xFFFFFFFF:08x}".encode("ascii")
+    return body + f" {zlib.crc32(body):08x}\n".encode("ascii")
+
+
+def _parse_slots(raw: bytes) -> tuple[int | None, int, int | None]:
+    """(reservation, its write count, slot holding it) of a file's bytes: the valid slot
+    written last. (0, 0, None) for an empty file; the bare number of the older layout with
+    slot None; reservation None if the file holds no timestamp."""
+    if not raw:
+        return 0, 0, None
+    text = raw.decode("ascii", errors="replace")
+    bare = text[:-1] if text.endswith("\n") else text
+    if len(raw) != 2 * SLOT_BYTES:
+        return (int(bare), 0, None) if bare.isdigit() and int(bare) <= MAX_TIMESTAMP else (None, 0, None)
+    best: tuple[int | None, int, int | None] = (None, 0, None)
+    for slot in (0, 1):
+        line = raw[slot * SLOT_BYTES:(slot + 1) * SLOT_BYTES]
+        body, crc = line[:SLOT_DIGITS + 9], line[SLOT_DIGITS + 10:SLOT_BYTES - 1]
+        digits, count = body[:SLOT_DIGITS], body[SLOT_DIGITS + 1:]
+        if (not line.endswith(b"\n") or crc != f"{zlib.crc32(body):08x}".encode("ascii") or not digits.isdigit()
+                or int(digits) > MAX_TIMESTAMP):
+            continue  # a slot a crash cut short: the other one holds the reservation
+        if best[0] is None or int(count, 16) > best[1]:
+            best = (int(digits), int(count, 16), slot)
+    return best
+
+
 # --- signing pymavlink objects ------------------------------------------------------------------
+HEARD_S = 10.0
+"""A sender whose correctly signed messages passed within this many seconds is being heard:
+a packet in its name that fails the signature is then not its own."""
+DROP_REASONS = ("bad signature", "replayed", "stale stream", "unsigned")
+
+
+@dataclass(frozen=True)
+class Drop:
+    """One message the signature check dropped, and why, as far as its bytes tell."""
+
+    reason: str
+    """One of ``DROP_REASONS``."""
+    message: str
+    stream: tuple[int, int, int] | None = None
+    """(link id, system, component) a signed packet names; None unsigned."""
+    timestamp: int = 0
+    """The packet's signing timestamp (signed packets)."""
+    reference: int = 0
+    """replayed: the stream's last timestamp; stale stream: ours."""
+    sender_heard: bool = False
+    """bad signature: correctly signed messages of that system and component passed lately."""
+
+    def describe(self) -> str:
+        """The packet and what its drop means, in words: a replay is not a key problem."""
+        if self.stream is None:
+            return f"{self.message} unsigned: the sender does not sign"
+        link, system, component = self.stream
+        who = f"{self.message} from system {system} component {component} (link id {link})"
+        if self.reason == "replayed":
+            behind = (self.reference - self.timestamp) / TICKS_PER_S
+            return (f"{who}: its timestamp is {behind:.2f} s behind the last one heard on that stream: "
+                    f"a replay of captured packets (not a key problem)")
+        if self.reason == "stale stream":
+            behind = (self.reference - self.timestamp) / TICKS_PER_S
+            return (f"{who} opens a stream {behind:.0f} s behind our timestamp (more than "
+                    f"{NEW_STREAM_WINDOW // TICKS_PER_S} s allowed): old packets replayed, or a sender whose "
+                    f"clock is behind and who keeps no timestamp file (not a key problem)")
+        if self.sender_heard:
+            return (f"{who}: the signature does not match our key while that sender's correctly signed "
+                    f"messages pass: forged, or another station with another key using its ids")
+        return f"{who}: the signature does not match our key: the sender signs with another key (or it is forged)"
+
+
 @dataclass
 class SigningStats:
     """What the signature check let through and what it dropped, by reason and message."""
@@ -266,7 +400,12 @@ class Signer:
         self.stats = SigningStats()
         self.last_drop = ""
         """'<MESSAGE> (<reason>)' of the latest dropped message."""
-        self._reason: str | None = None
+        self.last_drops: dict[str, Drop] = {}
+        """The latest drop of each reason."""
+        self._failed: Drop | None = None
+        """What ``check_signature`` found wrong with the packet pymavlink asks about next."""
+        self._good_at: dict[tuple[int, int], float] = {}
+        """(system, component) -> when a correctly signed message of it last passed."""
         self._highest_heard = 0
         state = mavlink.MAVLinkSigning()
         state.secret_key = key
@@ -301,33 +440,37 @@ class Signer:
         """The spec's acceptance of a signed packet: the signature first, then the timestamp
         against the stream's last one (or, for a new stream, within a minute of ours)."""
         buf = bytes(msgbuf)
-        digest = hashlib.sha256(self.state.secret_key + buf[:-6]).digest()[:6]
-        if not hmac.compare_digest(digest, buf[-6:]):
-            self._reason = "bad signature"
-            return False
         link_id = buf[-SIGNATURE_LEN]
         timestamp = int.from_bytes(buf[-12:-6], "little")
         stream = (link_id, src_system, src_component)
+        digest = hashlib.sha256(self.state.secret_key + buf[:-6]).digest()[:6]
+        if not hmac.compare_digest(digest, buf[-6:]):
+            heard = self.clock() - self._good_at.get((src_system, src_component), -math.inf) <= HEARD_S
+            self._failed = Drop("bad signature", "", stream, timestamp, sender_heard=heard)
+            return False
         last = self.state.stream_timestamps.get(stream)
         if last is None and timestamp + NEW_STREAM_WINDOW < self.state.timestamp:
-            self._reason = "stale stream"
+            self._failed = Drop("stale stream", "", stream, timestamp, int(self.state.timestamp))
             return False
         if last is not None and timestamp <= last:
-            self._reason = "replayed"
+            self._failed = Drop("replayed", "", stream, timestamp, last)
             return False
         self.state.stream_timestamps[stream] = timestamp
         self._highest_heard = max(self._highest_heard, timestamp)
+        self._good_at[(src_system, src_component)] = self.clock()
         self.stats.accepted += 1
         return True
 
     def _allow_unsigned(self, mav: Any, msg_id: int) -> bool:
         """pymavlink asks this for every message that is unsigned or failed the check."""
-        reason, self._reason = self._reason or "unsigned", None
+        failed, self._failed = self._failed, None
         if msg_id in self.accept_unsigned:
             self.stats.unsigned_allowed += 1
             return True
         name = mavlink.mavlink_map[msg_id].msgname if msg_id in mavlink.mavlink_map else f"MSG {msg_id}"
-        self.stats.dropped[reason] = self.stats.dropped.get(reason, 0) + 1
+        drop = replace(failed, message=name) if failed is not None else Drop("unsigned", name)
+        self.last_drops[drop.reason] = drop  # before the count: a reader of the count finds it
+        self.stats.dropped[drop.reason] = self.stats.dropped.get(drop.reason, 0) + 1
         self.stats.dropped_types[name] = self.stats.dropped_types.get(name, 0) + 1
-        self.last_drop = f"{name} ({reason})"
+        self.last_drop = f"{name} ({drop.reason})"
         return False

@@ -44,7 +44,7 @@ from .config import ServiceConfig
 from .errors import JournalError, LinkError, PlanningError
 from . import events as ev
 from .intake import Accepted, Intake, fairness_rule
-from .journal import Journal, RequestRow
+from .journal import Journal
 from .link import (ArmedChanged, Connected, Landed, LinkEvent, LinkSettings, Lost, ModeChanged, Restarted, Restored,
                    VehicleLink, open_link)
 from .link.base import RETURNING_MODES
@@ -57,6 +57,7 @@ from .sortie import inputs as ins
 from .supervisor import Supervisor
 from .throttle import RateLimit
 from .vehicle_view import VehicleView
+from .world import JournalWorld
 from .zenoh_io import ZenohIO, reply_and_drop
 
 log = logging.getLogger("planner_service")
@@ -98,25 +99,6 @@ class Parts:
     """Every wait and timeout."""
 
 
-class JournalWorld:
-    """The sortie logic's view of the journal (the current sortie)."""
-
-    def __init__(self, journal: Journal) -> None:
-        self.journal = journal
-
-    def request_for(self, user_id: str) -> RequestRow | None:
-        return self.journal.request_in_force(user_id)
-
-    def services_of(self, user_id: str) -> int:
-        return self.journal.service_counts().get(user_id, 0)
-
-    def pending_count(self) -> int:
-        return self.journal.pending_count()
-
-    def pending(self) -> list[RequestRow]:
-        return self.journal.pending()
-
-
 class Service:
     def __init__(self, config: ServiceConfig, parts: Parts) -> None:
         self.cfg = config
@@ -147,6 +129,7 @@ class Service:
         self.view = VehicleView(self.scenario, self.origin, self.area)
         self._waiting_for = ""
         s = config.safety
+        self.world = JournalWorld(self.journal)
         self.logic = SortieLogic(Rules(
             scenario=self.scenario, origin=self.origin, area=self.area, flavour=self.flavour,
             start_mission=config.mavlink.start_mission, min_requests=config.planner.min_requests,
@@ -155,7 +138,7 @@ class Service:
             next_battery_fraction=config.sortie.next_battery_fraction,
             max_mission_items=config.mavlink.max_mission_items, max_failures=config.planner.max_failures,
             hold_margin_s=s.hold_margin_s, energy_margin_j=s.energy_margin_j,
-        ), JournalWorld(self.journal))
+        ), self.world)
         self.state = self._restore()
         self.plan_msg: Plan | None = None
         if self.state.over:
@@ -388,12 +371,17 @@ class Service:
         return ins.CommandDone(cmd)
 
     def _record_service(self, e: fx.RecordService) -> None:
-        battery = self._vehicle().battery_fraction
+        battery_j = (self._vehicle().battery_fraction or 0.0) * self.scenario.battery_j
         try:
-            self.journal.record_service(e.request_id, e.hover_index, e.xyz, e.tasks, e.bits, e.reward,
-                                        (battery or 0.0) * self.scenario.battery_j, self.wall(), e.bound_tasks)
+            self.world.record_service(e.request_id, e.user_id, e.tasks, e.hover_index, e.xyz, e.bits, e.reward,
+                                      battery_j, self.wall(), e.bound_tasks)
         except JournalError as err:
-            log.error("could not record the service of request %d: %s", e.request_id, err)
+            # kept by the world view (counted as served for the rest of the sortie) and here
+            # whole, so that what the journal lacks is on record
+            log.error("could not record the service of request %d: %s; kept in memory: user %s, %d tasks "
+                      "(bound to %s) at point %d (%.1f, %.1f, %.1f), %.0f bits, reward %.6g, held %.1f s, "
+                      "battery %.0f J, at %.3f", e.request_id, err, e.user_id, e.tasks, e.bound_tasks,
+                      e.hover_index, *e.xyz, e.bits, e.reward, e.held_s, battery_j, self.wall())
             self._check_journal()
 
     # --- the vehicle as the logic sees it ----------------------------------------------------------

@@ -87,6 +87,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Iterable, Iterator
 
+from protocol.file_lock import flock_holder, names
+
 from .errors import JournalError
 
 SCHEMA_VERSION = 4
@@ -906,7 +908,7 @@ def _lock(path: str, shown: str, create: bool = False) -> int | None:
     try:
         fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
     except OSError as err:
-        holder = _flock_holder(fd)
+        holder = flock_holder(fd)
         os.close(fd)
         if err.errno not in (errno.EWOULDBLOCK, errno.EAGAIN):
             raise JournalError(f"cannot lock the journal {shown}: {err.strerror or err}") from None
@@ -914,7 +916,7 @@ def _lock(path: str, shown: str, create: bool = False) -> int | None:
         doing = "creating" if create else "using"
         raise JournalError(f"the journal {shown} is in use by another service ({who} is {doing} it): "
                            "one service per journal; stop it or give this one another journal.path") from None
-    if not _names(path, fd):
+    if not names(path, fd):
         os.close(fd)  # replaced, removed or (ours to build) moved into place since we opened it
         return None
     return fd
@@ -961,35 +963,6 @@ def _remove_quietly(*paths: str) -> None:
         _remove(*paths)
     except OSError:
         pass
-
-
-def _names(path: str, fd: int) -> bool:
-    """True if ``path`` still leads to the file open as ``fd``."""
-    try:
-        now = os.stat(path)
-    except OSError:
-        return False
-    held = os.fstat(fd)
-    return (now.st_dev, now.st_ino) == (held.st_dev, held.st_ino)
-
-
-def _flock_holder(fd: int) -> int | None:
-    """The pid that holds a ``flock`` on the file open as ``fd``, as ``/proc/locks`` shows
-    it; None where it does not (another system, another pid namespace)."""
-    info = os.fstat(fd)
-    device = f"{os.major(info.st_dev):02x}:{os.minor(info.st_dev):02x}:{info.st_ino}"
-    try:
-        with open("/proc/locks") as handle:
-            lines = handle.read().splitlines()
-    except OSError:
-        return None
-    for line in lines:
-        fields = line.split()  # "1: FLOCK ADVISORY WRITE 4242 fe:00:1234 0 EOF"; waiters have "->"
-        if len(fields) >= 6 and fields[1] == "FLOCK" and fields[5] == device and fields[4].isdigit():
-            pid = int(fields[4])
-            if pid > 0:
-                return pid
-    return None
 
 
 def _check_file(path: str) -> None:

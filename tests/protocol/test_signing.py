@@ -15,8 +15,8 @@ import pytest
 from pymavlink.dialects.v20 import common as M
 
 from protocol.errors import SigningError
-from protocol.signing import (RESERVE_TICKS, Signer, TimestampStore, default_timestamp_path, key_from_passphrase,
-                              load_key, timestamp_at, write_key)
+from protocol.signing import (RESERVE_TICKS, SLOT_BYTES, Signer, TimestampStore, default_timestamp_path,
+                              key_from_passphrase, load_key, read_reservation, timestamp_at, write_key)
 
 REPO = Path(__file__).resolve().parents[2]
 KEY = bytes(range(32))
@@ -112,7 +112,7 @@ def test_a_restart_never_reuses_a_timestamp_even_when_the_clock_goes_back(tmp_pa
     store = TimestampStore(path, clock=lambda: now[0])
     start = store.open()
     assert start == timestamp_at(T0)
-    assert int(path.read_text()) == start + RESERVE_TICKS  # reserved before anything is used
+    assert read_reservation(path) == start + RESERVE_TICKS  # reserved before anything is used
     used = start + 5000  # 5000 messages signed
     now[0] += 10.0
     current = store.advance(used)
@@ -156,20 +156,98 @@ def test_the_reservation_moves_ahead_before_it_is_reached(tmp_path: Path) -> Non
         now[0] = T0 + step  # one second per tick, 200 s in all
         current = store.advance(start)
         assert store.reserved >= current + RESERVE_TICKS // 2  # always half a reservation of margin
-        assert int((tmp_path / "ts").read_text()) == store.reserved
+        assert read_reservation(tmp_path / "ts") == store.reserved
     store.close(current)
 
 
 def test_one_timestamp_file_per_process(tmp_path: Path) -> None:
     first = TimestampStore(tmp_path / "ts")
     first.open()
-    with pytest.raises(SigningError, match="in use by another process"):
+    with pytest.raises(SigningError, match=f"in use by pid {os.getpid()}"):
         TimestampStore(tmp_path / "ts").open()
     first.close(timestamp_at(T0))
     second = TimestampStore(tmp_path / "ts")  # free again once closed
     second.close(second.open())
     assert default_timestamp_path("/etc/k.key", "service") == Path("/etc/k.key.service-timestamp")
     assert default_timestamp_path("k", "vehicle") != default_timestamp_path("k", "service")
+
+
+def test_the_lock_is_the_kernels_on_the_file_itself(tmp_path: Path, python_env) -> None:
+    """Another process holds the file: a second is refused in one line naming the file and
+    the holder, whatever side files are deleted (the lock was a ``ts.lock`` beside the file:
+    deleting it let a second process in, both signing with the same timestamps); killed, the
+    holder leaves nothing stale, and the next start is above what it reserved."""
+    path = tmp_path / "ts"
+    child = (f"import sys; from protocol.signing import TimestampStore\n"
+             f"s = TimestampStore({str(path)!r}, clock=lambda: {T0})\n"
+             f"print(s.open(), s.reserved, flush=True); sys.stdin.read()\n")
+    holder = subprocess.Popen([sys.executable, "-c", child], env=python_env, cwd=REPO, stdin=subprocess.PIPE,
+                              stdout=subprocess.PIPE, text=True)
+    try:
+        assert holder.stdout is not None
+        start, reserved = map(int, holder.stdout.readline().split())
+        for side in tmp_path.iterdir():
+            if side != path:
+                side.unlink()  # a ts.lock, a ts.tmp: whatever stands beside the file
+        with pytest.raises(SigningError) as err:
+            TimestampStore(path, clock=lambda: T0).open()
+        assert str(err.value) == (f"{path}: is in use by pid {holder.pid}: each process signing with a key needs "
+                                  f"its own timestamp file")
+        assert "\n" not in str(err.value)
+    finally:
+        holder.kill()  # SIGKILL: no close, no unlock but the kernel's
+        holder.wait(10)
+    after = TimestampStore(path, clock=lambda: T0 - 60.0)
+    begin = after.open()
+    assert begin == reserved + 1 > start
+    after.close(begin)
+
+
+def test_a_store_removed_under_its_holder_says_so(tmp_path: Path) -> None:
+    """Removing the file itself lets another process create a new one; the holder notices
+    at its next write (it cannot keep its reservation there any more) and says so."""
+    now = [T0]
+    store = TimestampStore(tmp_path / "ts", clock=lambda: now[0])
+    start = store.open()
+    (tmp_path / "ts").unlink()
+    other = TimestampStore(tmp_path / "ts", clock=lambda: now[0])
+    other.close(other.open())
+    now[0] += RESERVE_TICKS / 100_000
+    with pytest.raises(SigningError, match="was removed or replaced while this process used it"):
+        store.advance(start)
+
+
+def test_a_write_cut_by_a_crash_leaves_the_reservation_before_it(tmp_path: Path) -> None:
+    """The two slots: a crash in the middle of a write spoils only the slot being written,
+    whose value was not in use yet; the other still holds the reservation before it."""
+    path = tmp_path / "ts"
+    now = [T0]
+    store = TimestampStore(path, clock=lambda: now[0])
+    start = store.open()
+    first = store.reserved
+    now[0] += 20.0
+    store.advance(start)
+    second = store.reserved
+    assert second > first and read_reservation(path) == second
+    store._unlock()  # the process dies with the lock released by the kernel
+    raw = bytearray(path.read_bytes())
+    slot = raw.index(f"{second:015d}".encode())  # the slot written last
+    raw[slot + 3:slot + 9] = b"999999"  # the new value half written: its checksum fails
+    path.write_bytes(bytes(raw))
+    assert read_reservation(path) == first
+    again = TimestampStore(path, clock=lambda: T0)
+    assert again.open() == first + 1
+    again.close(first + 1)
+    assert len(path.read_bytes()) == 2 * SLOT_BYTES
+
+
+def test_a_timestamp_file_of_the_older_layout_is_read(tmp_path: Path) -> None:
+    path = tmp_path / "ts"
+    path.write_text(f"{timestamp_at(T0 + 100.0)}\n")  # one bare number, as written before the slots
+    store = TimestampStore(path, clock=lambda: T0)
+    assert store.open() == timestamp_at(T0 + 100.0) + 1
+    store.close(timestamp_at(T0 + 100.0) + 1)
+    assert read_reservation(path) == timestamp_at(T0 + 100.0) + 1
 
 
 def test_a_malformed_timestamp_file_is_refused_by_name(tmp_path: Path) -> None:
@@ -215,6 +293,36 @@ def test_signed_accepted_unsigned_wrong_key_and_replays_dropped() -> None:
     assert s.dropped == {"replayed": 1, "unsigned": 1, "bad signature": 1}
     assert s.dropped_types == {"COMMAND_LONG": 3}
     assert vehicle.last_drop == "COMMAND_LONG (bad signature)"
+
+
+def test_each_drop_says_what_it_is() -> None:
+    """A replay is a replay (not a key problem), a bad signature in the name of a sender
+    whose signed messages pass is a forgery, one from a sender never heard points to the key."""
+    now = [T0]
+    vehicle = Signer(KEY, clock=lambda: now[0])
+    rx = sender(vehicle, 1, 1)
+    rx.robust_parsing = True
+    good = sender(Signer(KEY, clock=lambda: T0), 255, 190)
+    packet = arm_bytes(good)
+    receive(rx, packet)
+    later = arm_bytes(good)  # 1 tick later on the same stream
+    receive(rx, later)
+    receive(rx, packet)  # captured bytes sent again
+    replay = vehicle.last_drops["replayed"]
+    assert (replay.stream, replay.reference - replay.timestamp) == ((0, 255, 190), 1)
+    assert replay.describe() == ("COMMAND_LONG from system 255 component 190 (link id 0): its timestamp is 0.00 s "
+                                 "behind the last one heard on that stream: a replay of captured packets (not a key "
+                                 "problem)")
+    receive(rx, arm_bytes(sender(Signer(bytes(32), clock=lambda: T0), 255, 190)))
+    assert "forged" in vehicle.last_drops["bad signature"].describe()
+    now[0] += 11.0  # that sender not heard for longer than HEARD_S
+    receive(rx, arm_bytes(sender(Signer(bytes(32), clock=lambda: T0), 255, 190)))
+    assert vehicle.last_drops["bad signature"].describe().endswith("the sender signs with another key (or it is forged)")
+    receive(rx, arm_bytes(sender(Signer(KEY, link_id=4, clock=lambda: T0 - 120.0))))
+    assert "opens a stream 120 s behind our timestamp" in vehicle.last_drops["stale stream"].describe()
+    receive(rx, arm_bytes(sender(None)))
+    assert vehicle.last_drops["unsigned"].describe() == "COMMAND_LONG unsigned: the sender does not sign"
+    assert vehicle.stats.dropped == {"replayed": 1, "bad signature": 2, "stale stream": 1, "unsigned": 1}
 
 
 def test_a_forged_future_timestamp_does_not_lock_the_real_sender_out() -> None:
@@ -272,4 +380,4 @@ def test_tick_follows_the_clock_and_the_highest_timestamp_heard(tmp_path: Path) 
     me.tick()
     assert me.timestamp == timestamp_at(T0 + 100.0)
     me.close()
-    assert int((tmp_path / "ts").read_text()) == timestamp_at(T0 + 100.0)
+    assert read_reservation(tmp_path / "ts") == timestamp_at(T0 + 100.0)

@@ -13,7 +13,7 @@ import pytest
 from planner_service.service.config import build_config
 from planner_service.service.errors import ConfigError
 from planner_service.service.processes import free_port
-from protocol.signing import write_key
+from protocol.signing import read_reservation, write_key
 from tests.support.stack import Stack
 
 
@@ -43,8 +43,8 @@ def test_same_key_request_to_accepted_mission(stack: Stack, tmp_path: Path) -> N
     assert "mission of" in vehicle.log() and "items accepted" in vehicle.log()
     assert " 0 dropped" in signing_summary(vehicle.log()), "every message of the service was signed"
     assert " 0 dropped" in signing_summary(service.log()), "every message of the vehicle was signed"
-    stamp = int((tmp_path / "uav.key.service-timestamp").read_text())
-    assert stamp > 0, "the service kept its last timestamp for its next start"
+    stamp = read_reservation(tmp_path / "uav.key.service-timestamp")
+    assert stamp is not None and stamp > 0, "the service kept its last timestamp for its next start"
 
 
 @pytest.mark.timeout(90)

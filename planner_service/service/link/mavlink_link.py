@@ -34,8 +34,9 @@ telemetry, mission replies, reports and COMMAND_ACKs alike.
 
 Signing (``signing_key_file``): one ``protocol.signing.Signer`` for the link's life, attached
 to every connection it opens, so the timestamp keeps growing across reopens and restarts;
-messages from the vehicle that are unsigned or wrongly signed are dropped, counted, and
-named in the errors when the vehicle does not answer.
+messages that are unsigned, wrongly signed or replayed are dropped, counted, and told by
+reason (a replay as a replay, a forgery as a forgery: ``protocol.signing.Drop``) in a
+warning and in the errors when the vehicle does not answer.
 """
 
 from __future__ import annotations
@@ -120,6 +121,8 @@ class PymavlinkLink(VehicleLink):
         """The connection was (re)opened: ask for telemetry at the next heartbeat."""
         self._signer: Signer | None = None
         self._warned_drops = 0
+        self._warned_by_reason: dict[str, int] = {}
+        """Drops by reason as of the last warning: the next one tells only what came since."""
         self._warned_at = -SIGNING_WARN_S
         self.timer = RetryTimer(settings.item_timeout_s)
         """Wait before repeating a mission message or a command: the measured round trip."""
@@ -183,21 +186,28 @@ class PymavlinkLink(VehicleLink):
             self._signer.attach(conn.mav)  # before anything is sent on it
         return conn
 
-    def signing_hint(self) -> str:
-        """Why the vehicle may be silent or deaf, as far as signing tells ('' without signing)."""
+    def signing_hint(self, told: dict[str, int] | None = None) -> str:
+        """Why the vehicle may be silent or deaf, as far as signing tells ('' without signing):
+        the messages dropped by reason (beyond the counts in ``told``), each with its latest
+        packet and what that reason means. A replay is named a replay and a forgery a
+        forgery: only a bad signature from a sender none of whose messages pass points to the
+        key (they blamed the key for every drop)."""
         signer = self._signer
         if signer is None:
             return ""
-        dropped = signer.stats.dropped
-        bad = dropped.get("bad signature", 0)
-        if bad:
-            return (f" (signing: {bad} messages with a bad signature dropped, the last {signer.last_drop}: the vehicle "
-                    f"signs with another key than {self.settings.signing_key_file})")
-        if dropped.get("unsigned", 0):
-            return (f" (signing: {dropped['unsigned']} unsigned messages dropped: the vehicle does not sign; give it "
-                    f"the key in {self.settings.signing_key_file})")
-        return (" (signing is on: a vehicle with another key or without signing ignores our messages; check that it "
-                f"holds the key in {self.settings.signing_key_file})")
+        key = self.settings.signing_key_file
+        told = told or {}
+        fresh = {r: n - told.get(r, 0) for r, n in sorted(signer.stats.dropped.items()) if n > told.get(r, 0)}
+        if not fresh:
+            return (" (signing is on: a vehicle with another key or without signing ignores our messages; check that it "
+                    f"holds the key in {key})")
+        parts = [f"{n} {reason}, the last {signer.last_drops[reason].describe()}" for reason, n in fresh.items()]
+        bad = signer.last_drops.get("bad signature")
+        if "bad signature" in fresh and bad is not None and not bad.sender_heard:
+            parts.append(f"check that the vehicle holds the key in {key}")
+        elif "unsigned" in fresh and signer.stats.accepted == 0:
+            parts.append(f"give the vehicle the key in {key}")
+        return f" (signing: {'; '.join(parts)})"
 
     def _reader(self) -> None:
         """Reader thread: messages to the loop; reopen the connection after any failure.
@@ -297,7 +307,8 @@ class PymavlinkLink(VehicleLink):
         now = time.monotonic()
         if total > self._warned_drops and now - self._warned_at >= SIGNING_WARN_S:
             log.warning("%d messages from the link dropped for their signature%s", total - self._warned_drops,
-                        self.signing_hint())
+                        self.signing_hint(self._warned_by_reason))
+            self._warned_by_reason = dict(signer.stats.dropped)
             self._warned_drops, self._warned_at = total, now
 
     # --- telemetry requests -------------------------------------------------------------------
