@@ -136,6 +136,7 @@ class Service:
             replan_min_interval_s=config.planner.replan_min_interval_s, hold_radius_m=s.hold_radius_m,
             rtl_battery_fraction=s.rtl_battery_fraction, repeat=config.sortie.repeat,
             next_battery_fraction=config.sortie.next_battery_fraction,
+            readback_interval_s=config.sortie.readback_interval_s,
             max_mission_items=config.mavlink.max_mission_items, max_failures=config.planner.max_failures,
             hold_margin_s=s.hold_margin_s, energy_margin_j=s.energy_margin_j,
         ), self.world)
@@ -344,14 +345,14 @@ class Service:
         log.info("plan %d: %s uploaded (%d items, %.0f ms; %s)", up.plan_id,
                  [p.hover_index for p in up.path.points], len(up.items), (self.mono() - t0) * 1e3,
                  up.path.stop_reason)
-        return ins.Uploaded(up, self.link.generation, (self.mono() - t0) * 1e3)
+        return ins.Uploaded(up, self.link.generation, (self.mono() - t0) * 1e3, self.link.mission_id)
 
     async def _read_back(self) -> ins.Input:
         try:
             items = await self.link.download()
         except LinkError as err:
             return ins.ReadBackFailed(err.result)
-        return ins.ReadBackDone(tuple(items), self.link.generation)
+        return ins.ReadBackDone(tuple(items), self.link.generation, self.link.mission_id)
 
     async def _command(self, cmd: fx.Command) -> ins.Input:
         try:

@@ -289,6 +289,12 @@ class SortieConfig(Section):
     """The next sortie begins when the vehicle is on the ground, disarmed and its battery
     is back at or above this fraction (swapped or charged); above
     ``safety.rtl_battery_fraction`` (``ServiceConfig.check``)."""
+    readback_interval_s: float = setting(30.0, ge=0)
+    """Wall seconds between read-backs of the mission the service flies under authority,
+    compared item by item with the one it uploaded: another station's mission that no
+    report shows (ArduPilot names no mission; one of the same length keeps the count) ends
+    the authority within this; 0: no periodic read-back (a disagreement still reads back
+    at once)."""
 
 
 SECTIONS: dict[str, type[Section]] = {

@@ -60,7 +60,8 @@ class VehicleView:
         fraction, source = self._battery(t, now)
         return Vehicle(connected=t.connected, position_ok=position_ok, xyz=xyz if position_ok else (0.0, 0.0, 0.0),
                        boot_s=boot, armed=t.armed, airborne=t.airborne, landed_known=t.landed_known, mode=t.mode,
-                       seq=t.mission_seq, mission_total=t.mission_total, battery_fraction=fraction,
+                       seq=t.mission_seq, mission_total=t.mission_total, mission_id=t.mission_id,
+                       battery_fraction=fraction,
                        battery_source=source,
                        time_rate=t.time_rate), waiting
 

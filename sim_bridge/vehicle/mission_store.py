@@ -31,6 +31,7 @@ from pymavlink.dialects.v20 import common as mavlink
 from protocol.mission import MissionItem
 
 from .stored_items import Problem
+from .mission_id import MissionAck, MissionCount, px4_mission_id
 
 log = logging.getLogger(__name__)
 
@@ -282,7 +283,15 @@ class MissionStore:
         self._ack(up.peer, up.target, result, MISSION)
 
     def _ack(self, peer: Hashable, target: tuple[int, int], result: int, mission_type: int) -> None:
-        self._send(mavlink.MAVLink_mission_ack_message(target[0], target[1], result, mission_type), peer)
+        if self.write_through:
+            self._send(mavlink.MAVLink_mission_ack_message(target[0], target[1], result, mission_type), peer)
+            return
+        # PX4 returns the mission's id in the ACK that accepts it (and repeats it)
+        opaque = self._id() if result == mavlink.MAV_MISSION_ACCEPTED and mission_type == MISSION else 0
+        self._send(MissionAck(target[0], target[1], result, mission_type, opaque), peer)
+
+    def _id(self) -> int:
+        return px4_mission_id(self.items)
 
     # --- download, clear, set current --------------------------------------------------------
     def _on_request_list(self, msg: Any, peer: Hashable, src: tuple[int, int]) -> None:
@@ -293,7 +302,11 @@ class MissionStore:
         # Fences and rally points are not kept: report none rather than leave a ground
         # station (QGroundControl asks for all three) waiting.
         count = self.count() if mission_type == MISSION else 0
-        self._send(mavlink.MAVLink_mission_count_message(src[0], src[1], count, mission_type), peer)
+        if self.write_through:
+            self._send(mavlink.MAVLink_mission_count_message(src[0], src[1], count, mission_type), peer)
+        else:  # PX4 names the mission it sends
+            self._send(MissionCount(src[0], src[1], count, mission_type, self._id() if mission_type == MISSION else 0),
+                       peer)
 
     def _on_request(self, msg: Any, peer: Hashable, src: tuple[int, int]) -> None:
         mission_type = getattr(msg, "mission_type", MISSION)

@@ -11,6 +11,7 @@ from protocol.geodesy import local_to_global
 
 from .estimator import EKF_FLAGS_GPS, EKF_FLAGS_NO_GPS, Stage
 from .flight import Flight, MissionState
+from .mission_id import MissionCurrent, px4_mission_id
 from .modes import AUTOPILOT, Mode, custom_mode
 
 # A 4S lithium pack: 16.8 V full, 14.0 V at the end of its useful charge.
@@ -243,6 +244,8 @@ def mission_current(flight: Flight, seq: int | None = None, state: int | None = 
     else:
         total = len(flight.mission) if flight.mission else 0xFFFF  # UINT16_MAX: no mission (MAVLink)
         seq = min(seq, max(len(flight.mission) - 1, 0))
+        # PX4 names its mission (MavlinkMissionManager::send_mission_current): mission_id
+        return MissionCurrent(seq, total, state, mode, px4_mission_id(flight.mission))
     return mavlink.MAVLink_mission_current_message(seq, total, state, mode)
 
 

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import re
 import time
+from dataclasses import replace
 
 import pytest
 
@@ -162,3 +163,26 @@ def test_a_pilots_disarming_in_the_air_ends_the_authority_and_nothing_arms_again
     assert not ARMED.search(after), after[-3000:]
     status = client.state().status
     assert status.authority == "none" and not status.armed, status
+
+
+@pytest.mark.timeout(180)
+def test_a_second_stations_mission_of_the_same_length_ends_the_authority(stack: Stack) -> None:
+    """As above, but their mission has as many items as ours (ours read back, each point
+    moved 55 m north): MISSION_CURRENT's count says nothing (ArduPilot names no mission), so
+    before the periodic read-back (here every 2 s) the service flew it as its own."""
+    stack.vehicle("--speedup", SPEEDUP, "--recharge-s", "30")
+    stack.service(mavlink__start_mission="true", planner__min_requests="5", sortie__readback_interval_s="2")
+    stack.users("--count", "10", "--speedup", SPEEDUP, "--seed", "1")
+    stack.wait_event(lambda e: e.event == "user_served", 90.0, "a first service")
+    gcs = GroundStation(f"udpout:127.0.0.1:{stack.mav_port}")
+    try:
+        gcs.wait_vehicle()
+        ours = gcs.download()
+        theirs = [replace(i, x=i.x + 5000) if i.seq > 0 and i.x else i for i in ours]
+        uploaded_at = time.time()
+        assert gcs.upload(theirs) == M.MAV_MISSION_ACCEPTED
+    finally:
+        gcs.close()
+    revoked = stack.wait_event(lambda e: e.event == "authority_revoked" and e.time_s >= uploaded_at, 20.0,
+                               "the end of the authority")
+    assert "not ours" in revoked.detail and f"{len(theirs)} items" in revoked.detail, revoked.detail

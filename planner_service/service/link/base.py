@@ -63,6 +63,10 @@ class VehicleLink(abc.ABC):
         self.state = VehicleState(settings.flavour, self._emit, link_timeout_s=settings.link_timeout_s)
         self.generation = 0
         """Which mission the vehicle holds, as far as this link knows (see ``events``)."""
+        self.mission_id = 0
+        """The autopilot's id of the mission it took from our last upload or gave in our
+        last download (MISSION_ACK's or MISSION_COUNT's ``opaque_id``, PX4: a CRC32 of the
+        items), the id its MISSION_CURRENT names that mission by; 0: not said."""
         self._current: tuple[int, int] | None = None
         """(generation, seq) of the latest MISSION_CURRENT about the mission held."""
         self._current_moved = asyncio.Event()

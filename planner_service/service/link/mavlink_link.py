@@ -58,6 +58,8 @@ from protocol.signing import Signer, TimestampStore, default_timestamp_path, loa
 from ..errors import LinkError  # noqa: E402
 from .base import CURRENT_WAIT_S, LinkSettings, VehicleLink  # noqa: E402
 from .events import Current, LinkEvent, Reached  # noqa: E402
+from .extensions import (MISSION_ACK_ID_OFFSET, MISSION_COUNT_ID_OFFSET, MISSION_CURRENT_ID_OFFSET,  # noqa: E402
+                         extension_u32)
 from .rtt import RetryTimer  # noqa: E402
 from .streams import INTERVAL_CMD, Request  # noqa: E402
 from .upload import MissionDownload, MissionUpload, cancel_message  # noqa: E402
@@ -370,8 +372,8 @@ class PymavlinkLink(VehicleLink):
         self._current = None
         self._mark = (msg.get_seq(), time.monotonic()) if msg is not None else None
 
-    def _set_progress(self, seq: int, total: int) -> None:
-        self.state.set_progress(seq, total)
+    def _set_progress(self, seq: int, total: int, mission_id: int = 0) -> None:
+        self.state.set_progress(seq, total, mission_id)
 
     def _on_restart(self) -> None:
         self._new_generation(None)
@@ -428,8 +430,9 @@ class PymavlinkLink(VehicleLink):
             self.on_event(Current(int(msg.seq), total, mission))
             return
         t = self.telemetry
-        changed = (msg.seq, total) != (t.mission_seq, t.mission_total)
-        self._set_progress(int(msg.seq), total)
+        mission_id = extension_u32(msg, "mission_id", MISSION_CURRENT_ID_OFFSET)
+        changed = (msg.seq, total, mission_id) != (t.mission_seq, t.mission_total, t.mission_id)
+        self._set_progress(int(msg.seq), total, mission_id)
         self._current = (mission, int(msg.seq))
         self._current_moved.set()
         if changed:
@@ -466,8 +469,11 @@ class PymavlinkLink(VehicleLink):
         sent = op.sent
         done = op.on_message(msg)
         self._note_commit_possible(op)
+        if isinstance(op, MissionDownload) and msg.get_type() == "MISSION_COUNT":
+            self.mission_id = extension_u32(msg, "opaque_id", MISSION_COUNT_ID_OFFSET)
         if done is not None and isinstance(op, MissionUpload) and done.accepted:
             # Accepted: from this message on the vehicle's reports are about the new mission.
+            self.mission_id = extension_u32(msg, "opaque_id", MISSION_ACK_ID_OFFSET)
             self._sort_reports(msg, len(op.items))
         elif done is not None and isinstance(op, MissionDownload) and done.ok and self._generation_on_download:
             self._new_generation(msg)
@@ -481,6 +487,7 @@ class PymavlinkLink(VehicleLink):
         the last message we sent. Abandoned (cancelled) uploads are cancelled on the
         vehicle too."""
         self._mission_op = op
+        self.mission_id = 0  # until the vehicle names the mission this operation ends with
         self._mission_moved.clear()
         try:
             op.begin()

@@ -14,8 +14,11 @@ MAVSDK's coloured log lines are routed to the ``mavsdk`` logger instead of stdou
 Which mission a report is about: ``generation`` grows after each accepted upload or
 download. MAVSDK hides the packets, so there is no sequence number to sort by; a report
 arrives on the loop in the order MAVSDK received it, before the upload's result (the ACK
-is handled after the messages before it). A MISSION_CURRENT whose total does not fit the
-mission just uploaded is about the one before and is dropped.
+is handled after the messages before it). Right after an upload or a download, a
+MISSION_CURRENT whose total (or, where the autopilot names its missions, id) does not fit
+the mission just moved is about the one before and is dropped, until the first that fits
+or ``STALE_REPORT_S``: after that a report that does not fit is news (another station's
+mission), which the sortie logic must see.
 """
 
 from __future__ import annotations
@@ -48,6 +51,12 @@ log = logging.getLogger(__name__)
 RETRYABLE = {MissionRawResult.BUSY, MissionRawResult.TIMEOUT, MissionRawResult.ERROR}
 REPORTS = frozenset({"MISSION_CURRENT", "MISSION_ITEM_REACHED"})
 REFUSAL_TEXT_WAIT_S = 0.3
+STALE_REPORT_S = 2.0
+"""Wall seconds after an upload or a download in which a MISSION_CURRENT that does not fit
+the mission moved may still be about the one before (it was sent before, or crossed it)."""
+ACK_WAIT_S = 0.3
+"""Wall seconds to wait, after MAVSDK says an upload was accepted, for the MISSION_ACK
+itself on the message stream (its ``opaque_id``: the mission's id)."""
 
 
 def _to_logging(level: Any, message: str, file: str | None, line: int) -> bool:
@@ -111,6 +120,10 @@ class MavsdkLink(VehicleLink):
         self._upload_lock = asyncio.Lock()
         self._expect_total: int | None = None
         """After an upload: the mission's size, which a MISSION_CURRENT about it reports."""
+        self._expect_until = 0.0
+        """``time.monotonic()`` until which a report that does not fit is taken as stale."""
+        self._ack_seen = asyncio.Event()
+        """A MISSION_ACK from the autopilot arrived on the message stream."""
         self._connected = asyncio.Event()
         self._inflight: set[asyncio.Future[Any]] = set()
         """MAVSDK calls running in executor threads: a cancelled task leaves them running, and
@@ -176,6 +189,12 @@ class MavsdkLink(VehicleLink):
             return
         msg = fields(message)
         msg_id = int(getattr(msg, "message_id", -1))
+        if name in ("MISSION_ACK", "MISSION_COUNT") and self._upload_lock.locked() and self.state.trusted(*source):
+            # the mission's id, which MAVSDK's mission_raw does not return
+            if name == "MISSION_COUNT" or int(getattr(msg, "type", -1)) == M.MAV_MISSION_ACCEPTED:
+                self.mission_id = int(getattr(msg, "opaque_id", 0) or 0)
+            if name == "MISSION_ACK":
+                self._ack_seen.set()
         if name in REPORTS:
             if not self.state.trusted(*source):
                 return
@@ -191,12 +210,17 @@ class MavsdkLink(VehicleLink):
             return
         raw = int(getattr(msg, "total", 0) or 0)
         total = -1 if raw == 0 else 0 if raw == 0xFFFF else raw
+        mission_id = int(getattr(msg, "mission_id", 0) or 0)
         expect = self._expect_total
-        if expect is not None and total >= 0 and total not in (expect, expect - 1):
-            return  # about the mission before the last upload (ArduPilot leaves home out of total)
+        if expect is not None and time.monotonic() < self._expect_until:
+            stale = ((total >= 0 and total not in (expect, expect - 1))  # ArduPilot leaves home out of total
+                     or (self.mission_id != 0 and mission_id not in (0, self.mission_id)))
+            if stale:
+                return  # about the mission before the last upload
+            self._expect_total = None  # the first report of the mission moved: what follows is news
         t = self.telemetry
-        changed = (int(msg.seq), total) != (t.mission_seq, t.mission_total)
-        self.state.set_progress(int(msg.seq), total)
+        changed = (int(msg.seq), total, mission_id) != (t.mission_seq, t.mission_total, t.mission_id)
+        self.state.set_progress(int(msg.seq), total, mission_id)
         self._current = (self.generation, int(msg.seq))
         self._current_moved.set()
         if changed:
@@ -302,6 +326,8 @@ class MavsdkLink(VehicleLink):
             last: MissionRawError | None = None
             accepted = False
             for _ in range(self.settings.retries):
+                self.mission_id = 0
+                self._ack_seen.clear()
                 try:
                     await self._raw.upload_mission(raw)
                 except MissionRawError as err:
@@ -313,8 +339,13 @@ class MavsdkLink(VehicleLink):
                 break
             if not accepted:
                 raise LinkError("upload_mission()", _name(last.result) if last is not None else "UNKNOWN")
+            try:
+                await asyncio.wait_for(self._ack_seen.wait(), ACK_WAIT_S)
+            except TimeoutError:
+                log.debug("link: the upload's MISSION_ACK did not show on the message stream; its id is unknown")
             self.generation += 1
             self._expect_total, self._current = len(raw), None
+            self._expect_until = time.monotonic() + STALE_REPORT_S
             self.state.set_progress(0, len(raw))
             if current_seq is not None:
                 await self._ensure_current(current_seq, wait_for_report=True, restart=restart_current)
@@ -353,6 +384,7 @@ class MavsdkLink(VehicleLink):
     async def download(self) -> list[MissionItem]:
         async with self._upload_lock:
             self._check_link("download_mission()")
+            self.mission_id = 0
             try:
                 raw = await self._raw.download_mission()
             except MissionRawError as err:
@@ -361,6 +393,7 @@ class MavsdkLink(VehicleLink):
                 raw = []  # the vehicle holds none
             self.generation += 1
             self._expect_total, self._current = len(raw), None
+            self._expect_until = time.monotonic() + STALE_REPORT_S
             self.state.set_progress(-1, -1)
             return [mission_item(r) for r in raw]
 

@@ -85,9 +85,9 @@ class VehicleState:
     def _set(self, **changes: Any) -> None:
         self.telemetry = Telemetry(**{**self.telemetry.__dict__, **changes})
 
-    def set_progress(self, seq: int, total: int) -> None:
-        """The mission item flown and the mission's size, as the backend's reports say."""
-        self._set(mission_seq=seq, mission_total=total)
+    def set_progress(self, seq: int, total: int, mission_id: int = 0) -> None:
+        """The mission item flown, the mission's size and id, as the backend's reports say."""
+        self._set(mission_seq=seq, mission_total=total, mission_id=mission_id)
 
     # --- link liveness ----------------------------------------------------------------------
     def heard(self) -> None:
@@ -306,7 +306,7 @@ class VehicleState:
         """The vehicle rebooted: what it reported before (home, estimator, mission) is stale."""
         self._pos = PositionInputs(estimator_name=self.estimator)
         self._clock_rate = ClockRate()
-        self._set(home_set=False, gps_fix=-1, mission_seq=0, mission_total=-1)
+        self._set(home_set=False, gps_fix=-1, mission_seq=0, mission_total=-1, mission_id=0)
         log.warning("the autopilot restarted: %s", detail)
         self.on_restart()
         self.emit(Restarted(detail))

@@ -79,6 +79,8 @@ class Telemetry:
     mission_total: int = -1
     """Items of the mission held, as MISSION_CURRENT counts them (ArduPilot: less home);
     0: none; -1: not said (yet, or since an upload or a restart)."""
+    mission_id: int = 0
+    """MISSION_CURRENT's id of the mission held (PX4: a CRC32 of its items); 0: not said."""
     time_rate: float | None = None
     """Vehicle seconds per wall second (a simulator may run faster), from its timestamps;
     None until measured (``ClockRate``)."""

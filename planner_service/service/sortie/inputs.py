@@ -33,6 +33,10 @@ class Vehicle:
     mission_total: int = -1
     """The items of the mission it holds, as MISSION_CURRENT counts them (ArduPilot: less
     home); 0: none; -1: not said."""
+    mission_id: int = 0
+    """MISSION_CURRENT's ``mission_id``: the autopilot's id of the mission it holds (PX4: a
+    CRC32 of its items, the ``opaque_id`` of the upload's MISSION_ACK); 0: not said
+    (ArduPilot)."""
     battery_fraction: float | None = None
     """The best estimate: the autopilot's reading, else the model's fallback; None: unknown."""
     battery_source: Literal["autopilot", "model", "unknown"] = "unknown"
@@ -121,6 +125,9 @@ class Uploaded:
     upload: Upload
     generation: int
     upload_ms: float = 0.0
+    mission_id: int = 0
+    """The ``opaque_id`` of the MISSION_ACK that accepted it: the id MISSION_CURRENT names
+    it by (PX4); 0: not said."""
 
 
 @dataclass(frozen=True)
@@ -134,6 +141,9 @@ class UploadFailed:
 class ReadBackDone:
     items: tuple[MissionItem, ...]
     generation: int
+    mission_id: int = 0
+    """The ``opaque_id`` of the vehicle's MISSION_COUNT (PX4): the id of the mission read; 0:
+    not said."""
 
 
 @dataclass(frozen=True)

@@ -88,6 +88,9 @@ class Rules:
     max_failures: int = 8
     retry_s: float = 1.0
     max_retry_s: float = 30.0
+    readback_interval_s: float = 30.0
+    """Wall seconds between read-backs of the mission flown under authority (``_periodic``):
+    what no report shows (ArduPilot names no mission) is found within this; 0: never."""
 
     @property
     def mode_names(self) -> dict[str, str]:
@@ -181,6 +184,17 @@ class Sortie:
     doubted: tuple[Sample, ...] = ()
     """The vehicle's reports while in doubt or an upload is in flight (``_replay``), at most
     ``MAX_DOUBTED``."""
+    mission_id: int = 0
+    """The autopilot's id of ``held`` (the upload's MISSION_ACK ``opaque_id``); 0: not said."""
+    id_at_doubt: int = 0
+    """The MISSION_CURRENT ``mission_id`` that raised the doubt (``_id_check``)."""
+    id_explained: int = 0
+    """A ``mission_id`` a read-back showed to go with the mission held."""
+    checked_at: float = -math.inf
+    """When the vehicle was last known to hold ``held`` (accepted or read back)."""
+    top_seq: int = -1
+    """The highest item the vehicle was seen flying of ``held`` since it was known to hold it
+    or the service last commanded an item (``_seq_check``)."""
 
 
 Step = tuple[Sortie, list[fx.Effect]]
@@ -230,16 +244,18 @@ class SortieLogic:
                                  now, out)
             case ins.Uploaded():
                 s = self._uploaded(replace(s, busy=""), event, v, out)
+                s = self._known(s, now, event.mission_id)
             case ins.UploadFailed(upload=up, error=error, outcome_unknown=unknown):
                 s = self._upload_failed(replace(s, busy=""), up, error, unknown, v, now, out)
             case ins.ReadBackDone(items=items, generation=gen):
                 s = self._read_back(replace(s, busy=""), items, gen, v, out)
+                s = self._known(s, now, event.mission_id, read_back=True)
             case ins.ReadBackFailed(error=error):
                 out.append(fx.Log("warning", f"could not read back the vehicle's mission ({s.doubt}): {error}; "
                                              f"trying again"))
                 s = replace(s, busy="", readback_at=now + self.rules.retry_s)
             case ins.CommandDone(command=cmd):
-                s = self._command_done(replace(s, commanding=""), cmd, now, out)
+                s = self._command_done(replace(s, commanding="", top_seq=-1), cmd, now, out)
             case ins.CommandFailed(command=cmd, error=error):
                 s = self._command_failed(replace(s, commanding=""), cmd, error, now, out)
             case ins.RequestIn(user_id=user, tasks=tasks):
@@ -277,6 +293,9 @@ class SortieLogic:
         s = self._watch(s, v, out)
         s = self._count_check(s, v, out)
         s = self._disarm_check(s, v, now, out)
+        s = self._id_check(s, v, out)
+        s = self._seq_check(s, v, out)
+        s = self._periodic(s, v, now, out)
         s = self._safety(s, v, out)
         return self._next(s, v, now, out)
 
@@ -344,6 +363,65 @@ class SortieLogic:
         return self._doubt(replace(s, count_at_doubt=v.mission_total),
                            f"the vehicle counts {v.mission_total} mission items, plan {held.plan_id} has "
                            f"{len(held.items)}", out)
+
+    def _checkable(self, s: Sortie, v: ins.Vehicle) -> bool:
+        """The vehicle is known to hold ``held`` and nothing the service does now changes it."""
+        return (s.held is not None and s.held_gen is not None and not s.busy and s.doubt is None and v.connected
+                and s.over is None)
+
+    def _id_check(self, s: Sortie, v: ins.Vehicle, out: list[fx.Effect]) -> Sortie:
+        """MISSION_CURRENT's ``mission_id`` (PX4: a CRC32 of the items) against the id the
+        autopilot gave our upload: another station's mission of the same length shows here,
+        not in the count. An id the link could not learn (0) is read back once, then known."""
+        if not self._checkable(s, v) or v.mission_id == 0 or v.mission_id in (s.mission_id, s.id_explained):
+            return s
+        held = s.held
+        assert held is not None
+        said = f"{s.mission_id:#010x}" if s.mission_id else "not said"
+        return self._doubt(replace(s, id_at_doubt=v.mission_id),
+                           f"the vehicle names its mission {v.mission_id:#010x}, plan {held.plan_id}'s id is {said}",
+                           out)
+
+    def _seq_check(self, s: Sortie, v: ins.Vehicle, out: list[fx.Effect]) -> Sortie:
+        """The item flown against the mission held: an item it does not have, or a step back
+        that nothing the service commanded explains (ArduPilot keeps its index across an
+        upload; a mission's items are flown forward), is someone else's doing."""
+        if not self._checkable(s, v) or not v.airborne or v.seq < 0 or s.commanding:
+            return s
+        held = s.held
+        assert held is not None
+        if v.seq >= len(held.items):
+            return self._doubt(s, f"the vehicle flies item {v.seq}, plan {held.plan_id} has {len(held.items)}", out)
+        if v.seq < s.top_seq:
+            return self._doubt(replace(s, top_seq=-1), f"the vehicle went back from item {s.top_seq} to {v.seq} "
+                               f"of plan {held.plan_id}, not commanded by the service", out)
+        return replace(s, top_seq=v.seq) if v.seq > s.top_seq else s
+
+    def _periodic(self, s: Sortie, v: ins.Vehicle, now: float, out: list[fx.Effect]) -> Sortie:
+        """Read the mission back every ``readback_interval_s`` while the service flies it
+        under authority: ArduPilot names no mission, and a station's mission of the same
+        length leaves every report as it was. Only between a plan and an upload (``busy``
+        empty), so it never delays one in flight; reports meanwhile are judged after."""
+        interval = self.rules.readback_interval_s
+        if (interval <= 0 or not s.authority.granted or not v.airborne or not self._checkable(s, v)
+                or now - s.checked_at < interval):
+            return s
+        held = s.held
+        assert held is not None
+        why = f"the periodic check of plan {held.plan_id} (every {interval:g} s)"
+        out.append(fx.Log("info", f"{why}: reading the mission back"))
+        return replace(s, doubt=why, held_gen=None, readback_at=0.0)
+
+    def _known(self, s: Sortie, now: float, mission_id: int, *, read_back: bool = False) -> Sortie:
+        """The vehicle was just seen to hold ``held`` (an upload accepted, a read-back): its
+        id, as the autopilot gave it, and the checks start afresh from here."""
+        if s.held is None or s.held_gen is None:
+            return replace(s, mission_id=0, id_explained=0) if s.held is None else s
+        if read_back:
+            explained = s.id_at_doubt if mission_id == 0 else 0
+            return replace(s, mission_id=mission_id or s.mission_id, id_explained=explained, id_at_doubt=0,
+                           checked_at=now, top_seq=-1)
+        return replace(s, mission_id=mission_id, id_explained=0, id_at_doubt=0, checked_at=now, top_seq=-1)
 
     def _replay(self, s: Sortie, v: ins.Vehicle, out: list[fx.Effect]) -> Sortie:
         """The reports kept during a doubt or an upload, judged now that the vehicle is known
