@@ -133,7 +133,7 @@ def test_three_sorties_in_a_row(stack: Stack) -> None:
     # known) until the operator gives it: then sortie 2's landing is its own, and sortie 3
     # begins with the configuration's
     stack.wait_log(third, "authority ended: revoked: the service started with the vehicle in the air", 30.0)
-    assert client.operator("start", "the vehicle is seen flying our mission", timeout_s=10.0).accepted
+    assert stack.operator("start", "the vehicle is seen flying our mission").accepted
     wait_sortie(stack, 2, True, 60.0)
     wait_sortie(stack, 3, False, 30.0)
     wait_sortie(stack, 3, True, 60.0)
