@@ -1,5 +1,6 @@
 """A small zenoh client of the planner service: submit a task request and await the ack,
-follow status, plans, events and a user's place, read the state snapshot.
+follow status, plans, events and a user's place, read the public state snapshot, send the
+operator's commands (with the operator key's proof).
 
 ``submit`` sends on the user's own request key (``{prefix}/{vehicle}/request/{user_id}``,
 which access control can give to that user's certificate alone) with a ``client_ref`` (one is
@@ -32,6 +33,7 @@ from .errors import ProtocolError
 from .keys import Keys
 from .messages import (ErrorReply, Event, OperatorCommand, OperatorReply, Plan, State, Status, TaskAck, TaskRequest,
                        UserPlace, decode, decode_operator_reply, decode_reply, encode)
+from .operator_proof import sign
 from .text import printable
 from .zenoh_config import error_text, session_config
 
@@ -158,8 +160,9 @@ class PlannerClient:
         return reply
 
     def state(self, timeout_s: float | None = None) -> State:
-        """The service's snapshot; ``ClientError`` if it did not answer or answered an error
-        (``busy: ...`` under load)."""
+        """The service's public snapshot: its status and the plan's points, nothing personal
+        (no pending requests, no user ids: the operator's ``status`` has them);
+        ``ClientError`` if it did not answer or answered an error (``busy: ...`` under load)."""
         data = self._query(self.keys.state, None, timeout_s)
         if data is None:
             raise ClientError("service", f"no reply on {self.keys.state}")
@@ -188,9 +191,16 @@ class PlannerClient:
         self._follow(self.keys.events, Event, callback)
 
     # --- the operator ----------------------------------------------------------------------------
-    def operator(self, command: str, reason: str = "", timeout_s: float | None = None) -> OperatorReply:
+    def operator(self, command: str, reason: str = "", timeout_s: float | None = None, *,
+                 key: bytes | None = None) -> OperatorReply:
         """Send an operator's command (``start``, ``hold``, ``status``) and return the
-        service's reply, accepted or refused (``reply.accepted``).
+        service's reply, accepted or refused (``reply.accepted``); for ``status`` with the
+        fleet-wide ``reply.state`` (every pending request).
+
+        ``key``: the operator key (``protocol.operator_proof``; the service's ``operator.key``
+        file). The command then carries its proof (an HMAC of the command and the time, not
+        the key), which a service without zenoh access control requires: without it the
+        answer is ``ClientError("proof", ...)``.
 
         The command carries a fresh random ``client_ref``, and the replier is judged as
         ``submit`` judges an ack's: every queryable on the key is asked and every reply
@@ -206,7 +216,11 @@ class PlannerClient:
         if len(reason) > 256:
             raise ClientError("reason", f"{len(reason)} characters; at most 256")
         ref = secrets.token_hex(8)
-        payload = encode(OperatorCommand(command=command, reason=reason, client_ref=ref))  # type: ignore[arg-type]
+        proved: dict[str, Any] = {}
+        if key is not None:
+            sent_at_ms = int(time.time() * 1000)
+            proved = {"sent_at_ms": sent_at_ms, "proof": sign(key, self.keys, command, reason, ref, sent_at_ms)}
+        payload = encode(OperatorCommand(command=command, reason=reason, client_ref=ref, **proved))  # type: ignore[arg-type]
         wait_s = timeout_s or self.timeout_s
         replies = self._replies(self.keys.operator, payload, wait_s)
         answers = operator_answers(replies, command, ref)

@@ -40,7 +40,9 @@ for ``status`` and ``state``, ``OPERATOR_SCHEMA_VERSION`` for the operator's mes
 STATUS_SCHEMA_VERSION = 2
 """``status`` (and ``state``, which holds one) at version 2: authority, battery source and
 unknown battery, position check, what the service waits for, the degraded state."""
-OPERATOR_SCHEMA_VERSION = 1
+OPERATOR_SCHEMA_VERSION = 2
+"""``operator_command`` and ``operator_reply``: 2 added the command's proof (``sent_at_ms``,
+``proof``) and the fleet-wide ``state`` in the reply to ``status``."""
 EVENT_SCHEMA_VERSION = 2
 """``event``'s layout: 2 added the kinds of the sortie logic (waypoint_skipped,
 upload_abandoned, command_failed, authority_*, degraded)."""
@@ -282,7 +284,9 @@ class State(_Message, tag="state"):
 class OperatorCommand(_Message, tag="operator_command", kw_only=True):
     """The operator's command on the operator queryable: ``start`` gives the service
     authority over modes and arming for the sortie, ``hold`` takes it back (the service
-    commands nothing more; the vehicle keeps the mission it holds), ``status`` asks."""
+    commands nothing more; the vehicle keeps the mission it holds), ``status`` asks.
+    Without zenoh access control every command carries the operator's proof
+    (``protocol.operator_proof``: ``sent_at_ms``, ``proof``, and ``client_ref``)."""
 
     LAYOUT: ClassVar[int] = OPERATOR_SCHEMA_VERSION
     schema: int = OPERATOR_SCHEMA_VERSION
@@ -290,14 +294,21 @@ class OperatorCommand(_Message, tag="operator_command", kw_only=True):
     reason: ShortText = ""
     """Why, in the operator's words (kept in the log and the authority's detail)."""
     client_ref: Annotated[str, msgspec.Meta(max_length=64)] | None = None
-    """The client's own correlation id, echoed in the reply."""
+    """The client's own correlation id, echoed in the reply; with a proof, never reused."""
+    sent_at_ms: Annotated[int, msgspec.Meta(ge=0, le=2 ** 53)] | None = None
+    """When the operator sent it: milliseconds since 1970 (UTC) on the operator's clock."""
+    proof: Annotated[str, msgspec.Meta(pattern=r"\A[0-9a-fA-F]{64}\Z")] | None = None
+    """HMAC-SHA256 of the command under the operator key, 64 hex digits."""
 
 
 class OperatorReply(_Message, tag="operator_reply", kw_only=True):
     """What the service did with an operator's command: ``accepted`` or refused (``message``
-    says why), the authority and phase that resulted, and for ``status`` the snapshot."""
+    says why), the authority and phase that resulted, and for ``status`` the snapshot and
+    the fleet-wide ``state`` (every pending request: users' positions and backlogs; the
+    operator's alone, docs/PROTOCOL.md, "Who may do what")."""
 
     LAYOUT: ClassVar[int] = OPERATOR_SCHEMA_VERSION
+    MAX_BYTES: ClassVar[int] = MAX_STATE_BYTES + MAX_PAYLOAD_BYTES
     schema: int = OPERATOR_SCHEMA_VERSION
     command: OperatorCommandName
     accepted: bool
@@ -306,6 +317,8 @@ class OperatorReply(_Message, tag="operator_reply", kw_only=True):
     message: ShortText = ""
     client_ref: Annotated[str, msgspec.Meta(max_length=64)] | None = None
     status: Status | None = None
+    state: State | None = None
+    """``status`` only: the state with every pending request and the plan's users."""
 
 
 class _NoMessage(_Message, tag="-"):
@@ -343,7 +356,7 @@ def decode(payload: bytes | bytearray | memoryview | str, kind: Any, area: Area 
         except UnicodeEncodeError:
             raise ProtocolError("payload", "is not valid Unicode (a lone surrogate)") from None
     data = bytes(payload)
-    limit = kind.MAX_BYTES if isinstance(kind, type) and issubclass(kind, _Message) else MAX_PAYLOAD_BYTES
+    limit = _limit(kind)
     if len(data) > limit:
         raise ProtocolError("payload", f"{len(data)} bytes exceeds the limit of {limit}")
     tagged = Union[kind, _NoMessage] if isinstance(kind, type) and issubclass(kind, _Message) else kind
@@ -362,6 +375,15 @@ def decode(payload: bytes | bytearray | memoryview | str, kind: Any, area: Area 
     refuse_duplicate_keys(data)  # msgspec kept the last of two equal keys without a word
     _check_values(message, area, "")
     return message
+
+
+def _limit(kind: Any) -> int:
+    """The largest payload read as ``kind``: its ``MAX_BYTES``; a Union's, the largest of its
+    members' (``operator_reply`` or ``error``: a reply with the fleet-wide state)."""
+    if isinstance(kind, type) and issubclass(kind, _Message):
+        return kind.MAX_BYTES
+    members = [m for m in getattr(kind, "__args__", ()) if isinstance(m, type) and issubclass(m, _Message)]
+    return max((m.MAX_BYTES for m in members), default=MAX_PAYLOAD_BYTES)
 
 
 def decode_request(payload: bytes | bytearray | memoryview | str, area: Area) -> TaskRequest:

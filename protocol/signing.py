@@ -118,8 +118,11 @@ def write_key(path: str | os.PathLike[str], key: bytes | None = None) -> bytes:
         os.fchmod(fd, 0o600)  # the umask may only remove bits; this makes the mode exact
         os.write(fd, (key.hex() + "\n").encode("ascii"))
         os.fsync(fd)
-    finally:
+    except OSError as err:  # a full disk: no half-written key is left to be refused later
         os.close(fd)
+        os.unlink(name)
+        raise SigningError(name, f"cannot write the key file: {err.strerror or err}") from None
+    os.close(fd)
     return key
 
 

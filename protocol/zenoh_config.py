@@ -94,3 +94,16 @@ def session_config(mode: str, listen: Sequence[str] = (), connect: Sequence[str]
     conf.insert_json5("listen/endpoints", json.dumps(list(listen)))
     conf.insert_json5("connect/endpoints", json.dumps(list(connect)))
     return conf
+
+
+def access_control_closed(config_file: str | Path | None) -> bool:
+    """Does ``config_file`` turn zenoh's access control on with everything not allowed
+    denied (``access_control.enabled: true``, ``default_permission: "deny"``)? Only then
+    can its rules (not the service) decide who may query a key. False without a file;
+    ``ProtocolError("config_file", ...)`` if the file is refused."""
+    if not config_file:
+        return False
+    conf = session_config("peer", config_file=config_file)
+    enabled = json.loads(conf.get_json("access_control/enabled"))
+    default = json.loads(conf.get_json("access_control/default_permission"))
+    return enabled is True and default == "deny"

@@ -5,8 +5,12 @@ from its status, plan and event publications and its state query, until Ctrl-C; 
 after the last). ``start``: give the service authority to arm, switch modes and start the
 mission; ``hold``: take it back (the service commands nothing more, the vehicle keeps its
 mission); ``status``: ask. Each prints what the service did. Exit status: 0 accepted,
-1 refused or no answer, 2 a usage error, 141 the reader of its output went away. Under access control only an operator's
-certificate may send commands (docs/zenoh/operator-tls.json5)."""
+1 refused or no answer, 2 a usage error, 141 the reader of its output went away.
+
+Who may command: without zenoh access control, the holder of the service's operator key
+(``--operator-key``; each command carries its proof, never the key); under access control,
+an operator's certificate (docs/zenoh/operator-tls.json5). The pending requests (every
+user's position and backlog) that ``watch`` shows come from ``status``: the operator's too."""
 
 from __future__ import annotations
 
@@ -23,6 +27,9 @@ from protocol.client_args import DEFAULT_ENDPOINT, add_client_arguments
 
 HELP = "the operator's command line: watch the service live, or start / hold / status"
 ACTIONS = ("watch", "start", "hold", "status")
+DEFAULT_KEY = "operator.key"
+"""The service's default key file: ``operator.key`` beside its default journal (both in the
+folder it starts in)."""
 CLEAR = "\x1b[H\x1b[2J"
 """Cursor home and clear screen (ANSI): used only on a terminal that is not ``dumb``."""
 
@@ -34,6 +41,11 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--reason", default="", metavar="TEXT",
                         help="start or hold: why, in words (at most 256 characters; kept in the service's log and in "
                              "status.authority_detail)")
+    parser.add_argument("--operator-key", metavar="FILE", default=None,
+                        help=f"the service's operator key (its operator.key_file; default {DEFAULT_KEY}, where the "
+                             "service makes it beside a journal in the current folder): each command carries its "
+                             "proof, which a service without zenoh access control requires. A missing default file "
+                             "is skipped (under access control the certificate is the proof)")
     add_client_arguments(parser)
     parser.add_argument("--timeout", type=positive_float, default=5.0,
                         help="seconds to wait for the service's answer (default 5)")
@@ -48,9 +60,21 @@ def configure(parser: argparse.ArgumentParser) -> None:
                              "when TERM is dumb or the output is not a terminal)")
 
 
+def _key(path: str | None) -> bytes | None:
+    """The operator key of ``path``; None when no path was given and the default is absent."""
+    from protocol.signing import load_key
+
+    if path is None:
+        if not os.path.lexists(DEFAULT_KEY):
+            return None
+        path = DEFAULT_KEY
+    return load_key(path)
+
+
 def run(args: argparse.Namespace) -> int:
-    from protocol import Keys, ProtocolError
+    from protocol import Keys, ProtocolError, SigningError
     from protocol.client import PlannerClient
+    from protocol.text import printable
 
     if args.reason and args.action not in ("start", "hold"):
         print(f"error: --reason: only start and hold take a reason, not {args.action}", file=sys.stderr)
@@ -61,6 +85,11 @@ def run(args: argparse.Namespace) -> int:
     if args.action != "watch" and (args.once or args.plain):
         print("error: --once and --plain are for watch", file=sys.stderr)
         return USAGE_ERROR
+    try:
+        args.key = _key(args.operator_key)
+    except SigningError as err:
+        print(f"error: --operator-key: {printable(str(err), 400)}", file=sys.stderr)
+        return 1
     keys = Keys(args.prefix, args.vehicle)
     stop = threading.Event()
     if args.action == "watch":  # Ctrl-C (or SIGTERM) ends the watch between two redraws
@@ -87,10 +116,13 @@ def _command(client: Any, args: argparse.Namespace) -> int:
     from protocol.text import printable
 
     try:
-        reply = client.operator(args.action, args.reason, args.timeout)
+        reply = client.operator(args.action, args.reason, args.timeout, key=args.key)
     except ClientError as err:
         hint = ("; is the service running, and is this an operator's certificate? (under access control only "
                 "operators may send commands)") if err.field == "service" else ""
+        if err.field == "proof":
+            hint = ("; give the service's operator key with --operator-key FILE" if args.key is None else
+                    "; is --operator-key the service's operator.key_file?")
         print(f"error: {printable(err.field, 64)}: {printable(err.message, 300)}{hint}", file=sys.stderr)
         return 1
     verdict = "accepted" if reply.accepted else "refused"
@@ -139,16 +171,17 @@ def _watch(client: Any, args: argparse.Namespace, stop: threading.Event) -> int:
     try:
         while not stop.is_set():  # also when the service is absent: the view says so
             try:
-                state = client.state(timeout_s=min(args.timeout, 1.0))
+                reply = client.operator("status", timeout_s=min(args.timeout, 1.0), key=args.key)
+                state = reply.state if reply.state is not None else client.state(timeout_s=min(args.timeout, 1.0))
                 update(pending=list(state.pending), pending_note="")
                 if view.status is None:  # no publication yet: the state's snapshot will do
                     update(status=state.status, status_at=time.monotonic())
                 if state.plan is not None and (view.plan is None or state.plan.plan_id > view.plan.plan_id):
                     update(plan=state.plan)  # published before the watch began
             except ClientError as err:
-                update(pending_note=f"no answer from the state query ({err.message})")
+                update(pending_note=f"no answer to the operator's status ({err.field}: {err.message})")
             except ProtocolError as err:
-                update(pending_note=f"the state query's answer was refused ({err.field}: {err.message})")
+                update(pending_note=f"the operator's status answer was refused ({err.field}: {err.message})")
             if args.once and view.status is None and time.monotonic() < deadline:
                 stop.wait(0.1)
                 continue

@@ -32,23 +32,25 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, replace
 from typing import Any, Awaitable, Callable
 
+import msgspec
 import numpy as np
 
-from protocol import ErrorReply, PendingRequest, Plan, PlanPoint, State, Status, encode
+from protocol import ErrorReply, PendingRequest, Plan, PlanPoint, SigningError, State, Status, encode
+from protocol.operator_proof import ProofCheck, load_or_create_key
 from protocol.text import printable
 
 from ..mcts import MctsConfig
 from ..model import pack
 from .allocator import ARENAS, cap_arenas
 from .config import ServiceConfig
-from .errors import JournalError, LinkError, PlanningError
+from .errors import ConfigError, JournalError, LinkError, PlanningError
 from . import events as ev
 from .intake import Accepted, Intake, fairness_rule
 from .journal import Journal
 from .link import (ArmedChanged, Connected, Landed, LinkEvent, LinkSettings, Lost, ModeChanged, Restarted, Restored,
                    VehicleLink, open_link)
 from .link.base import RETURNING_MODES
-from .operator import read_command, reply_for
+from .operator import OperatorGate, read_command, reply_for
 from .places import plan_places, user_places
 from .planning import Planner, VehicleFix, after_hold, assemble, not_served_reason, planning_battery_j
 from .sortie import HeldMission, Rules, Sortie, SortieLogic, Vehicle, item_dict, new_sortie
@@ -93,6 +95,8 @@ class Parts:
     journal: Journal
     open_link: Callable[[Callable[[LinkEvent], None]], VehicleLink]
     zio: ZenohIO
+    operator_gate: OperatorGate
+    """Who may send the operator's commands (the key's proof, or zenoh's access control)."""
     wall: Callable[[], float] = time.time
     """Timestamps in the journal and the publications."""
     mono: Callable[[], float] = time.monotonic
@@ -173,6 +177,7 @@ class Service:
                 loop.add_signal_handler(sig, self.stopping.set)
             except (NotImplementedError, RuntimeError):  # not the main thread (tests)
                 pass
+        log.info("%s", self.parts.operator_gate.why)
         self.supervisor.start("connect", self._connect_loop())
         self.supervisor.start("tick", self._tick_loop(), forever=True)
         self.supervisor.start("status", self._status_loop(), forever=True)
@@ -460,8 +465,9 @@ class Service:
         """An operator's command: read at the edge (an error naming the field changes
         nothing), decided by the sortie logic, answered with what the service did."""
         payload = query.payload.to_bytes() if query.payload is not None else None
-        cmd = read_command(payload)
+        cmd = read_command(payload, self.parts.operator_gate, self.wall())
         if isinstance(cmd, ErrorReply):
+            log.warning("operator command refused: %s: %s", printable(cmd.field, 64), printable(cmd.message, 300))
             reply_and_drop(query, self.keys.operator, encode(cmd))
             return
         before = self.state
@@ -471,12 +477,20 @@ class Service:
         if self.state.authority != before.authority:
             log.info("operator: authority %s -> %s (%s)", before.authority.state, self.state.authority.state,
                      self.state.authority.detail)
-        reply_and_drop(query, self.keys.operator, encode(reply_for(cmd, accepted, message, self._status())))
+        fleet = self._fleet_state() if cmd.command == "status" else None
+        reply_and_drop(query, self.keys.operator, encode(reply_for(cmd, accepted, message, self._status(), fleet)))
 
-    def _on_state(self, query: Any) -> None:
+    def _fleet_state(self) -> State:
+        """Everything: the status, the plan with its users, every pending request (each
+        user's position and backlog). The operator's alone: in the reply to ``status``."""
         pending = [PendingRequest(request_id=r.request_id, user_id=r.user_id, x_m=r.x_m, y_m=r.y_m, z_m=r.z_m,
                                   tasks=r.backlog) for r in self.journal.pending()]
-        state = State(status=self._status(), plan=self.plan_msg, pending=pending)
+        return State(status=self._status(), plan=self.plan_msg, pending=pending)
+
+    def _on_state(self, query: Any) -> None:
+        """Anyone's: nothing personal (docs/PROTOCOL.md, "Who may do what"): the status (the
+        vehicle's, and counts) and the plan's points without whom they serve; no pending list."""
+        state = State(status=self._status(), plan=public_plan(self.plan_msg))
         reply_and_drop(query, self.keys.state, encode(state))
 
     def _on_link_event(self, ev: LinkEvent) -> None:
@@ -617,6 +631,30 @@ class Service:
             log.error("could not note %s in the journal: %s", key, err)
 
 
+def public_plan(plan: Plan | None) -> Plan | None:
+    """``plan`` without the user served at each point."""
+    if plan is None:
+        return None
+    return msgspec.structs.replace(plan, points=[msgspec.structs.replace(p, user_id=None) for p in plan.points])
+
+
+def operator_gate(config: ServiceConfig) -> OperatorGate:
+    """The gate of the operator's commands: the key's proof (the key file loaded, or made
+    with mode 0600 if absent), unless zenoh's access control decides. ``ConfigError``
+    naming ``operator.key_file`` if the key cannot be read or made."""
+    if not config.operator_proof_needed():
+        return OperatorGate(None, f"zenoh access control ({config.zenoh.config_file}) decides who may query "
+                                  f"{config.keys().operator}; no operator key needed (operator.proof = auto)")
+    path = config.operator_key_path()
+    try:
+        key, made = load_or_create_key(path)
+    except SigningError as err:
+        raise ConfigError("operator.key_file", str(err)) from None
+    check = ProofCheck(key, config.keys(), config.operator.proof_window_s)
+    return OperatorGate(check, f"operator commands need the proof of the key in {path}"
+                               f"{' (made now, mode 0600)' if made else ''}")
+
+
 def _max_points(config: ServiceConfig) -> int:
     from protocol.mission import max_points
 
@@ -630,8 +668,13 @@ def build_parts(config: ServiceConfig) -> Parts:
                             m.source_component, signing_key_file=m.signing_key_file,
                             signing_timestamp_file=m.signing_timestamp_file)
     journal = Journal(config.journal.path, config.journal.synchronous, now_s=time.time())
+    try:
+        gate = operator_gate(config)
+    except ConfigError:
+        journal.close()
+        raise
     return Parts(journal=journal, open_link=lambda on_event: open_link(m.backend, settings, on_event),
-                 zio=ZenohIO(config.zenoh, config.keys()))
+                 zio=ZenohIO(config.zenoh, config.keys()), operator_gate=gate)
 
 
 def run_service(config: ServiceConfig) -> int:

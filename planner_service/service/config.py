@@ -24,7 +24,7 @@ from protocol import Area, GeoOrigin, Keys, ProtocolError
 from protocol.errors import MissionError, SigningError
 from protocol.mission import Flavour
 from protocol.signing import default_timestamp_path, load_key
-from protocol.zenoh_config import endpoint_problem
+from protocol.zenoh_config import access_control_closed, endpoint_problem
 
 from ..model import Scenario, ScenarioError, preset
 from ..model.presets import Preset
@@ -297,9 +297,35 @@ class SortieConfig(Section):
     at once)."""
 
 
+ProofRule = Literal["auto", "always"]
+OPERATOR_KEY_NAME = "operator.key"
+"""The operator key's file name beside the journal (``operator.key_file`` empty)."""
+
+
+@dataclass(frozen=True)
+class OperatorConfig(Section):
+    """Who may send the operator's commands (docs/SERVICE.md, "The operator's key")."""
+
+    section: ClassVar[str] = "operator"
+
+    proof: ProofRule = "auto"
+    """``auto``: every operator command must carry the proof of the operator key unless
+    ``zenoh.config_file`` turns zenoh's access control on with default_permission "deny"
+    (its rules then say who may query the operator key: the shipped ones, operator
+    certificates only); ``always``: the proof is needed under access control too."""
+    key_file: str = ""
+    """The operator key (64 hex characters, mode 0600), made by the service at start when
+    absent; a file that its group or others may read is refused. Empty: ``operator.key``
+    beside the journal."""
+    proof_window_s: float = setting(30.0, gt=0, le=300.0, unit="s")
+    """A command's ``sent_at_ms`` must lie this close to the service's clock (either way);
+    its client_ref is refused again for twice this long (replays)."""
+
+
 SECTIONS: dict[str, type[Section]] = {
     "zenoh": ZenohConfig, "intake": IntakeConfig, "mavlink": MavlinkConfig, "planner": PlannerConfig,
-    "journal": JournalConfig, "origin": OriginConfig, "safety": SafetyConfig, "sortie": SortieConfig}
+    "journal": JournalConfig, "origin": OriginConfig, "safety": SafetyConfig, "sortie": SortieConfig,
+    "operator": OperatorConfig}
 """The TOML tables besides ``[scenario]``, in the order ``to_toml`` writes them."""
 SCENARIO_DEFAULTS: tuple[tuple[str, Any], ...] = (("task_arrival_period_s", 55.0), ("task_model", "backlog"))
 """The ``[scenario]`` keys the service sets besides the preset's: live users' requests are
@@ -319,6 +345,7 @@ class ServiceConfig:
     origin: OriginConfig = field(default_factory=OriginConfig)
     safety: SafetyConfig = field(default_factory=SafetyConfig)
     sortie: SortieConfig = field(default_factory=SortieConfig)
+    operator: OperatorConfig = field(default_factory=OperatorConfig)
     scenario_preset: Preset = "field"
     scenario_overrides: tuple[tuple[str, Any], ...] = SCENARIO_DEFAULTS
     """(name, value) pairs of the [scenario] section besides ``preset``, each value of its
@@ -348,10 +375,42 @@ class ServiceConfig:
     def keys(self) -> Keys:
         return Keys(self.zenoh.prefix, self.zenoh.vehicle)
 
+    def operator_key_path(self) -> Path:
+        """The operator key's file: ``operator.key_file``, or ``operator.key`` beside the journal."""
+        return Path(self.operator.key_file or Path(self.journal.path).parent / OPERATOR_KEY_NAME)
+
+    def operator_proof_needed(self) -> bool:
+        """Must operator commands carry the key's proof (``operator.proof``)? Checked
+        zenoh.config_file first: it is read here."""
+        if self.operator.proof == "always":
+            return True
+        try:
+            return not access_control_closed(self.zenoh.config_file or None)
+        except ProtocolError as err:
+            raise ConfigError("zenoh.config_file", err.message) from None
+
+    def _check_operator_key(self) -> None:
+        """An operator key that exists must load (owner-only, 64 hex characters), and one
+        that does not must be creatable: refused at start, never at the first command."""
+        if not self.operator_proof_needed():
+            return
+        path = self.operator_key_path()
+        if os.path.lexists(path):
+            try:
+                load_key(path)
+            except SigningError as err:
+                raise ConfigError("operator.key_file", str(err)) from None
+            return
+        folder = path.parent
+        if not os.access(folder, os.W_OK | os.X_OK):
+            raise ConfigError("operator.key_file", f"{path}: the folder {folder} is missing or not writable "
+                                                   "(the service makes the operator key there)")
+
     def check(self) -> None:
         """Every section's rules, then those between sections; ``ConfigError`` names the key."""
         for name in SECTIONS:
             getattr(self, name).check()
+        self._check_operator_key()
         p, s = self.planner, self.safety
         if p.min_requests > self.intake.max_pending_requests:
             raise ConfigError("planner.min_requests", f"{p.min_requests} can never be pending: "

@@ -44,14 +44,14 @@ def test_each_bad_request_is_refused_and_changes_nothing(stack: Stack) -> None:
     assert isinstance(good, TaskAck) and good.request_id == 1
     stack.wait_event(lambda e: e.event == "mission_uploaded", 20.0, "a mission for the good request")
     before = stack.rows("SELECT * FROM requests ORDER BY request_id")
-    pending_before = client.state().pending
+    pending_before = stack.fleet().pending
     for body, field in BAD:
         reply = client.submit_raw(body)
         assert isinstance(reply, ErrorReply), (body[:80], reply)
         assert reply.field == field, (body[:80], reply)
         assert reply.message
     assert stack.rows("SELECT * FROM requests ORDER BY request_id") == before
-    assert client.state().pending == pending_before
+    assert stack.fleet().pending == pending_before
     # and a good one afterwards still works, with the next id
     after = client.submit_raw(payload(user_id="u-2", client_ref="again"))
     assert isinstance(after, TaskAck) and after.request_id == 2 and after.client_ref == "again"

@@ -90,7 +90,7 @@ def test_vehicle_restart_mid_sortie(stack: Stack, backend: str, flavour: str) ->
     assert not re.findall(r"command (?:176|300|400|20|21|22) ", second.log()), second.log()[-2000:]
     assert not any(e.event == "mission_resumed" for e in stack.events)
     client = stack.client
-    assert client is not None and client.operator("start", "resume after the restart", timeout_s=10.0).accepted
+    assert client is not None and stack.operator("start", "resume after the restart").accepted
     resumed = stack.wait_event(lambda e: e.event == "mission_resumed", 30.0, "the mission resumed")
     stack.wait_event(lambda e: e.event == "landed", 120.0, "landing")
     assert users.stop() == 0 and service.stop() == 0

@@ -65,7 +65,8 @@ def test_hostile_payloads_over_zenoh_change_nothing(stack: Stack) -> None:
             replies = [r.ok for r in client.session.get(client.keys.state, payload=case.payload, timeout=5.0)]
             assert len(replies) == 1 and replies[0] is not None, case
             state = decode(replies[0].payload.to_bytes(), State)
-            assert (state.pending, state.plan) == (state_before.pending, state_before.plan), case
+            assert (state.status.pending_requests, state.plan) == (state_before.status.pending_requests,
+                                                                  state_before.plan), case
             seen["state"] += 1
 
     t0 = time.perf_counter()

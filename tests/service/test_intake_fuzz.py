@@ -151,7 +151,7 @@ def test_a_state_query_answers_the_same_state_whatever_it_carries(tmp_path: Path
         baseline = RecordingQuery(None)
         service._on_state(baseline)
         (key, expected), = baseline.replies
-        assert key == service.keys.state and decode(expected, State).pending[0].user_id == "u-1"
+        assert key == service.keys.state and decode(expected, State).status.pending_requests == 1
         watcher = sqlite3.connect(tmp_path / "journal.sqlite")
         before = watcher.execute("PRAGMA data_version").fetchone()[0]
         seen = {"payloads": 0}

@@ -10,11 +10,13 @@ from dataclasses import replace
 import pytest
 
 from planner_service.model import preset
-from planner_service.service.operator import read_command, reply_for
+from planner_service.service.operator import OperatorGate, read_command, reply_for
 from planner_service.service.sortie import Authority, Rules, SortieLogic, Vehicle, new_sortie
 from planner_service.service.sortie import effects as fx
 from planner_service.service.sortie import inputs as ins
-from protocol import Area, ErrorReply, GeoOrigin, OperatorCommand, OperatorReply, Status, decode_operator_reply, encode
+from protocol import (Area, ErrorReply, GeoOrigin, Keys, OperatorCommand, OperatorReply, PendingRequest, State, Status,
+                      decode_operator_reply, encode)
+from protocol.operator_proof import ProofCheck, sign
 
 
 class NoRequests:
@@ -46,6 +48,9 @@ def operator(state, command: str, reason: str = "", v: Vehicle = READY):  # type
 def sent(reply: OperatorReply | ErrorReply) -> OperatorReply | ErrorReply:
     """The reply as the operator's client reads it off the wire."""
     return decode_operator_reply(encode(reply))
+
+
+OPEN = OperatorGate(None, "access control decides (a test of what comes after the gate)")
 
 
 def test_start_gives_the_authority_and_says_so() -> None:
@@ -98,18 +103,18 @@ def test_status_changes_nothing_and_summarises() -> None:
 def test_a_payload_that_is_not_a_command_changes_nothing() -> None:
     for payload, field in ((None, "payload"), (b"\xff\xfe", "payload"), (b'{"kind": "task_request"}', "kind"),
                            (b'{"kind": "operator_command", "command": "arm", "client_ref": "r-9"}', "command"),
-                           (b'{"kind": "operator_command", "command": "start", "schema": 2}', "schema"),
+                           (b'{"kind": "operator_command", "command": "start", "schema": 1}', "schema"),
                            (b'{"kind": "operator_command", "command": "start", "force": true}', "force")):
-        reply = read_command(payload)
+        reply = read_command(payload, OPEN, 0.0)
         assert isinstance(reply, ErrorReply) and reply.field == field, (payload, reply)
         assert sent(reply) == reply
-    reply = read_command(b'{"kind": "operator_command", "command": "arm", "client_ref": "r-9"}')
+    reply = read_command(b'{"kind": "operator_command", "command": "arm", "client_ref": "r-9"}', OPEN, 0.0)
     assert isinstance(reply, ErrorReply) and reply.client_ref == "r-9"
 
 
 def test_hostile_text_in_a_reason_is_escaped_and_bounded() -> None:
     reason = "ok\x1b[2J\x1b]0;pwned\x07\nINFO forged log line\u202e" + "\x00" * 300
-    cmd = read_command(json.dumps({"kind": "operator_command", "command": "start", "reason": reason[:256]}).encode())
+    cmd = read_command(json.dumps({"kind": "operator_command", "command": "start", "reason": reason[:256]}).encode(), OPEN, 0.0)
     assert isinstance(cmd, OperatorCommand)
     new, _, accepted, said = operator(NONE, "start", cmd.reason)
     reply = reply_for(cmd, accepted, said, Status(authority=new.authority.state))
@@ -118,3 +123,83 @@ def test_hostile_text_in_a_reason_is_escaped_and_bounded() -> None:
         assert not any(ord(c) < 32 or c == "\u202e" for c in text), text
         assert "\\x1b[2J" in text and "\\x0aINFO forged" in text and len(text) <= 256
     assert sent(reply) == reply
+
+
+KEY = bytes(range(32))
+GATED_KEYS = Keys()
+
+
+def gated() -> OperatorGate:
+    return OperatorGate(ProofCheck(KEY, GATED_KEYS, window_s=30.0), "the key's proof")
+
+
+def command(name: str = "start", reason: str = "range clear", ref: str = "r-1", at_ms: int = 1_000_000,
+            key: bytes = KEY, **fields: object) -> bytes:
+    body = {"kind": "operator_command", "command": name, "reason": reason, "client_ref": ref, "sent_at_ms": at_ms,
+            "proof": sign(key, GATED_KEYS, name, reason, ref, at_ms), **fields}
+    return json.dumps({k: v for k, v in body.items() if v is not None}).encode()
+
+
+@pytest.mark.parametrize("name", ["start", "hold", "status"])
+def test_without_the_keys_proof_no_command_passes_the_gate(name: str) -> None:
+    """Issue 23, item 4: on the default configuration any peer's start was carried out.
+    Every command (start, hold, status) now needs the proof; refused ones name the field."""
+    gate = gated()
+    bare = json.dumps({"kind": "operator_command", "command": name, "client_ref": "r-0"}).encode()
+    for payload, field in ((bare, "proof"),
+                           (command(name, key=b"\x01" * 32), "proof"),  # another key
+                           (command(name, proof=None), "proof"),
+                           (command(name, ref=None), "client_ref"),
+                           (command(name, at_ms=None), "sent_at_ms")):
+        reply = read_command(payload, gate, 1000.0)
+        assert isinstance(reply, ErrorReply) and reply.field == field, (payload, reply)
+        assert sent(reply) == reply
+    assert gate.check is not None and gate.check.seen == {}  # nothing refused is remembered
+    ok = read_command(command(name), gate, 1000.0)
+    assert isinstance(ok, OperatorCommand) and ok.command == name
+
+
+def test_an_altered_command_fails_its_proof() -> None:
+    good = json.loads(command("hold", reason="pilot takes over"))
+    for field, value in (("command", "start"), ("reason", "anything"), ("client_ref", "r-2"), ("sent_at_ms", 1_000_001)):
+        reply = read_command(json.dumps({**good, field: value}).encode(), gated(), 1000.0)
+        assert isinstance(reply, ErrorReply) and reply.field == "proof", field
+    other_vehicle = sign(KEY, Keys(vehicle="uav2"), "hold", "pilot takes over", "r-1", 1_000_000)
+    reply = read_command(json.dumps({**good, "proof": other_vehicle}).encode(), gated(), 1000.0)
+    assert isinstance(reply, ErrorReply) and reply.field == "proof"
+
+
+def test_a_replayed_or_stale_command_is_refused() -> None:
+    gate = gated()
+    assert isinstance(read_command(command(ref="r-1", at_ms=1_000_000), gate, 1000.0), OperatorCommand)
+    again = read_command(command(ref="r-1", at_ms=1_000_000), gate, 1005.0)  # the same bytes, 5 s later
+    assert isinstance(again, ErrorReply) and again.field == "client_ref" and "already used" in again.message
+    # the same bytes after the window: refused for their time (and still remembered until then)
+    late = read_command(command(ref="r-1", at_ms=1_000_000), gate, 1030.5)
+    assert isinstance(late, ErrorReply) and late.field == "sent_at_ms" and "+" not in late.message
+    assert late.message.startswith("-30.5 s from the service's clock")
+    ahead = read_command(command(ref="r-3", at_ms=1_031_000), gate, 1000.0)  # a clock 31 s ahead
+    assert isinstance(ahead, ErrorReply) and ahead.field == "sent_at_ms" and ahead.message.startswith("+31.0 s")
+    # within the window either way: taken
+    assert isinstance(read_command(command(ref="r-4", at_ms=1_029_000), gate, 1000.0), OperatorCommand)
+    assert isinstance(read_command(command(ref="r-5", at_ms=971_000), gate, 1000.0), OperatorCommand)
+    # a ref is forgotten once its command can no longer pass the window
+    assert gate.check is not None and "r-1" in gate.check.seen
+    read_command(command(ref="r-6", at_ms=1_100_000), gate, 1100.0)
+    assert "r-1" not in gate.check.seen and "r-6" in gate.check.seen
+
+
+def test_the_proof_is_checked_on_the_reason_as_sent_then_the_reason_is_escaped() -> None:
+    reason = "ok\x1b[2J" + "x" * 200
+    cmd = read_command(command(reason=reason), gated(), 1000.0)
+    assert isinstance(cmd, OperatorCommand) and "\\x1b[2J" in cmd.reason and len(cmd.reason) <= 100
+
+
+def test_the_status_reply_holds_the_fleet_wide_state_and_the_others_do_not() -> None:
+    state = State(status=Status(), pending=[PendingRequest(request_id=1, user_id="u-1", x_m=1.0, y_m=2.0, z_m=0.0,
+                                                           tasks=5)])
+    for name in ("start", "hold", "status"):
+        cmd = OperatorCommand(command=name, client_ref="r")  # type: ignore[arg-type]
+        reply = sent(reply_for(cmd, True, "", Status(), state))
+        assert isinstance(reply, OperatorReply)
+        assert reply.state == (state if name == "status" else None), name

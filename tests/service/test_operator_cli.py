@@ -25,19 +25,23 @@ from protocol.zenoh_config import session_config
 from tests.support.stack import Stack
 
 
-def operator(endpoint: str, *args: str, timeout: float = 60) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([sys.executable, "-m", "planner_service", "operator", *args, "--connect", endpoint],
-                          cwd=REPO, capture_output=True, text=True, timeout=timeout)
+def operator(endpoint: str, *args: str, key: Path | None = None, timeout: float = 60) -> subprocess.CompletedProcess[str]:
+    """The operator command, with the service's key file when given (cwd is the repository,
+    where no default operator.key lies: without ``key`` the command carries no proof)."""
+    with_key = ["--operator-key", str(key)] if key is not None else []
+    return subprocess.run([sys.executable, "-m", "planner_service", "operator", *args, "--connect", endpoint,
+                           *with_key], cwd=REPO, capture_output=True, text=True, timeout=timeout)
 
 
 @pytest.mark.timeout(180)
 def test_status_start_hold_against_the_service(stack: Stack) -> None:
     stack.service()  # no vehicle yet: a start is refused
-    status = operator(stack.endpoint, "status")
+    key = stack.operator_key_path
+    status = operator(stack.endpoint, "status", key=key)
     assert status.returncode == 0, status.stderr
     assert status.stdout.startswith("accepted: status: authority none: not given yet"), status.stdout
     assert "  phase      lost" in status.stdout and "  battery    " in status.stdout
-    refused = operator(stack.endpoint, "start")
+    refused = operator(stack.endpoint, "start", key=key)
     assert refused.returncode == 1 and refused.stdout.startswith("refused: start: the autopilot is not connected")
     assert "Traceback" not in refused.stderr
 
@@ -46,14 +50,21 @@ def test_status_start_hold_against_the_service(stack: Stack) -> None:
     deadline = time.monotonic() + 30
     while not stack.client.state().status.position_ok and time.monotonic() < deadline:
         time.sleep(0.2)  # the stub, as ArduPilot, has no position estimate for its first seconds
-    started = operator(stack.endpoint, "start", "--reason", "range clear\x1b[2J")
+    # Issue 23, item 4: without the key a start was accepted from any peer; now it is refused
+    # at the edge, naming the proof, and changes nothing
+    unkeyed = operator(stack.endpoint, "start")
+    assert unkeyed.returncode == 1 and unkeyed.stdout == "", unkeyed
+    assert unkeyed.stderr.startswith("error: proof: an operator command needs the operator's proof"), unkeyed.stderr
+    assert "give the service's operator key with --operator-key FILE" in unkeyed.stderr
+    assert stack.client.state().status.authority == "none"
+    started = operator(stack.endpoint, "start", "--reason", "range clear\x1b[2J", key=key)
     assert started.returncode == 0, (started.stdout, started.stderr)
     assert started.stdout.startswith("accepted: start: authority given: the service may arm"), started.stdout
     assert "(range clear\\x1b[2J)" in started.stdout and "\x1b" not in started.stdout
     assert "authority operator, phase" in started.stdout
-    again = operator(stack.endpoint, "status")
+    again = operator(stack.endpoint, "status", key=key)
     assert "  authority  operator: given by the operator (range clear\\x1b[2J)" in again.stdout, again.stdout
-    held = operator(stack.endpoint, "hold")
+    held = operator(stack.endpoint, "hold", key=key)
     assert held.returncode == 0 and held.stdout.startswith("accepted: hold: authority withdrawn"), held.stdout
     assert stack.client.state().status.authority == "none"
     service = stack.children[0]
@@ -79,10 +90,10 @@ def test_a_rogue_queryable_cannot_answer_for_the_service(stack: Stack) -> None:
     try:
         time.sleep(0.5)
         with PlannerClient([stack.endpoint]) as client:
-            reply = client.operator("start", timeout_s=5.0)
+            reply = client.operator("start", timeout_s=5.0, key=stack.operator_key())
         assert forged["n"] == 1
         assert not reply.accepted and reply.message == "the autopilot is not connected"  # the service's own
-        quiet = operator(stack.endpoint, "start")
+        quiet = operator(stack.endpoint, "start", key=stack.operator_key_path)
         assert quiet.returncode == 1 and "forged" not in quiet.stdout
     finally:
         queryable.undeclare()
@@ -111,11 +122,11 @@ def test_a_rogue_queryable_that_echoes_the_command_is_not_believed(stack: Stack)
         time.sleep(0.5)
         with PlannerClient([stack.endpoint]) as client:
             with pytest.raises(ClientError) as err:
-                client.operator("start", timeout_s=5.0)
+                client.operator("start", timeout_s=5.0, key=stack.operator_key())
         assert forged["n"] == 1 and err.value.field == "reply", err.value
         assert err.value.message.startswith("2 different replies answer the operator's start (client_ref '")
         assert "two queryables answer on uavmec/uav1/operator (a rogue one, or two services" in err.value.message
-        quiet = operator(stack.endpoint, "start")
+        quiet = operator(stack.endpoint, "start", key=stack.operator_key_path)
         assert quiet.returncode == 1 and quiet.stdout == "" and "forged" not in quiet.stderr
         assert quiet.stderr.startswith("error: reply: 2 different replies answer the operator's start"), quiet.stderr
         assert "Traceback" not in quiet.stderr
@@ -161,14 +172,22 @@ def test_operator_status_into_a_closed_pipe_ends_quietly() -> None:
 
 class FakeService:
     """A zenoh session that publishes what a hostile or broken peer might on the service's
-    keys (no access control here), and answers the state query."""
+    keys (no access control here), and answers the operator's status with the fleet-wide
+    state (what watch shows of the pending requests)."""
 
     def __init__(self, endpoint: str, status: Status, pending: list[PendingRequest]) -> None:
         keys = Keys()
         self.session = zenoh.open(session_config("peer", [endpoint]))
         self.status = status
-        state = encode(State(status=status, pending=pending))
-        self.queryable = self.session.declare_queryable(keys.state, lambda q: (q.reply(keys.state, state), q.drop()))
+        state = State(status=status, pending=pending)
+
+        def answer(query: Any) -> None:
+            ref = json.loads(query.payload.to_bytes())["client_ref"]
+            query.reply(keys.operator, encode(OperatorReply(command="status", accepted=True, authority="none",
+                                                            phase="flying", client_ref=ref, status=status,
+                                                            state=state)))
+            query.drop()
+        self.queryable = self.session.declare_queryable(keys.operator, answer)
         self.token = self.session.liveliness().declare_token(keys.alive)
         self.key = keys.status
 

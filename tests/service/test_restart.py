@@ -26,7 +26,7 @@ def test_restart_resumes_from_the_journal(stack: Stack) -> None:
 
     stack.events.clear()
     stack.service()
-    state = client.state()
+    state = stack.fleet()
     assert [(p.request_id, p.user_id, p.tasks) for p in state.pending] == [(2, "u2", 11), (3, "u1", 12)]
     assert client.submit("u3", 200.0, 200.0, 7).request_id == 4
     ev = stack.wait_event(lambda e: e.event == "mission_uploaded" and "newest_request=4" in e.detail, 20.0,

@@ -63,7 +63,7 @@ def test_another_key_on_the_vehicle_fails_cleanly_and_says_so(stack: Stack, tmp_
         time.sleep(0.2)
     time.sleep(2.0)  # time enough for a plan and an upload, had the link been up
     assert not any(e.event == "mission_uploaded" for e in stack.events)
-    assert [r.user_id for r in stack.client.state().pending] == ["u1"], "the request stays pending"
+    assert [r.user_id for r in stack.fleet().pending] == ["u1"], "the request stays pending"
     service.stop()
     vehicle.stop()
     warning = next(line for line in service.log().splitlines() if "signs with another key" in line)

@@ -134,7 +134,7 @@ def test_three_sorties_in_a_row(stack: Stack) -> None:
     # known) until the operator gives it; sortie 3 begins without (the configuration's is
     # for a process's first sortie) and waits for the operator's start: nothing flies
     stack.wait_log(third, "authority ended: revoked: the service started with the vehicle in the air", 30.0)
-    assert client.operator("start", "the vehicle is seen flying our mission", timeout_s=10.0).accepted
+    assert stack.operator("start", "the vehicle is seen flying our mission").accepted
     wait_sortie(stack, 2, True, 60.0)
     wait_sortie(stack, 3, False, 30.0)
     begun = stack.wait_event(started(3), 10.0, "sortie 3's start")
@@ -142,7 +142,7 @@ def test_three_sorties_in_a_row(stack: Stack) -> None:
     armings = vehicle.log().count("armed at t=")
     time.sleep(2.0)  # with the authority, the service arms within a second of its plan
     assert vehicle.log().count("armed at t=") == armings, "armed in sortie 3 before the operator's start"
-    assert client.operator("start", "sortie 3", timeout_s=10.0).accepted
+    assert stack.operator("start", "sortie 3").accepted
     wait_sortie(stack, 3, True, 60.0)
     assert third.stop() == 0
 
@@ -237,7 +237,7 @@ def test_soak(stack: Stack) -> None:
     for n in range(1, SOAK_SORTIES + 1):
         wait_sortie(stack, n, False, 60.0)
         if n > 1:  # the configuration's authority is for the first sortie only
-            assert stack.client.operator("start", f"sortie {n}", timeout_s=10.0).accepted
+            assert stack.operator("start", f"sortie {n}").accepted
         wait_sortie(stack, n, True, 120.0)
         samples[n] = (time.monotonic() - t0, *_sample(service.proc.pid), *_sample(vehicle.proc.pid))
     wall = time.monotonic() - t0

@@ -34,7 +34,7 @@ def test_a_new_client_session_is_served_at_once(stack: Stack) -> None:
         assert ack.user_id == f"session-{n}"
     print("\nnew client session: open / first request acked in " +
           ", ".join(f"{a:.0f} / {b:.1f}" for a, b in times) + " ms")
-    assert [p.user_id for p in stack.client.state().pending] == ["session-0", "session-1", "session-2"]  # type: ignore[union-attr]
+    assert [p.user_id for p in stack.fleet().pending] == ["session-0", "session-1", "session-2"]  # type: ignore[union-attr]
 
 
 def router(stack: Stack, endpoint: str, n: int) -> Child:

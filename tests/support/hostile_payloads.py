@@ -35,7 +35,7 @@ PHASES = get_args(Phase)
 AUTHORITIES = ("none", "operator", "revoked")
 BATTERY_SOURCES = ("autopilot", "model", "unknown")
 OPERATOR_COMMANDS = ("start", "hold", "status")
-LAYOUTS = {"status": 2, "state": 2, "operator_command": 1, "operator_reply": 1, "event": 2}
+LAYOUTS = {"status": 2, "state": 2, "operator_command": 2, "operator_reply": 2, "event": 2}
 """Each message type's layout version (docs/PROTOCOL.md); 1 for the others."""
 EVENTS = get_args(EventKind)
 """Every event kind the wire knows (derived from the type: this list cannot drift)."""
@@ -202,7 +202,9 @@ def valid_message(kind: str, rng: random.Random, side_m: float = 500.0, max_alt_
     if kind == "operator_command":
         f.update(command=dump(rng.choice(OPERATOR_COMMANDS)))
         return _optional(rng, f, {"reason": lambda: _text(rng),
-                                  "client_ref": lambda: rng.choice(["null", _text(rng, 64), _id(rng)])})
+                                  "client_ref": lambda: rng.choice(["null", _text(rng, 64), _id(rng)]),
+                                  "sent_at_ms": lambda: rng.choice(["null", str(rng.randrange(0, 2 ** 53))]),
+                                  "proof": lambda: rng.choice(["null", dump(rng.randbytes(32).hex())])})
     if kind == "operator_reply":
         f.update(command=dump(rng.choice(OPERATOR_COMMANDS)), accepted=rng.choice(["true", "false"]),
                  authority=dump(rng.choice(AUTHORITIES)), phase=dump(rng.choice(PHASES)))

@@ -12,10 +12,11 @@ import time
 from pathlib import Path
 from typing import Any, Callable
 
-from planner_service.service.config import build_config, to_toml
+from planner_service.service.config import OPERATOR_KEY_NAME, build_config, to_toml
 from planner_service.service.processes import Child, free_port
-from protocol import Event
+from protocol import Event, OperatorReply, State
 from protocol.client import PlannerClient
+from protocol.signing import load_key
 
 
 class Stack:
@@ -82,6 +83,26 @@ class Stack:
         child = Child("sim_bridge", ["users", "--connect", self.endpoint, *extra], self.tmp / "users.log")
         self.children.append(child)
         return child
+
+    @property
+    def operator_key_path(self) -> Path:
+        """Where the service makes its operator key (``operator.key`` beside the journal)."""
+        return self.journal_path.parent / OPERATOR_KEY_NAME
+
+    def operator_key(self) -> bytes:
+        """The service's operator key (made by the service at its first start)."""
+        return load_key(self.operator_key_path)
+
+    def operator(self, command: str, reason: str = "", timeout_s: float = 10.0) -> OperatorReply:
+        """The operator's ``command``, with the proof of the service's key."""
+        assert self.client is not None
+        return self.client.operator(command, reason, timeout_s, key=self.operator_key())
+
+    def fleet(self, timeout_s: float = 10.0) -> State:
+        """The fleet-wide state (every pending request): the operator's ``status``."""
+        state = self.operator("status", timeout_s=timeout_s).state
+        assert state is not None, "the operator's status came without the fleet-wide state"
+        return state
 
     def _on_event(self, ev: Event) -> None:
         with self._lock:
