@@ -204,6 +204,25 @@ def test_a_hold_longer_than_needed_ends_once_the_next_decision_is_on_board() -> 
     assert (cmd.kind, cmd.seq) == ("set_current", 3)
 
 
+@pytest.mark.parametrize("after", ["the pilot's LOITER and back to AUTO", "the journal failed"])
+def test_a_hold_is_not_ended_early_without_the_authority_or_degraded(after: str) -> None:
+    # Found by reading: the early end (MAV_CMD_DO_SET_MISSION_CURRENT) was sent without
+    # the authority, and in the degraded state.
+    world = FakeWorld()
+    run, _ = fly_to_first_point(world)
+    (plan,) = only(run.tick(seq=2, xyz=(120.0, 200.0, 100.0), boot_s=20.0), fx.Plan)
+    needed = run.s.binding.needed_s
+    (up,) = only(run.feed(ins.Planned(plan.basis, path(point(9, 400.0, 300.0, "b", 2)))), fx.Upload)
+    run.feed(ins.Uploaded(up, 2))
+    if after == "the journal failed":
+        run.feed(ins.Degraded("the journal failed"))
+    else:
+        run.feed(ins.ModeChanged("LOITER"), mode="LOITER")
+        run.feed(ins.ModeChanged("AUTO"), mode="AUTO")
+    out = run.tick(seq=2, boot_s=20.0 + needed + 2)
+    assert not only(out, fx.Command), after
+
+
 def test_restart_read_back_and_a_lost_mission_resumed_from_where_it_is() -> None:
     world = FakeWorld()
     run, up = fly_to_first_point(world)

@@ -494,9 +494,12 @@ class SortieLogic:
         arrival restarted the autopilot's hold timer (ArduPilot restarts the current item
         when the items after it change; PX4 flies the item marked current), so the service,
         not the timer, ends it, as soon as the next item is the decision made from this
-        point (uploaded) and the reports show the hold the request needs."""
+        point (uploaded) and the reports show the hold the request needs. Only under its
+        authority, not degraded: without, it commands nothing and the timer ends the hold."""
         w, b, held = s.watch, s.binding, s.held
         if w is None or b is None or held is None or w.phase != "holding" or s.early_end == w.seq:
+            return s
+        if not s.authority.granted or s.degraded is not None:
             return s
         if s.decided_at != w.seq or s.busy == "upload" or s.commanding:
             return s
