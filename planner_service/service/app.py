@@ -553,6 +553,7 @@ class Service:
         self.plan_msg = Plan(plan_id=held.plan_id, time_s=self.wall(), predicted_energy_j=max(predicted_energy_j, 0.0),
                              points=[PlanPoint(p.x_m, p.y_m, p.z_m, p.hold_s, p.user_id) for p in ahead])
         self.zio.publish(self.plan_msg)
+        self._event(ev.PlanUpdated(f"plan {held.plan_id}: {len(ahead)} points ahead"))
         try:
             places = plan_places(ahead, v.xyz, self.scenario.speed_mps)
             messages = user_places(self.journal.user_backlogs(), places, sortie=self.state.number,

@@ -31,6 +31,7 @@ def test_whole_sortie(stack: Stack, backend: str, flavour: str) -> None:
     assert probe.client_ref == "probe" and probe.request_id >= 1
     stack.wait_event(lambda e: e.event == "landed", 90.0, "landing")
     stack.wait_disarmed(10.0)
+    assert any(e.event == "plan_updated" for e in stack.events), "no plan announced"
     # the autopilot's disarming at the service's own landing is explained: no authority ended
     assert not [e.detail for e in stack.events if e.event == "authority_revoked"]
     assert users.stop() == 0 and service.stop() == 0
