@@ -140,7 +140,7 @@ class Service:
             replan_min_interval_s=config.planner.replan_min_interval_s, hold_radius_m=s.hold_radius_m,
             rtl_battery_fraction=s.rtl_battery_fraction, repeat=config.sortie.repeat,
             next_battery_fraction=config.sortie.next_battery_fraction,
-            readback_interval_s=config.sortie.readback_interval_s,
+            readback_interval_s=config.sortie.readback_interval_s, leg_tolerance_m=config.sortie.leg_tolerance_m,
             max_mission_items=config.mavlink.max_mission_items, max_failures=config.planner.max_failures,
             hold_margin_s=s.hold_margin_s, energy_margin_j=s.energy_margin_j,
         ), self.world)

@@ -295,6 +295,11 @@ class SortieConfig(Section):
     report shows (ArduPilot names no mission; one of the same length keeps the count) ends
     the authority within this; 0: no periodic read-back (a disagreement still reads back
     at once)."""
+    leg_tolerance_m: float = setting(30.0, ge=0)
+    """How far (m, horizontally) the vehicle may stray from the leg it flies to a point of
+    ours (from where it began that item to the point) for three reports in a row before the
+    mission is read back: another station's mission of the same length flies elsewhere;
+    0: not checked."""
 
 
 ProofRule = Literal["auto", "always"]

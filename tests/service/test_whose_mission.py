@@ -92,3 +92,30 @@ def test_no_periodic_read_back_during_an_upload_or_without_authority() -> None:
     assert not only(run.tick(seq=2, boot_s=9.0), fx.ReadBack), "an upload in flight is not disturbed"
     run.s = replace(run.s, busy="", authority=run.s.authority.release("the operator's hold"))
     assert not only(run.tick(seq=2, boot_s=10.0), fx.ReadBack)
+
+
+def test_a_vehicle_off_the_leg_it_flies_reads_the_mission_back() -> None:
+    # Another station's mission of the same length: the same item numbers, other places.
+    # The vehicle began item 2 at (30, 50) for our point at (120, 200); theirs lies east.
+    run, up = fly_to_first_point(FakeWorld())
+    for k, t in enumerate((9.0, 10.0, 11.0, 12.0)):  # on our leg (a few metres off at most)
+        f = (k + 1) / 5
+        assert not only(run.tick(seq=2, xyz=(30.0 + 90.0 * f + 3.0, 50.0 + 150.0 * f, 100.0), boot_s=t), fx.ReadBack)
+    run.tick(seq=2, xyz=(120.0, 200.0, 100.0), boot_s=13.0)  # at the point, holding: on the leg's end
+    assert run.s.leg is not None and run.s.off_leg == 0
+    run2, _ = fly_to_first_point(FakeWorld())
+    out = []
+    for k, t in enumerate((9.0, 10.0, 11.0)):
+        assert not only(out, fx.ReadBack), "one or two reports off are no evidence"
+        out = run2.tick(seq=2, xyz=(30.0 + 40.0 * (k + 1), 50.0 - 5.0 * (k + 1), 100.0), boot_s=t)
+    (rb,) = only(out, fx.ReadBack)
+    assert "m off its leg to point" in rb.why and "item 2" in rb.why, rb.why
+    run2.feed(ins.ReadBackDone(moved(up.items), 3))
+    assert run2.s.authority.state == "revoked" and "not ours" in run2.s.authority.detail
+
+
+def test_the_same_report_seen_by_several_ticks_counts_once_off_the_leg() -> None:
+    run, _ = fly_to_first_point(FakeWorld())
+    for _ in range(5):  # ticks come faster than position reports
+        out = run.tick(seq=2, xyz=(150.0, 20.0, 100.0), boot_s=9.0)
+    assert not only(out, fx.ReadBack) and run.s.off_leg == 1

@@ -58,6 +58,9 @@ it (a tick of the loop and a command's round trip): that much more hovering, in 
 is planned at each point."""
 MAX_DOUBTED = 1200
 """Reports kept while in doubt: a minute of the service's ticks (the oldest are dropped)."""
+LEG_REPORTS = 3
+"""Position reports in a row off the leg that read the mission back (one stray report, a
+gust, is no evidence)."""
 DISARM_LANDING_S = 2.0
 """Wall seconds a disarming on the service's own return waits for the landing's report (it
 may follow the heartbeat showing the disarming) before it is taken as nobody's."""
@@ -91,6 +94,9 @@ class Rules:
     readback_interval_s: float = 30.0
     """Wall seconds between read-backs of the mission flown under authority (``_periodic``):
     what no report shows (ArduPilot names no mission) is found within this; 0: never."""
+    leg_tolerance_m: float = 30.0
+    """How far (horizontally) the vehicle may be off the leg it flies to a point of ours
+    before the mission is read back (``_leg_check``); 0: not checked."""
 
     @property
     def mode_names(self) -> dict[str, str]:
@@ -195,6 +201,11 @@ class Sortie:
     top_seq: int = -1
     """The highest item the vehicle was seen flying of ``held`` since it was known to hold it
     or the service last commanded an item (``_seq_check``)."""
+    leg: tuple[int, float, float, float] | None = None
+    """The leg being flown (``_leg_check``): its item, where the vehicle was (x, y) when it
+    began it, and the vehicle's clock of the last report judged."""
+    off_leg: int = 0
+    """Reports in a row off that leg."""
 
 
 Step = tuple[Sortie, list[fx.Effect]]
@@ -255,7 +266,7 @@ class SortieLogic:
                                              f"trying again"))
                 s = replace(s, busy="", readback_at=now + self.rules.retry_s)
             case ins.CommandDone(command=cmd):
-                s = self._command_done(replace(s, commanding="", top_seq=-1), cmd, now, out)
+                s = self._command_done(replace(s, commanding="", top_seq=-1, leg=None, off_leg=0), cmd, now, out)
             case ins.CommandFailed(command=cmd, error=error):
                 s = self._command_failed(replace(s, commanding=""), cmd, error, now, out)
             case ins.RequestIn(user_id=user, tasks=tasks):
@@ -295,6 +306,7 @@ class SortieLogic:
         s = self._disarm_check(s, v, now, out)
         s = self._id_check(s, v, out)
         s = self._seq_check(s, v, out)
+        s = self._leg_check(s, v, out)
         s = self._periodic(s, v, now, out)
         s = self._safety(s, v, out)
         return self._next(s, v, now, out)
@@ -397,6 +409,35 @@ class SortieLogic:
                                f"of plan {held.plan_id}, not commanded by the service", out)
         return replace(s, top_seq=v.seq) if v.seq > s.top_seq else s
 
+    def _leg_check(self, s: Sortie, v: ins.Vehicle, out: list[fx.Effect]) -> Sortie:
+        """The vehicle's track against the leg it flies: from where it was when it began
+        item ``seq`` to that item's point. Another station's mission of the same length
+        has the same items at other places: the vehicle heads off the leg before any count
+        or id says so. ``LEG_REPORTS`` reports in a row more than ``leg_tolerance_m`` off
+        read the mission back (a false alarm costs one read-back, nothing more)."""
+        tolerance = self.rules.leg_tolerance_m
+        held = s.held
+        point = held.point_at(v.seq) if held is not None else None
+        if (tolerance <= 0 or point is None or not self._checkable(s, v) or not v.airborne or not v.position_ok
+                or v.mode not in MISSION_MODES or s.commanding or math.isnan(v.boot_s)):
+            return replace(s, leg=None, off_leg=0) if s.leg is not None else s
+        x, y = v.xyz[0], v.xyz[1]
+        if s.leg is None or s.leg[0] != v.seq:
+            return replace(s, leg=(v.seq, x, y, v.boot_s), off_leg=0)
+        if v.boot_s == s.leg[3]:
+            return s  # the same report again
+        seq, x0, y0, _ = s.leg
+        s = replace(s, leg=(seq, x0, y0, v.boot_s))
+        off = off_segment_m((x0, y0), (point.x_m, point.y_m), (x, y))
+        if off <= tolerance:
+            return replace(s, off_leg=0) if s.off_leg else s
+        if s.off_leg + 1 < LEG_REPORTS:
+            return replace(s, off_leg=s.off_leg + 1)
+        assert held is not None
+        return self._doubt(replace(s, leg=None, off_leg=0),
+                           f"the vehicle is {off:.0f} m off its leg to point {point.hover_index} (item {seq} of plan "
+                           f"{held.plan_id})", out)
+
     def _periodic(self, s: Sortie, v: ins.Vehicle, now: float, out: list[fx.Effect]) -> Sortie:
         """Read the mission back every ``readback_interval_s`` while the service flies it
         under authority: ArduPilot names no mission, and a station's mission of the same
@@ -420,8 +461,9 @@ class SortieLogic:
         if read_back:
             explained = s.id_at_doubt if mission_id == 0 else 0
             return replace(s, mission_id=mission_id or s.mission_id, id_explained=explained, id_at_doubt=0,
-                           checked_at=now, top_seq=-1)
-        return replace(s, mission_id=mission_id, id_explained=0, id_at_doubt=0, checked_at=now, top_seq=-1)
+                           checked_at=now, top_seq=-1, leg=None, off_leg=0)
+        return replace(s, mission_id=mission_id, id_explained=0, id_at_doubt=0, checked_at=now, top_seq=-1, leg=None,
+                       off_leg=0)
 
     def _replay(self, s: Sortie, v: ins.Vehicle, out: list[fx.Effect]) -> Sortie:
         """The reports kept during a doubt or an upload, judged now that the vehicle is known
@@ -1060,6 +1102,14 @@ class SortieLogic:
         authority = s.next_authority or next_sortie(s.authority)
         out.append(fx.Emit(ev.SortieStarted(f"sortie {number}: authority {authority.state} ({authority.detail})")))
         return Sortie(number=number, authority=authority, plan_id=s.plan_id, version=s.version + 1)
+
+
+def off_segment_m(a: tuple[float, float], b: tuple[float, float], p: tuple[float, float]) -> float:
+    """The horizontal distance (m) from ``p`` to the segment from ``a`` to ``b``."""
+    dx, dy = b[0] - a[0], b[1] - a[1]
+    length2 = dx * dx + dy * dy
+    t = 0.0 if length2 == 0.0 else min(1.0, max(0.0, ((p[0] - a[0]) * dx + (p[1] - a[1]) * dy) / length2))
+    return math.hypot(p[0] - (a[0] + t * dx), p[1] - (a[1] + t * dy))
 
 
 def marked_current(items: list[MissionItem], seq: int) -> list[MissionItem]:
