@@ -166,18 +166,21 @@ def test_a_pilots_disarming_in_the_air_ends_the_authority_and_nothing_arms_again
 
 
 @pytest.mark.timeout(180)
-@pytest.mark.parametrize("found_by, settings", [
-    ("the periodic read-back", {"sortie__readback_interval_s": "2", "sortie__leg_tolerance_m": "0"}),
-    ("the track off the leg", {"sortie__readback_interval_s": "0"}),
+@pytest.mark.parametrize("found_by, backend, flavour, settings", [
+    ("the periodic check", "pymavlink", "ardupilot", {"sortie__readback_interval_s": "2", "sortie__leg_tolerance_m": "0"}),
+    ("off its leg", "pymavlink", "ardupilot", {"sortie__readback_interval_s": "0"}),
+    ("names its mission", "pymavlink", "px4", {"sortie__readback_interval_s": "0", "sortie__leg_tolerance_m": "0"}),
+    ("names its mission", "mavsdk", "px4", {"sortie__readback_interval_s": "0", "sortie__leg_tolerance_m": "0"}),
 ])
-def test_a_second_stations_mission_of_the_same_length_ends_the_authority(stack: Stack, found_by: str,
-                                                                        settings: dict[str, str]) -> None:
+def test_a_second_stations_mission_of_the_same_length_ends_the_authority(
+        stack: Stack, found_by: str, backend: str, flavour: str, settings: dict[str, str]) -> None:
     """As above, but their mission has as many items as ours (ours read back, each point
-    moved 55 m north): MISSION_CURRENT's count says nothing (ArduPilot names no mission), so
-    before the periodic read-back (here every 2 s) and the check of the vehicle's track
-    against the leg it flies (each alone here) the service flew it as its own."""
-    stack.vehicle("--speedup", SPEEDUP, "--recharge-s", "30")
-    service = stack.service(mavlink__start_mission="true", planner__min_requests="5", **settings)
+    moved 55 m north): MISSION_CURRENT's count says nothing, so before the periodic
+    read-back (here every 2 s), the check of the vehicle's track against the leg it flies
+    and PX4's ``mission_id`` (each alone here) the service flew it as its own."""
+    stack.vehicle("--speedup", SPEEDUP, "--recharge-s", "30", "--flavour", flavour)
+    service = stack.service(mavlink__start_mission="true", planner__min_requests="5", mavlink__backend=backend,
+                            mavlink__flavour=flavour, **settings)
     stack.users("--count", "10", "--speedup", SPEEDUP, "--seed", "1")
     stack.wait_event(lambda e: e.event == "user_served", 90.0, "a first service")
     gcs = GroundStation(f"udpout:127.0.0.1:{stack.mav_port}")
@@ -192,5 +195,4 @@ def test_a_second_stations_mission_of_the_same_length_ends_the_authority(stack: 
     revoked = stack.wait_event(lambda e: e.event == "authority_revoked" and e.time_s >= uploaded_at, 20.0,
                                "the end of the authority")
     assert "not ours" in revoked.detail and f"{len(theirs)} items" in revoked.detail, revoked.detail
-    doubt = "off its leg" if found_by == "the track off the leg" else "the periodic check"
-    stack.wait_log(service, doubt, 5.0)
+    stack.wait_log(service, found_by, 5.0)
