@@ -165,7 +165,7 @@ class Service:
         if last is not None:
             held = HeldMission.from_journal(last.plan_id, last.items, last.points, self.flavour)
             judged = held.served_since(last.time_s, [(s.user_id, s.time_s) for s in services])
-        return replace(state, just_started=True, over=(sortie.why or "ended") if sortie.over else None,
+        return replace(state, just_started=True, warming=True, over=(sortie.why or "ended") if sortie.over else None,
                        flown=j.get_meta(FLOWN_KEY) == str(sortie.number), held=held, judged=judged,
                        last_hover_index=services[-1].hover_index if services else -1, services=len(services))
 
@@ -232,11 +232,18 @@ class Service:
             log.info("stopped: journal flushed")
 
     async def _warm_up(self) -> None:
-        """Compile every kernel the planner uses before the first request needs them."""
+        """Compile every kernel the planner uses before the first request needs them; until
+        then the service plans and starts nothing (its status says it waits for this)."""
         start = time.monotonic()
-        await asyncio.get_running_loop().run_in_executor(self.executor, self.planner.warm_up)
-        log.info("planner warmed up: its kernels compiled or loaded from numba's cache in %.1f s",
-                 time.monotonic() - start)
+        log.info("planner warming up: compiling its kernels or loading them from numba's cache")
+        try:
+            await asyncio.get_running_loop().run_in_executor(self.executor, self.planner.warm_up)
+        except Exception as err:  # noqa: BLE001 - the first plan compiles what is missing
+            log.error("planner warm-up failed (%s): the first plan compiles what it needs", err)
+        else:
+            log.info("planner warmed up: its kernels compiled or loaded from numba's cache in %.1f s",
+                     time.monotonic() - start)
+        self._feed(ins.WarmedUp())
 
     async def _connect_loop(self) -> None:
         while True:
@@ -542,8 +549,12 @@ class Service:
             mission_seq=max(t.mission_seq, 0), mission_total=max(t.mission_total, 0),
             pending_requests=self.journal.pending_count(), served_users=len(self.journal.service_counts()),
             authority=s.authority.state, authority_detail=s.authority.detail[:256], position_ok=v.position_ok,
-            waiting_for=self._waiting_for[:256], degraded=(s.degraded or "")[:256],
+            waiting_for=self._waiting()[:256], degraded=(s.degraded or "")[:256],
         )
+
+    def _waiting(self) -> str:
+        warming = "the planner warming up (compiling its kernels)" if self.state.warming else ""
+        return "; ".join(w for w in (warming, self._waiting_for) if w)
 
     def _publish_plan(self, held: HeldMission, predicted_energy_j: float = 0.0) -> None:
         """The plan's points still to fly, and every user's place in it (for the acks and

@@ -775,3 +775,17 @@ def test_a_service_started_between_sorties_gives_the_configurations_authority_to
     used = run.s.authority.commanding("AUTO")
     assert not used.unused
     assert next_sortie(used).state == "none"
+
+
+def test_nothing_is_planned_or_started_while_the_planner_warms_up() -> None:
+    # A cold numba cache: the first plan waited 74 s for the compiler in the field.
+    world = FakeWorld()
+    world.ask("a", 120.0, 200.0, 10, 1)
+    run = Run(world)
+    run.s = replace(run.s, warming=True)
+    assert not only(run.tick(), fx.Plan)
+    run.feed(ins.SortieBegun(run.s.number))  # (a sortie begun meanwhile keeps waiting)
+    assert run.s.warming
+    (plan,) = only(run.feed(ins.WarmedUp()), fx.Plan)
+    (up,) = only(run.feed(ins.Planned(plan.basis, path(point(3, 120.0, 200.0, "a", 1)))), fx.Upload)
+    assert only(run.feed(ins.Uploaded(up, 1)), fx.Command)[0].kind == "start"

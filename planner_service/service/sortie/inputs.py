@@ -186,8 +186,13 @@ class Degraded:
     why: str
 
 
+@dataclass(frozen=True)
+class WarmedUp:
+    """The planner's kernels are compiled (or loaded from numba's cache): plans may begin."""
+
+
 Input = (Tick | LinkConnected | LinkLost | LinkRestored | VehicleRestarted | ModeChanged | ArmedChanged | Landed
          | Planned | PlanFailed | Uploaded | UploadFailed | ReadBackDone | ReadBackFailed | CommandDone
-         | CommandFailed | RequestIn | OperatorCommand | SortieBegun | Degraded)
+         | CommandFailed | RequestIn | OperatorCommand | SortieBegun | Degraded | WarmedUp)
 
 __all__ = ["Input", "Vehicle", "World", "Sequence"]

@@ -187,6 +187,8 @@ class Sortie:
     disarmed_at: float | None = None
     """When a disarming on the service's own return, not yet reported landed, was seen
     (``_disarm_check``)."""
+    warming: bool = False
+    """The planner's kernels are being compiled: no plan, no start until they are."""
     doubted: tuple[Sample, ...] = ()
     """The vehicle's reports while in doubt or an upload is in flight (``_replay``), at most
     ``MAX_DOUBTED``."""
@@ -279,6 +281,8 @@ class SortieLogic:
                 if s.degraded is None:
                     s = replace(s, degraded=why, version=s.version + 1)
                     out += [fx.Emit(ev.Degraded(why[:256])), fx.Log("error", f"degraded: {why}")]
+            case ins.WarmedUp():
+                s = replace(s, warming=False)
         if not isinstance(event, ins.Tick):
             s = self._next(s, v, now, out)
         return s, out
@@ -600,6 +604,8 @@ class SortieLogic:
     # --- deciding ------------------------------------------------------------------------------
     def _plan_wanted(self, s: Sortie, v: ins.Vehicle, now: float) -> fx.PlanBasis | None:
         r = self.rules
+        if s.warming:
+            return None  # a plan now would wait for the compiler (minutes on a cold cache)
         if not (v.connected and v.position_ok) or v.battery_fraction is None:
             return None
         if v.time_rate is None:
@@ -934,8 +940,9 @@ class SortieLogic:
 
     # --- commands ------------------------------------------------------------------------------
     def _command_due(self, s: Sortie, v: ins.Vehicle, out: list[fx.Effect]) -> Sortie:
-        """Start or resume the mission when the service may and should."""
-        if not s.authority.granted or s.held is None or not v.connected:
+        """Start or resume the mission when the service may and should (not while the
+        planner warms up: the decisions in flight would wait for the compiler)."""
+        if not s.authority.granted or s.held is None or not v.connected or s.warming:
             return s
         if (not v.airborne and not s.started and s.held.points and s.busy == "" and v.position_ok
                 and v.battery_fraction is not None and v.battery_source == "autopilot"):
@@ -1101,7 +1108,7 @@ class SortieLogic:
     def _begun(self, s: Sortie, number: int, out: list[fx.Effect]) -> Sortie:
         authority = s.next_authority or next_sortie(s.authority)
         out.append(fx.Emit(ev.SortieStarted(f"sortie {number}: authority {authority.state} ({authority.detail})")))
-        return Sortie(number=number, authority=authority, plan_id=s.plan_id, version=s.version + 1)
+        return Sortie(number=number, authority=authority, plan_id=s.plan_id, version=s.version + 1, warming=s.warming)
 
 
 def off_segment_m(a: tuple[float, float], b: tuple[float, float], p: tuple[float, float]) -> float:
