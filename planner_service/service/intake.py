@@ -40,8 +40,9 @@ from ..model._jit import py
 from ..model.fairness import is_eligible
 from .config import IntakeConfig
 from .errors import JournalError
-from .journal import NO_TASKS, Journal, RequestRow
+from .journal import NO_TASKS, Journal
 from .places import Place
+from .rows import RequestRow
 from .throttle import RateLimit
 
 BUSY = "busy: "

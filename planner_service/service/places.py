@@ -16,7 +16,7 @@ from typing import Iterable, Mapping, Protocol, Sequence
 from protocol import UserPlace
 
 from .errors import PlanningError
-from .journal import UserBacklog
+from .rows import UserBacklog
 
 
 class Stop(Protocol):

@@ -47,7 +47,7 @@ from ..model.world import clone, evaluate, scene_of, step
 from ..policy import Decision
 from .config import FLIGHT_ALGOS, FlightAlgo
 from .errors import PlanningError
-from .journal import RequestRow, ServiceRow, UserRow
+from .rows import RequestRow, ServiceRow, UserRow
 
 
 @dataclass(frozen=True)

@@ -18,7 +18,8 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 
 from .errors import JournalError
-from .journal import Journal, RequestRow
+from .journal import Journal
+from .rows import RequestRow
 
 
 @dataclass(frozen=True)

@@ -10,7 +10,8 @@ import pytest
 
 from planner_service.service.errors import JournalError
 from planner_service.model import preset
-from planner_service.service.journal import Journal, SortieRow
+from planner_service.service.journal import Journal
+from planner_service.service.rows import SortieRow
 from planner_service.service.report import sortie_summary
 
 

@@ -9,7 +9,8 @@ from pathlib import Path
 import pytest
 
 from planner_service.service.errors import JournalError
-from planner_service.service.journal import Journal, UserBacklog
+from planner_service.service.journal import Journal
+from planner_service.service.rows import UserBacklog
 
 XYZ = (100.0, 100.0, 100.0)
 

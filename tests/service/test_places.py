@@ -6,7 +6,7 @@ from __future__ import annotations
 import pytest
 
 from planner_service.service.errors import PlanningError
-from planner_service.service.journal import UserBacklog
+from planner_service.service.rows import UserBacklog
 from planner_service.service.places import Place, plan_places, user_places
 from protocol import PlanPoint, UserPlace, decode, encode
 

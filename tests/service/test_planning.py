@@ -14,7 +14,7 @@ from planner_service.model.energy import flight_energy_j
 from planner_service.model.world import evaluate, scene_of
 from planner_service.service.config import FLIGHT_ALGOS, build_config
 from planner_service.service.errors import PlanningError
-from planner_service.service.journal import RequestRow, ServiceRow, UserRow
+from planner_service.service.rows import RequestRow, ServiceRow, UserRow
 from planner_service.service.planning import (PlannedPath, PlannedPoint, Planner, VehicleFix, after_hold, assemble,
                                               check_path,
                                               hold_time_s, not_served_reason, planning_battery_j, predict_path,

@@ -10,7 +10,7 @@ from dataclasses import dataclass, field, replace
 import pytest
 
 from planner_service.model import preset
-from planner_service.service.journal import RequestRow
+from planner_service.service.rows import RequestRow
 from planner_service.service.planning import PlannedPath, PlannedPoint
 from planner_service.service.sortie import Rules, Sortie, SortieLogic, Vehicle, new_sortie
 from planner_service.service.sortie import effects as fx

@@ -22,7 +22,7 @@ import json, sys
 from numba.core.registry import CPUDispatcher
 from planner_service.mcts import MctsConfig
 from planner_service.service.config import build_config
-from planner_service.service.journal import RequestRow, ServiceRow, UserRow
+from planner_service.service.rows import RequestRow, ServiceRow, UserRow
 from planner_service.service.planning import Planner, VehicleFix, assemble, planning_battery_j
 
 def signatures():

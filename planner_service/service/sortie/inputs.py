@@ -9,8 +9,8 @@ from typing import Literal, Protocol, Sequence
 
 from protocol import MissionItem
 
-from ..journal import RequestRow
 from ..planning import PlannedPath
+from ..rows import RequestRow
 from .effects import Command, PlanBasis, Upload
 
 

@@ -41,8 +41,8 @@ from ...model.reward import interval_reward
 from ..errors import PlanningError
 from ..link.base import HOLDING_MODES, MISSION_MODES, RETURNING_MODES
 from ...model.interval import NO_USER, return_energy_j, served_user
-from ..journal import RequestRow
 from ..planning import PlannedPath, PlannedPoint, check_path, first_steps, hold_time_s, planning_battery_j
+from ..rows import RequestRow
 from .. import events as ev
 from . import effects as fx
 from . import inputs as ins
