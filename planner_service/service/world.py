@@ -70,7 +70,13 @@ class JournalWorld:
         return self._counted(self.journal.request_in_force(user_id))
 
     def services_of(self, user_id: str) -> int:
-        return self.journal.service_counts().get(user_id, 0) + sum(1 for u in self._now() if u.user_id == user_id)
+        return self.service_counts().get(user_id, 0)
+
+    def service_counts(self) -> dict[str, int]:
+        counts = self.journal.service_counts()
+        for u in self._now():
+            counts[u.user_id] = counts.get(u.user_id, 0) + 1
+        return counts
 
     def pending_count(self) -> int:
         return len(self.pending()) if self._now() else self.journal.pending_count()

@@ -26,6 +26,9 @@ class NoRequests:
     def services_of(self, user_id: str) -> int:
         return 0
 
+    def service_counts(self) -> dict[str, int]:
+        return {}
+
     def pending_count(self) -> int:
         return 0
 

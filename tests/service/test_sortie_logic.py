@@ -33,6 +33,9 @@ class FakeWorld:
     def services_of(self, user_id: str) -> int:
         return self.served.get(user_id, 0)
 
+    def service_counts(self) -> dict[str, int]:
+        return dict(self.served)
+
     def pending_count(self) -> int:
         return len(self.requests)
 

@@ -54,6 +54,10 @@ class World(Protocol):
     def services_of(self, user_id: str) -> int:
         """Services the user has had this sortie."""
 
+    def service_counts(self) -> dict[str, int]:
+        """Services each user has had this sortie (users with none are absent): one
+        reading for every pending user."""
+
     def pending_count(self) -> int:
         """Requests waiting."""
 

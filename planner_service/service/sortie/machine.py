@@ -531,7 +531,8 @@ class SortieLogic:
             return None
         users = np.array([[r.x_m, r.y_m, r.z_m] for r in rows], dtype=np.float64)
         tasks = np.array([r.backlog for r in rows], dtype=np.int64)
-        served = np.array([self.world.services_of(r.user_id) for r in rows], dtype=np.int64)
+        counts = self.world.service_counts()
+        served = np.array([counts.get(r.user_id, 0) for r in rows], dtype=np.int64)
         i = served_user(self.p, np.array([point.x_m, point.y_m, point.z_m]), users, tasks, served)
         return None if i == NO_USER else rows[i]
 
@@ -654,7 +655,8 @@ class SortieLogic:
         rows = self.world.pending()
         sc = self.rules.scenario
         battery = planning_battery_j(sc, (v.battery_fraction or 0.0) * sc.battery_j, 0.0, self.rules.energy_margin_j)
-        served = [self.world.services_of(row.user_id) for row in rows]
+        counts = self.world.service_counts()
+        served = [counts.get(row.user_id, 0) for row in rows]
         return first_steps(sc, self.points, rows, served, v.xyz, s.last_hover_index, battery) > 0
 
     def _planned(self, s: Sortie, planned: ins.Planned, v: ins.Vehicle, now: float, out: list[fx.Effect]) -> Sortie:
