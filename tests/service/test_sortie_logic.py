@@ -792,3 +792,18 @@ def test_nothing_is_planned_or_started_while_the_planner_warms_up() -> None:
     (plan,) = only(run.feed(ins.WarmedUp()), fx.Plan)
     (up,) = only(run.feed(ins.Planned(plan.basis, path(point(3, 120.0, 200.0, "a", 1)))), fx.Upload)
     assert only(run.feed(ins.Uploaded(up, 1)), fx.Command)[0].kind == "start"
+
+
+def test_a_disarming_after_the_mission_index_went_back_to_0_on_touching_down_is_the_landings() -> None:
+    # ArduCopter SITL with the MAVSDK backend: the disarming resets the mission index, and
+    # MISSION_CURRENT 0 came before the heartbeat showing the disarming: the landing at the
+    # end of our own return was taken for nobody's.
+    run, _ = fly_to_first_point(FakeWorld())
+    rtl = run.s.held.rtl_seq
+    run.tick(seq=rtl, xyz=(10.0, 10.0, 30.0), boot_s=30.0)  # on the way home
+    run.tick(seq=0, xyz=(0.0, 0.0, 0.2), boot_s=40.0)
+    run.feed(ins.ArmedChanged(False), armed=False)
+    run.feed(ins.Landed(), airborne=False)
+    run.now += 3.0
+    run.tick()
+    assert run.s.authority.granted, run.s.authority

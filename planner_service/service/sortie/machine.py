@@ -187,6 +187,8 @@ class Sortie:
     disarmed_at: float | None = None
     """When a disarming on the service's own return, not yet reported landed, was seen
     (``_disarm_check``)."""
+    homing: bool = False
+    """The vehicle was seen on the service's own way home (``_homing``)."""
     warming: bool = False
     """The planner's kernels are being compiled: no plan, no start until they are."""
     doubted: tuple[Sample, ...] = ()
@@ -307,6 +309,7 @@ class SortieLogic:
         s = self._start_lapsed(s, v, now, out)
         s = self._watch(s, v, out)
         s = self._count_check(s, v, out)
+        s = self._homing(s, v)
         s = self._disarm_check(s, v, now, out)
         s = self._id_check(s, v, out)
         s = self._seq_check(s, v, out)
@@ -899,11 +902,29 @@ class SortieLogic:
             out.append(fx.Emit(ev.Returning(f"mode {mode}")))
         return replace(s, authority=authority)
 
+    def _on_return(self, s: Sortie, v: ins.Vehicle) -> bool:
+        """The vehicle flies the service's own way home: its mission's return item, or the
+        return mode the service expects."""
+        held = s.held
+        return ((held is not None and v.seq == held.rtl_seq)
+                or (v.mode in RETURNING_MODES and v.mode == s.authority.expected_mode))
+
+    def _homing(self, s: Sortie, v: ins.Vehicle) -> Sortie:
+        """Remember that the vehicle was seen on the service's own way home, until it is seen
+        flying to a point again: ArduCopter's disarming on touching down resets its mission
+        index to 0, and that MISSION_CURRENT may come before the heartbeat showing the
+        disarming (seen on SITL with the MAVSDK backend)."""
+        if not v.airborne or s.held is None:
+            return s
+        if not s.homing and self._on_return(s, v):
+            return replace(s, homing=True)
+        if s.homing and s.held.point_at(v.seq) is not None and v.mode in MISSION_MODES:
+            return replace(s, homing=False)
+        return s
+
     def _arming(self, s: Sortie, v: ins.Vehicle, armed: bool, commanded: bool, now: float,
                 out: list[fx.Effect]) -> Sortie:
-        held = s.held
-        returning = s.flown and ((held is not None and v.seq == held.rtl_seq)
-                                 or (v.mode in RETURNING_MODES and v.mode == s.authority.expected_mode))
+        returning = s.flown and (s.homing or self._on_return(s, v))
         if not armed and not commanded and returning and v.airborne and s.authority.granted:
             # On the service's own return: the landing's disarming if the landing is
             # reported too (its report may come after the disarming's): judged then.
