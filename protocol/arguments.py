@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import argparse
 import math
-import sys
 from pathlib import Path
 from typing import NoReturn
 
@@ -27,13 +26,6 @@ class OneLineParser(argparse.ArgumentParser):
 
     def error(self, message: str) -> NoReturn:
         self.exit(USAGE_ERROR, f"{self.prog}: error: {message} (see --help)\n")
-
-
-def usage_error(option: str, message: str) -> int:
-    """Print a command's own check of an option as argparse would and return 2; for the
-    checks that need more than one option or the scenario."""
-    print(f"error: {option}: {message}", file=sys.stderr)
-    return USAGE_ERROR
 
 
 def zenoh_endpoint(text: str) -> str:

@@ -25,6 +25,3 @@ def scenario_from_args(args: argparse.Namespace) -> Scenario:
         raise SystemExit(2) from None
 
 
-def not_yet_built(what: str) -> int:
-    print(f"{what}: not yet built", file=sys.stderr)
-    return 2

@@ -49,10 +49,6 @@ class Interval:
     hi: float
     n: int
 
-    @property
-    def half_width(self) -> float:
-        return (self.hi - self.lo) / 2
-
     def as_dict(self) -> dict[str, float | int | None]:
         return {"mean": _finite_or_none(self.mean), "lo": _finite_or_none(self.lo),
                 "hi": _finite_or_none(self.hi), "n": self.n}

@@ -40,7 +40,6 @@ from protocol.operator_proof import ProofCheck, load_or_create_key
 from protocol.text import printable
 
 from ..mcts import MctsConfig
-from ..model import pack
 from .allocator import ARENAS, cap_arenas
 from .config import ServiceConfig
 from .errors import ConfigError, JournalError, LinkError, PlanningError
@@ -109,7 +108,6 @@ class Service:
         self.parts = parts
         self.wall, self.mono = parts.wall, parts.mono
         self.scenario = config.scenario()
-        self.p = pack(self.scenario)
         self.area = config.area()
         self.origin = config.origin_point()
         self.keys = config.keys()

@@ -263,11 +263,6 @@ def first_steps(scenario: Scenario, points: np.ndarray, requests: list[RequestRo
                                 tasks, np.array(served, dtype=np.int64), float(battery_j), q))
 
 
-def should_return(battery_fraction: float, airborne: bool, returning: bool, threshold: float) -> bool:
-    """Command return to launch: airborne, not already returning, battery at the threshold."""
-    return airborne and not returning and battery_fraction <= threshold
-
-
 PAPER_ITERATIONS = 1000
 """Iterations of ``mcts-paper`` and ``ts-mcts`` when ``planner.iterations`` is 0: the
 paper's n (they run a number of iterations, not a clock budget)."""

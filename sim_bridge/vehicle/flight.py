@@ -239,10 +239,6 @@ class Flight:
         return self.state is not MissionState.STOPPED or self.loaded is not None
 
     @property
-    def mission_done(self) -> bool:
-        return self.state is MissionState.COMPLETE
-
-    @property
     def mission_present(self) -> bool:
         """ArduPilot's ``present()``: more than home; PX4: any item."""
         return len(self.mission) > self.first_item

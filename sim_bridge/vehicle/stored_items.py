@@ -159,12 +159,6 @@ def ardupilot_stored(item: MissionItem) -> MissionItem:
                        param1=p1, param2=p2, param3=p3, param4=p4, x=x, y=y, z=z)
 
 
-def empty_home(seq: int = 0) -> MissionItem:
-    """ArduPilot's item 0 before home is known: zeros (as read back from SITL before its EKF
-    has an origin)."""
-    return MissionItem(seq=seq, frame=M.MAV_FRAME_GLOBAL, command=M.MAV_CMD_NAV_WAYPOINT)
-
-
 def crc_of(items: list[MissionItem]) -> int:
     """A fingerprint of a whole mission (PX4 updates its active mission only when the CRC of
     an upload differs from the one it holds)."""

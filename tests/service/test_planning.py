@@ -17,8 +17,7 @@ from planner_service.service.errors import PlanningError
 from planner_service.service.rows import RequestRow, ServiceRow, UserRow
 from planner_service.service.planning import (PlannedPath, PlannedPoint, Planner, VehicleFix, after_hold, assemble,
                                               check_path,
-                                              hold_time_s, not_served_reason, planning_battery_j, predict_path,
-                                              should_return)
+                                              hold_time_s, not_served_reason, planning_battery_j, predict_path)
 from protocol import Area
 
 S = field()
@@ -137,13 +136,11 @@ def test_planning_battery_keeps_the_drain_the_descent_and_the_margin() -> None:
     assert planning_battery_j(S, 50_000.0, 10.0, 1_000.0) == pytest.approx(50_000.0 - 10 * cruise_w - descent - 1_000.0)
 
 
-def test_not_served_reasons_and_return() -> None:
+def test_not_served_reasons() -> None:
     assert not_served_reason(S, 0, 0, "x") == "no tasks to offload"
     assert not_served_reason(S, 18, 2, "x") == "fairness: already served 2 times (limit 2)"
     assert not_served_reason(S, 15, 1, "x") == "fairness: a repeat needs more than 15 tasks, asked 15"
     assert not_served_reason(S, 16, 1, "sortie ended") == "sortie ended"
-    assert should_return(0.10, True, False, 0.1) and not should_return(0.11, True, False, 0.1)
-    assert not should_return(0.05, False, False, 0.1) and not should_return(0.05, True, True, 0.1)
 
 
 def crowd(battery_j: float = 100_000.0):
