@@ -30,7 +30,7 @@ import signal
 import time
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, replace
-from typing import Any, Awaitable, Callable
+from typing import Any, Awaitable, Callable, assert_never
 
 import msgspec
 import numpy as np
@@ -47,8 +47,7 @@ from .errors import ConfigError, JournalError, LinkError, PlanningError
 from . import events as ev
 from .intake import Accepted, Intake, fairness_rule
 from .journal import Journal
-from .link import (ArmedChanged, Connected, Landed, LinkEvent, LinkSettings, Lost, ModeChanged, Restarted, Restored,
-                   VehicleLink, open_link)
+from .link import LinkEvent, LinkSettings, VehicleLink, open_link
 from .link.base import RETURNING_MODES
 from .operator import OperatorGate, read_command, reply_for
 from .places import plan_places, user_places
@@ -295,6 +294,8 @@ class Service:
                 self._begin_sortie(fraction)
             case fx.MarkFlown():
                 self._save_meta(FLOWN_KEY, str(self.state.number))
+            case _:
+                assert_never(e)
 
     def _job(self, name: str, coro: Awaitable[ins.Input | None]) -> None:
         """Run an operation off the logic and feed its outcome back when it ends. Once the
@@ -372,6 +373,8 @@ class Service:
                     await self.link.hold()
                 case "set_current":
                     await self.link.set_current(cmd.seq)
+                case _:
+                    assert_never(cmd.kind)
         except LinkError as err:
             return ins.CommandFailed(cmd, str(err))
         return ins.CommandDone(cmd)
@@ -493,25 +496,9 @@ class Service:
         state = State(status=self._status(), plan=public_plan(self.plan_msg))
         reply_and_drop(query, self.keys.state, encode(state))
 
-    def _on_link_event(self, ev: LinkEvent) -> None:
-        match ev:
-            case Connected(mode=mode):
-                self._feed(ins.LinkConnected(mode))
-            case Lost(detail=detail):
-                self._feed(ins.LinkLost(detail))
-            case Restored(mode=mode):
-                self._feed(ins.LinkRestored(mode))
-            case Restarted(detail=detail):
-                self._feed(ins.VehicleRestarted(detail))
-            case ModeChanged(mode=mode, commanded=commanded):
-                self._feed(ins.ModeChanged(mode, commanded))
-            case ArmedChanged(armed=armed, commanded=commanded):
-                self._feed(ins.ArmedChanged(armed, commanded))
-            case Landed():
-                self._feed(ins.Landed())
-            case _:
-                pass  # the link logs texts, missing telemetry and the position's state; mission
-                # progress is not used: holds are judged from the vehicle's own position
+    def _on_link_event(self, event: LinkEvent) -> None:
+        """What the link reports is an input of the sortie logic as it is."""
+        self._feed(event)
 
     def _event(self, event: ev.ServiceEvent) -> None:
         self.zio.publish(ev.to_wire(event, self.wall()))

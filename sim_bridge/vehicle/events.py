@@ -121,6 +121,3 @@ FlightEvent = Union[
     HomeSet,
 ]
 """Every event the flight reports."""
-
-EVENT_TYPES: tuple[type, ...] = FlightEvent.__args__  # type: ignore[attr-defined]
-"""The event classes, for tests that must cover each one."""

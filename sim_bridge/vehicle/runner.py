@@ -13,7 +13,7 @@ import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Hashable
+from typing import Any, Callable, Hashable, assert_never
 
 from pymavlink.dialects.v20 import common as mavlink
 
@@ -387,7 +387,7 @@ class Vehicle:
                         if message is not None:
                             self._send_to(message, None)
             case _:
-                log.error("unhandled flight event %r", event)
+                assert_never(event)
 
     def _mission_current(self, message: Any) -> None:
         """MISSION_CURRENT at an event: PX4 sends it to every link; for ArduPilot an extra

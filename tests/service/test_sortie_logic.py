@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, replace
+from typing import get_args
 
 import pytest
 
@@ -217,8 +218,8 @@ def test_a_hold_is_not_ended_early_without_the_authority_or_degraded(after: str)
     if after == "the journal failed":
         run.feed(ins.Degraded("the journal failed"))
     else:
-        run.feed(ins.ModeChanged("LOITER"), mode="LOITER")
-        run.feed(ins.ModeChanged("AUTO"), mode="AUTO")
+        run.feed(ins.ModeChanged("LOITER", commanded=False), mode="LOITER")
+        run.feed(ins.ModeChanged("AUTO", commanded=False), mode="AUTO")
     out = run.tick(seq=2, boot_s=20.0 + needed + 2)
     assert not only(out, fx.Command), after
 
@@ -227,7 +228,7 @@ def test_restart_read_back_and_a_lost_mission_resumed_from_where_it_is() -> None
     world = FakeWorld()
     run, up = fly_to_first_point(world)
     (searching,) = only(run.tick(seq=2, xyz=(120.0, 200.0, 100.0), boot_s=20.0), fx.Plan)
-    out = run.feed(ins.VehicleRestarted("its clock went back"), boot_s=1.0, mode="LOITER", seq=0)
+    out = run.feed(ins.Restarted("its clock went back"), boot_s=1.0, mode="LOITER", seq=0)
     assert [e.event.kind for e in only(out, fx.Emit)][:2] == ["authority_revoked", "vehicle_restarted"]
     assert not only(out, fx.RecordService), "a hold of no measurable length serves nothing"
     # The decision being searched was made on the mission the restart lost: dropped.
@@ -266,7 +267,7 @@ def test_a_link_gap_read_back_as_ours_keeps_the_hold() -> None:
     world = FakeWorld()
     run, up = fly_to_first_point(world)
     (searching,) = only(run.tick(seq=2, xyz=(120.0, 200.0, 100.0), boot_s=20.0), fx.Plan)
-    run.feed(ins.LinkRestored("AUTO"))
+    run.feed(ins.Restored("AUTO"))
     out = run.feed(ins.Planned(searching.basis, path(point(9, 400.0, 300.0, "b", 2))))
     (rb,) = only(out, fx.ReadBack)
     out = run.feed(ins.ReadBackDone(up.items, 3))
@@ -282,7 +283,7 @@ def test_holds_flown_while_in_doubt_are_judged_once_the_read_back_shows_our_miss
     # the doubt are kept and judged once the vehicle is known to fly our mission.
     world = FakeWorld()
     run, up = fly_to_first_point(world)
-    (rb,) = only(run.feed(ins.LinkRestored("AUTO")), fx.ReadBack)
+    (rb,) = only(run.feed(ins.Restored("AUTO")), fx.ReadBack)
     for t in range(10, 80):  # the whole hold at point 3 (item 2), in doubt
         run.tick(seq=2, xyz=(120.0, 200.0, 100.0), boot_s=float(t))
     run.tick(seq=3, xyz=(160.0, 200.0, 100.0), boot_s=82.0)  # and on to item 3
@@ -330,7 +331,7 @@ def test_holds_flown_while_an_upload_waits_for_its_ack_are_judged_against_the_mi
 def test_reports_in_doubt_count_for_nothing_when_the_vehicle_holds_another_mission() -> None:
     world = FakeWorld()
     run, up = fly_to_first_point(world)
-    run.feed(ins.LinkRestored("AUTO"))
+    run.feed(ins.Restored("AUTO"))
     for t in range(10, 80):
         run.tick(seq=2, xyz=(120.0, 200.0, 100.0), boot_s=float(t))
     out = run.feed(ins.ReadBackDone(up.items[:2], 3))  # not ours: nothing it flew is ours to record
@@ -367,7 +368,7 @@ def test_a_count_a_read_back_showed_to_be_ours_doubts_nothing_again() -> None:
 def test_uncommanded_mode_change_ends_authority_and_no_command_follows() -> None:
     world = FakeWorld()
     run, _ = fly_to_first_point(world)
-    out = run.feed(ins.ModeChanged("LOITER"), mode="LOITER")
+    out = run.feed(ins.ModeChanged("LOITER", commanded=False), mode="LOITER")
     assert [e.event.kind for e in only(out, fx.Emit)] == ["authority_revoked"]
     assert run.s.authority.state == "revoked"
     out = run.tick(battery_fraction=0.05)  # the battery guard would fire with authority
@@ -379,8 +380,8 @@ def test_uncommanded_mode_change_ends_authority_and_no_command_follows() -> None
 def test_a_pilots_landing_ends_the_sortie_and_the_next_never_arms() -> None:
     world = FakeWorld()
     run, _ = fly_to_first_point(world)
-    run.feed(ins.ModeChanged("LAND"), mode="LAND")
-    run.feed(ins.Landed(), airborne=False)
+    run.feed(ins.ModeChanged("LAND", commanded=False), mode="LAND")
+    run.feed(ins.Landed("EXTENDED_SYS_STATE"), airborne=False)
     assert run.s.over == "the vehicle landed"
     out = run.tick(armed=False)
     (begin,) = only(out, fx.BeginSortie)
@@ -404,8 +405,8 @@ def test_after_its_own_landing_the_next_sortie_waits_for_the_operator() -> None:
     world = FakeWorld()
     run, _ = fly_to_first_point(world)
     run.feed(ins.ModeChanged("RTL", commanded=True), mode="RTL")
-    run.feed(ins.ArmedChanged(False), armed=False, xyz=(0.0, 0.0, 0.3))
-    run.feed(ins.Landed(), airborne=False)  # reported after the disarming
+    run.feed(ins.ArmedChanged(False, commanded=False), armed=False, xyz=(0.0, 0.0, 0.3))
+    run.feed(ins.Landed("EXTENDED_SYS_STATE"), airborne=False)  # reported after the disarming
     run.tick()
     assert run.s.authority.granted, "the autopilot's disarming on touching down at our return"
     (plan,) = only(run.feed(ins.SortieBegun(2)), fx.Plan)
@@ -431,7 +432,7 @@ def test_an_arming_or_disarming_the_service_did_not_command_ends_the_authority(
         world.ask("a", 120.0, 200.0, 10, 1)
         run = Run(world)
         run.tick(armed=not armed)
-    out = run.feed(ins.ArmedChanged(armed), armed=armed, airborne=airborne, xyz=xyz)
+    out = run.feed(ins.ArmedChanged(armed, commanded=False), armed=armed, airborne=airborne, xyz=xyz)
     assert run.s.authority.state == "revoked", why
     assert "authority_revoked" in [e.event.kind for e in only(out, fx.Emit)]
     assert ("armed" if armed else "disarmed") in run.s.authority.detail
@@ -449,7 +450,7 @@ def test_the_services_own_arming_and_its_landings_disarming_keep_the_authority()
     assert run.s.authority.on_arming(False, commanded=False, landing=False).state == "revoked"
     # At the mission's return item: the touchdown's disarming, its report within 2 s.
     rtl = run.s.held.rtl_seq
-    run.feed(ins.ArmedChanged(False), armed=False, seq=rtl, xyz=(0.0, 0.0, 0.5))
+    run.feed(ins.ArmedChanged(False, commanded=False), armed=False, seq=rtl, xyz=(0.0, 0.0, 0.5))
     run.now += 1.5
     run.tick(airborne=False)
     run.now += 5.0
@@ -457,15 +458,15 @@ def test_the_services_own_arming_and_its_landings_disarming_keep_the_authority()
     assert run.s.authority.granted
     # Reported landed first at the return item, then disarmed: the landing's.
     run2, _ = fly_to_first_point(FakeWorld())
-    run2.feed(ins.Landed(), airborne=False, seq=run2.s.held.rtl_seq, xyz=(0.0, 0.0, 0.1))
-    run2.feed(ins.ArmedChanged(False), armed=False)
+    run2.feed(ins.Landed("EXTENDED_SYS_STATE"), airborne=False, seq=run2.s.held.rtl_seq, xyz=(0.0, 0.0, 0.1))
+    run2.feed(ins.ArmedChanged(False, commanded=False), armed=False)
     assert run2.s.authority.granted
 
 
 def test_a_disarming_on_the_way_home_not_followed_by_a_landing_is_nobodys() -> None:
     world = FakeWorld()
     run, _ = fly_to_first_point(world)
-    run.feed(ins.ArmedChanged(False), armed=False, seq=run.s.held.rtl_seq, xyz=(50.0, 50.0, 60.0))
+    run.feed(ins.ArmedChanged(False, commanded=False), armed=False, seq=run.s.held.rtl_seq, xyz=(50.0, 50.0, 60.0))
     run.now += 1.0
     run.tick()
     assert run.s.authority.granted, "its landing's report may still come"
@@ -480,9 +481,9 @@ def test_a_disarming_in_the_air_reported_landed_first_is_not_a_landing() -> None
     # EXTENDED_SYS_STATE may reach the service before the heartbeat showing the disarming.
     world = FakeWorld()
     run, _ = fly_to_first_point(world)
-    run.feed(ins.Landed(), airborne=False, xyz=(30.0, 50.0, 40.0))
+    run.feed(ins.Landed("EXTENDED_SYS_STATE"), airborne=False, xyz=(30.0, 50.0, 40.0))
     assert run.s.over is not None
-    run.feed(ins.ArmedChanged(False), armed=False)
+    run.feed(ins.ArmedChanged(False, commanded=False), armed=False)
     assert run.s.authority.state == "revoked", "away from the mission's return: not ours"
 
 
@@ -577,9 +578,9 @@ def test_a_restart_never_gives_back_an_authority_the_pilot_ended() -> None:
     # LOITER gave the authority back: the service switched the vehicle to AUTO again.
     world = FakeWorld()
     run, _ = fly_to_first_point(world)
-    run.feed(ins.ModeChanged("LOITER"), mode="LOITER", boot_s=1.0)
+    run.feed(ins.ModeChanged("LOITER", commanded=False), mode="LOITER", boot_s=1.0)
     assert run.s.authority.state == "revoked"
-    out = run.feed(ins.VehicleRestarted("its clock went back"))
+    out = run.feed(ins.Restarted("its clock went back"))
     assert run.s.authority.state == "revoked" and "authority_granted" not in [e.event.kind for e in only(out, fx.Emit)]
     assert not only(run.effects[-len(out):], fx.Command)
 
@@ -589,7 +590,7 @@ def test_a_restart_ends_the_authority_and_after_it_any_mode_change_is_unexplaine
     # mode expected was unset, and unset explained every change.
     world = FakeWorld()
     run, _ = fly_to_first_point(world)
-    out = run.feed(ins.VehicleRestarted("its clock went back"))
+    out = run.feed(ins.Restarted("its clock went back"))
     assert run.s.authority.state == "revoked" and "authority_revoked" in [e.event.kind for e in only(out, fx.Emit)]
     given = Authority.by_operator("again")
     assert given.on_mode("LOITER", armed=True, mission_return=False).state == "revoked", "expected unknown"
@@ -603,10 +604,10 @@ def test_a_restart_that_landed_the_vehicle_leaves_the_next_sortie_to_the_operato
     # the restart is judged first.
     world = FakeWorld()
     run, _ = fly_to_first_point(world)
-    run.feed(ins.ModeChanged("STABILIZE"), mode="STABILIZE", boot_s=1.0)
-    run.feed(ins.Landed(), airborne=False, armed=False)
+    run.feed(ins.ModeChanged("STABILIZE", commanded=False), mode="STABILIZE", boot_s=1.0)
+    run.feed(ins.Landed("EXTENDED_SYS_STATE"), airborne=False, armed=False)
     assert run.s.over is not None and run.s.authority.state == "revoked"
-    run.feed(ins.VehicleRestarted("its clock went back"))
+    run.feed(ins.Restarted("its clock went back"))
     run.tick()
     run.feed(ins.SortieBegun(2))
     assert not run.s.authority.granted, run.s.authority
@@ -775,3 +776,22 @@ def test_a_service_started_between_sorties_gives_the_configurations_authority_to
     used = run.s.authority.commanding("AUTO")
     assert not used.unused
     assert next_sortie(used).state == "none"
+
+
+QUIET_REPORTS = [ins.Reached(2, 1), ins.Current(2, 5, 1), ins.PositionChanged(False, "a GPS fix"),
+                 ins.StatusText("EKF3 IMU0 is using GPS", 6), ins.TelemetryMissing(("BATTERY_STATUS",))]
+"""Link events the logic takes and that change nothing: it reads progress and position from
+the telemetry at each tick."""
+
+
+def test_every_link_event_is_an_input() -> None:
+    assert set(get_args(ins.LinkEvent)) <= set(get_args(ins.Input))
+    acting = {ins.Connected, ins.Lost, ins.Restored, ins.Restarted, ins.ModeChanged, ins.ArmedChanged, ins.Landed}
+    assert acting | {type(r) for r in QUIET_REPORTS} == set(get_args(ins.LinkEvent))
+
+
+@pytest.mark.parametrize("report", QUIET_REPORTS, ids=lambda r: type(r).__name__)
+def test_reports_read_from_telemetry_change_nothing(report: ins.LinkEvent) -> None:
+    run, _ = fly_to_first_point(FakeWorld())
+    before = run.s
+    assert run.feed(report) == [] and run.s == before

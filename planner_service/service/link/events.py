@@ -127,6 +127,3 @@ class PositionChanged:
 LinkEvent = Union[Connected, Lost, Restored, Restarted, Reached, Current, ModeChanged, ArmedChanged, Landed,
                   StatusText, TelemetryMissing, PositionChanged]
 """Every event a link reports."""
-
-EVENT_TYPES: tuple[type, ...] = (Connected, Lost, Restored, Restarted, Reached, Current, ModeChanged, ArmedChanged,
-                                 Landed, StatusText, TelemetryMissing, PositionChanged)

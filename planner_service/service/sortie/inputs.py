@@ -1,15 +1,20 @@
 """What the sortie logic is told: one frozen record per input, and the view of the vehicle
-and of the journal it decides on. Nothing here does I/O."""
+and of the journal it decides on. Nothing here does I/O.
+
+The link's events (``link/events.py``) are inputs as they are, one class each, re-exported
+here: what the autopilot reported reaches the logic without being renamed on the way."""
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Literal, Protocol, Sequence
+from typing import Literal, Protocol
 
 from protocol import MissionItem
 
 from ..journal import RequestRow
+from ..link.events import (ArmedChanged, Connected, Current, Landed, LinkEvent, Lost, ModeChanged, PositionChanged,
+                           Reached, Restarted, Restored, StatusText, TelemetryMissing)
 from ..planning import PlannedPath
 from .effects import Command, PlanBasis, Upload
 
@@ -64,45 +69,6 @@ class World(Protocol):
 @dataclass(frozen=True)
 class Tick:
     now: float
-
-
-@dataclass(frozen=True)
-class LinkConnected:
-    mode: str
-
-
-@dataclass(frozen=True)
-class LinkLost:
-    why: str
-
-
-@dataclass(frozen=True)
-class LinkRestored:
-    mode: str
-
-
-@dataclass(frozen=True)
-class VehicleRestarted:
-    why: str
-
-
-@dataclass(frozen=True)
-class ModeChanged:
-    mode: str
-    commanded: bool = False
-    """The link asked for this mode (a step of a start, a resume, a return or a hold)."""
-
-
-@dataclass(frozen=True)
-class ArmedChanged:
-    armed: bool
-    commanded: bool = False
-    """The link asked for it (the start's arming, a failed start's disarming)."""
-
-
-@dataclass(frozen=True)
-class Landed:
-    pass
 
 
 @dataclass(frozen=True)
@@ -186,8 +152,10 @@ class Degraded:
     why: str
 
 
-Input = (Tick | LinkConnected | LinkLost | LinkRestored | VehicleRestarted | ModeChanged | ArmedChanged | Landed
-         | Planned | PlanFailed | Uploaded | UploadFailed | ReadBackDone | ReadBackFailed | CommandDone
+Input = (Tick | LinkEvent | Planned | PlanFailed | Uploaded | UploadFailed | ReadBackDone | ReadBackFailed | CommandDone
          | CommandFailed | RequestIn | OperatorCommand | SortieBegun | Degraded)
 
-__all__ = ["Input", "Vehicle", "World", "Sequence"]
+__all__ = ["ArmedChanged", "CommandDone", "CommandFailed", "Connected", "Current", "Degraded", "Input", "Landed",
+           "LinkEvent", "Lost", "ModeChanged", "OperatorCommand", "PlanFailed", "Planned", "PositionChanged",
+           "Reached", "ReadBackDone", "ReadBackFailed", "RequestIn", "Restarted", "Restored", "SortieBegun",
+           "StatusText", "TelemetryMissing", "Tick", "UploadFailed", "Uploaded", "Vehicle", "World"]

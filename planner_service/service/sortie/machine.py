@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, replace
-from typing import Literal
+from typing import Literal, assert_never
 
 import numpy as np
 
@@ -226,16 +226,16 @@ class SortieLogic:
         match event:
             case ins.Tick():
                 s = self._tick(s, v, now, out)
-            case ins.LinkConnected(mode=mode):
+            case ins.Connected(mode=mode):
                 s = self._connected(s, v, mode, out)
-            case ins.LinkLost(why=why):
+            case ins.Lost(detail=why):
                 out += [fx.Emit(ev.LinkLost(why)), fx.Log("warning", f"link lost: {why}")]
-            case ins.LinkRestored(mode=mode):
+            case ins.Restored(mode=mode):
                 out += [fx.Emit(ev.LinkRestored(mode)), fx.Log("info", f"link restored ({mode})")]
                 if s.held is not None or s.flown:
                     s = self._doubt(s, "the link was lost", out)
                 s = replace(s, retry_at=min(s.retry_at, now), failures=0)
-            case ins.VehicleRestarted(why=why):
+            case ins.Restarted(detail=why):
                 # A restart only ever ends the authority: nothing the service commanded holds
                 # across it, and a restart is what an unsigned link can forge.
                 s = self._revoke(replace(s, restarted=True), f"the autopilot restarted ({why})", out)
@@ -279,6 +279,14 @@ class SortieLogic:
                 if s.degraded is None:
                     s = replace(s, degraded=why, version=s.version + 1)
                     out += [fx.Emit(ev.Degraded(why[:256])), fx.Log("error", f"degraded: {why}")]
+            case ins.Reached() | ins.Current() | ins.PositionChanged():
+                # Progress and position are read from the telemetry at each tick: holds are
+                # judged from where the vehicle is, never from a mission index alone.
+                return s, out
+            case ins.StatusText() | ins.TelemetryMissing():
+                return s, out  # the link logs them; what they change shows in its telemetry
+            case _:
+                assert_never(event)
         if not isinstance(event, ins.Tick):
             s = self._next(s, v, now, out)
         return s, out
@@ -980,7 +988,8 @@ class SortieLogic:
             case "set_current":
                 out.append(fx.Log("info", cmd.why))
                 return s
-        return s
+            case _:
+                assert_never(cmd.kind)
 
     def _command_failed(self, s: Sortie, cmd: fx.Command, error: str, now: float, out: list[fx.Effect]) -> Sortie:
         out += [fx.Emit(ev.CommandFailed(f"{cmd.kind}: {error}"[:256])),
