@@ -244,6 +244,9 @@ def test_restart_read_back_and_a_lost_mission_resumed_from_where_it_is() -> None
     assert up2.current_seq == 2, "a fresh mission in the air is flown from its first point"
     out = run.feed(ins.Uploaded(up2, 4))
     assert not only(out, fx.Command), "the mission is on board; only the operator resumes it"
+    (asked,) = [e.event for e in only(out, fx.Emit) if e.event.kind == "resume_needed"]
+    assert "plan 2" in asked.detail and "LOITER" in asked.detail, asked.detail
+    assert not any(e.event.kind == "resume_needed" for e in only(run.tick(), fx.Emit)), "told once"
     run.s, out, ok, _ = run.logic.operator(run.s, ins.OperatorCommand("start"), run.v, run.now)
     assert ok and run.s.authority.granted
     (plan,) = only(out, fx.Plan)  # from where the vehicle is now, then resumed

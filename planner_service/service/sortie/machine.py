@@ -17,7 +17,8 @@ What it decides, in the order a sortie goes:
 - **Doubt**: after a link gap, a vehicle restart or our own restart, the vehicle may hold
   another mission: read it back before anything else, the reports seen meanwhile (and
   during an upload) judged once the mission it holds is known; a lost mission in the air is
-  re-planned from where the vehicle is and resumed (with authority) or left to the operator.
+  re-planned from where the vehicle is and resumed (with authority) or left to the operator
+  (``resume_needed``).
 - **Authority** (``authority.py``): modes and arming only when granted; any change the
   service did not command ends it.
 - **Bounded retries**: a failed plan or upload is retried with a growing wait, and given up
@@ -333,7 +334,7 @@ class SortieLogic:
                 s = replace(s, busy="plan", dirty=False)
         if s.commanding == "" and now >= s.retry_at:
             s = self._command_due(s, v, out)
-        return s
+        return self._resume_needed(s, v, out)
 
     # --- holds: truth from the vehicle's position ---------------------------------------------
     def _watch(self, s: Sortie, v: ins.Vehicle, out: list[fx.Effect]) -> Sortie:
@@ -957,6 +958,21 @@ class SortieLogic:
             first = s.held.points[0][0] if s.held.points else s.held.rtl_seq
             return self._command(s, fx.Command("resume", first, f"plan {s.held.plan_id} (was {v.mode})"), out)
         return s
+
+    def _resume_needed(self, s: Sortie, v: ins.Vehicle, out: list[fx.Effect]) -> Sortie:
+        """A mission re-planned after the vehicle lost ours in the air (a restart, a link
+        gap), on board, the vehicle holding, and no authority to resume it: the operator is
+        told once (``resume_needed``); ``operator start`` plans from where the vehicle is then
+        and resumes."""
+        held = s.held
+        if (not s.resume_pending or s.authority.granted or held is None or s.held_gen is None or s.busy != ""
+                or not v.airborne or v.mode not in HOLDING_MODES):
+            return s
+        out += [fx.Emit(ev.ResumeNeeded(f"plan {held.plan_id} is on board and the vehicle holds in {v.mode}: the "
+                                        f"service has no authority ({s.authority.state}); operator start resumes it")),
+                fx.Log("warning", f"plan {held.plan_id} is on board, the vehicle holds in {v.mode}: the operator "
+                                  f"must resume it (operator start)")]
+        return replace(s, resume_pending=False)
 
     def _start_lapsed(self, s: Sortie, v: ins.Vehicle, now: float, out: list[fx.Effect]) -> Sortie:
         """A start the autopilot accepted but that never took off (it disarmed on the ground
