@@ -52,7 +52,7 @@ from .link.base import RETURNING_MODES
 from .operator import OperatorGate, read_command, reply_for
 from .places import plan_places, user_places
 from .planning import Planner, VehicleFix, after_hold, assemble, not_served_reason, planning_battery_j
-from .sortie import HeldMission, Rules, Sortie, SortieLogic, Vehicle, item_dict, new_sortie
+from .sortie import HeldMission, Rules, Sortie, SortieLogic, VehicleSnapshot, item_dict, new_sortie
 from .sortie import effects as fx
 from .sortie import inputs as ins
 from .supervisor import Supervisor
@@ -65,7 +65,7 @@ log = logging.getLogger("planner_service")
 
 GRACE_S = 5.0
 """Bounded wait for an upload in progress at shutdown."""
-OPERATIONS = (fx.Plan, fx.Upload, fx.ReadBack, fx.Command)
+OPERATIONS = (fx.MakePlan, fx.Upload, fx.ReadBack, fx.Command)
 """The effects that start an operation on the planner or the vehicle (``Service._job``):
 none is carried out once the service is stopping."""
 CONNECT_TIMEOUT_S = 10.0
@@ -266,7 +266,7 @@ class Service:
 
     def _do(self, e: fx.Effect) -> None:
         match e:
-            case fx.Plan(basis=basis):
+            case fx.MakePlan(basis=basis):
                 self._job("plan", self._plan(basis))
             case fx.Upload():
                 self._job("upload", self._upload(e))
@@ -304,7 +304,7 @@ class Service:
         async def run() -> None:
             outcome = await coro
             if outcome is not None and (not self.stopping.is_set() or isinstance(
-                    outcome, (ins.Uploaded, ins.UploadFailed, ins.ReadBackDone, ins.ReadBackFailed))):
+                    outcome, (ins.Uploaded, ins.NotUploaded, ins.ReadBackDone, ins.ReadBackFailed))):
                 self._feed(outcome)
         task = asyncio.ensure_future(run())
         task.set_name(name)
@@ -343,7 +343,7 @@ class Service:
             await self.link.upload(list(up.items), current_seq=up.current_seq, restart_current=up.restart_current)
         except LinkError as err:
             if err.operation != "set_current()":
-                return ins.UploadFailed(up, err.result, err.outcome_unknown)
+                return ins.NotUploaded(up, err.result, err.outcome_unknown)
             # The mission is held; only the item flown could not be confirmed (an autopilot
             # that does not report MISSION_CURRENT): its own index stands.
             log.warning("plan %d is held, but the item the vehicle flies could not be set: %s", up.plan_id, err)
@@ -376,7 +376,7 @@ class Service:
                 case _:
                     assert_never(cmd.kind)
         except LinkError as err:
-            return ins.CommandFailed(cmd, str(err))
+            return ins.CommandNotDone(cmd, str(err))
         return ins.CommandDone(cmd)
 
     def _record_service(self, e: fx.RecordService) -> None:
@@ -394,7 +394,7 @@ class Service:
             self._check_journal()
 
     # --- the vehicle as the logic sees it ----------------------------------------------------------
-    def _vehicle(self) -> Vehicle:
+    def _vehicle(self) -> VehicleSnapshot:
         vehicle, self._waiting_for = self.view.see(self.link.telemetry, self.mono())
         return vehicle
 
@@ -475,7 +475,7 @@ class Service:
             return
         before = self.state
         self.state, effects, accepted, message = self.logic.operator(
-            before, ins.OperatorCommand(cmd.command, cmd.reason), self._vehicle(), self.mono())
+            before, ins.OperatorAsked(cmd.command, cmd.reason), self._vehicle(), self.mono())
         self._carry_out(before, effects)
         if self.state.authority != before.authority:
             log.info("operator: authority %s -> %s (%s)", before.authority.state, self.state.authority.state,
@@ -569,7 +569,7 @@ class Service:
             return
         self.intake.closed_reason = f"the service is degraded: {why}"[:256]
         self.zio.withdraw_liveliness()
-        self._feed(ins.Degraded(why))
+        self._feed(ins.PartFailed(why))
 
     # --- sortie end and begin --------------------------------------------------------------------
     def _end_sortie(self, why: str) -> None:

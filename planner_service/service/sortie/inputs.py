@@ -13,14 +13,14 @@ from typing import Literal, Protocol
 from protocol import MissionItem
 
 from ..journal import RequestRow
-from ..link.events import (ArmedChanged, Connected, Current, Landed, LinkEvent, Lost, ModeChanged, PositionChanged,
+from ..link.events import (ArmedChanged, Connected, Current, OnGround, LinkEvent, Lost, ModeChanged, PositionChanged,
                            Reached, Restarted, Restored, StatusText, TelemetryMissing)
 from ..planning import PlannedPath
 from .effects import Command, PlanBasis, Upload
 
 
 @dataclass(frozen=True)
-class Vehicle:
+class VehicleSnapshot:
     """The vehicle as its telemetry shows it, in local metres (from the link's snapshot)."""
 
     connected: bool = False
@@ -50,7 +50,7 @@ class Vehicle:
 
 
 
-class World(Protocol):
+class JournalView(Protocol):
     """What the sortie logic reads of the journal (the current sortie)."""
 
     def request_for(self, user_id: str) -> RequestRow | None:
@@ -97,7 +97,10 @@ class Uploaded:
 
 
 @dataclass(frozen=True)
-class UploadFailed:
+class NotUploaded:
+    """The upload failed (``outcome_unknown``: no answer, the vehicle may hold it); the
+    service's ``upload_failed`` event is what the logic makes of it."""
+
     upload: Upload
     error: str
     outcome_unknown: bool = False
@@ -123,7 +126,9 @@ class CommandDone:
 
 
 @dataclass(frozen=True)
-class CommandFailed:
+class CommandNotDone:
+    """The autopilot refused the command, or never answered."""
+
     command: Command
     error: str
 
@@ -137,7 +142,9 @@ class RequestIn:
 
 
 @dataclass(frozen=True)
-class OperatorCommand:
+class OperatorAsked:
+    """The operator's command, read and checked at the edge (the wire's ``OperatorCommand``)."""
+
     command: Literal["start", "hold", "status"]
     reason: str = ""
 
@@ -148,14 +155,17 @@ class SortieBegun:
 
 
 @dataclass(frozen=True)
-class Degraded:
+class PartFailed:
+    """A part the service needs (the journal) failed: the service degrades (its
+    ``degraded`` event)."""
+
     why: str
 
 
-Input = (Tick | LinkEvent | Planned | PlanFailed | Uploaded | UploadFailed | ReadBackDone | ReadBackFailed | CommandDone
-         | CommandFailed | RequestIn | OperatorCommand | SortieBegun | Degraded)
+Input = (Tick | LinkEvent | Planned | PlanFailed | Uploaded | NotUploaded | ReadBackDone | ReadBackFailed | CommandDone
+         | CommandNotDone | RequestIn | OperatorAsked | SortieBegun | PartFailed)
 
-__all__ = ["ArmedChanged", "CommandDone", "CommandFailed", "Connected", "Current", "Degraded", "Input", "Landed",
-           "LinkEvent", "Lost", "ModeChanged", "OperatorCommand", "PlanFailed", "Planned", "PositionChanged",
-           "Reached", "ReadBackDone", "ReadBackFailed", "RequestIn", "Restarted", "Restored", "SortieBegun",
-           "StatusText", "TelemetryMissing", "Tick", "UploadFailed", "Uploaded", "Vehicle", "World"]
+__all__ = ["ArmedChanged", "CommandDone", "CommandNotDone", "Connected", "Current", "Input", "JournalView",
+           "LinkEvent", "Lost", "ModeChanged", "NotUploaded", "OnGround", "OperatorAsked", "PartFailed", "PlanFailed",
+           "Planned", "PositionChanged", "Reached", "ReadBackDone", "ReadBackFailed", "RequestIn", "Restarted",
+           "Restored", "SortieBegun", "StatusText", "TelemetryMissing", "Tick", "Uploaded", "VehicleSnapshot"]
