@@ -30,7 +30,7 @@ import signal
 import time
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, replace
-from typing import Any, Awaitable, Callable
+from typing import Any, Awaitable, Callable, assert_never
 
 import msgspec
 import numpy as np
@@ -46,13 +46,12 @@ from .errors import ConfigError, JournalError, LinkError, PlanningError
 from . import events as ev
 from .intake import Accepted, Intake, fairness_rule
 from .journal import Journal
-from .link import (ArmedChanged, Connected, Landed, LinkEvent, LinkSettings, Lost, ModeChanged, Restarted, Restored,
-                   VehicleLink, open_link)
+from .link import LinkEvent, LinkSettings, VehicleLink, open_link
 from .link.base import RETURNING_MODES
 from .operator import OperatorGate, read_command, reply_for
 from .places import plan_places, user_places
 from .planning import Planner, VehicleFix, after_hold, assemble, not_served_reason, planning_battery_j
-from .sortie import HeldMission, Rules, Sortie, SortieLogic, Vehicle, item_dict, new_sortie
+from .sortie import HeldMission, Rules, Sortie, SortieLogic, VehicleSnapshot, item_dict, new_sortie
 from .sortie import effects as fx
 from .sortie import inputs as ins
 from .supervisor import Supervisor
@@ -65,7 +64,7 @@ log = logging.getLogger("planner_service")
 
 GRACE_S = 5.0
 """Bounded wait for an upload in progress at shutdown."""
-OPERATIONS = (fx.Plan, fx.Upload, fx.ReadBack, fx.Command)
+OPERATIONS = (fx.MakePlan, fx.Upload, fx.ReadBack, fx.Command)
 """The effects that start an operation on the planner or the vehicle (``Service._job``):
 none is carried out once the service is stopping."""
 CONNECT_TIMEOUT_S = 10.0
@@ -272,7 +271,7 @@ class Service:
 
     def _do(self, e: fx.Effect) -> None:
         match e:
-            case fx.Plan(basis=basis):
+            case fx.MakePlan(basis=basis):
                 self._job("plan", self._plan(basis))
             case fx.Upload():
                 self._job("upload", self._upload(e))
@@ -300,6 +299,8 @@ class Service:
                 self._begin_sortie(fraction)
             case fx.MarkFlown():
                 self._save_meta(FLOWN_KEY, str(self.state.number))
+            case _:
+                assert_never(e)
 
     def _job(self, name: str, coro: Awaitable[ins.Input | None]) -> None:
         """Run an operation off the logic and feed its outcome back when it ends. Once the
@@ -308,7 +309,7 @@ class Service:
         async def run() -> None:
             outcome = await coro
             if outcome is not None and (not self.stopping.is_set() or isinstance(
-                    outcome, (ins.Uploaded, ins.UploadFailed, ins.ReadBackDone, ins.ReadBackFailed))):
+                    outcome, (ins.Uploaded, ins.NotUploaded, ins.ReadBackDone, ins.ReadBackFailed))):
                 self._feed(outcome)
         task = asyncio.ensure_future(run())
         task.set_name(name)
@@ -347,7 +348,7 @@ class Service:
             await self.link.upload(list(up.items), current_seq=up.current_seq, restart_current=up.restart_current)
         except LinkError as err:
             if err.operation != "set_current()":
-                return ins.UploadFailed(up, err.result, err.outcome_unknown)
+                return ins.NotUploaded(up, err.result, err.outcome_unknown)
             # The mission is held; only the item flown could not be confirmed (an autopilot
             # that does not report MISSION_CURRENT): its own index stands.
             log.warning("plan %d is held, but the item the vehicle flies could not be set: %s", up.plan_id, err)
@@ -377,8 +378,10 @@ class Service:
                     await self.link.hold()
                 case "set_current":
                     await self.link.set_current(cmd.seq)
+                case _:
+                    assert_never(cmd.kind)
         except LinkError as err:
-            return ins.CommandFailed(cmd, str(err))
+            return ins.CommandNotDone(cmd, str(err))
         return ins.CommandDone(cmd)
 
     def _record_service(self, e: fx.RecordService) -> None:
@@ -396,7 +399,7 @@ class Service:
             self._check_journal()
 
     # --- the vehicle as the logic sees it ----------------------------------------------------------
-    def _vehicle(self) -> Vehicle:
+    def _vehicle(self) -> VehicleSnapshot:
         vehicle, self._waiting_for = self.view.see(self.link.telemetry, self.mono())
         return vehicle
 
@@ -477,7 +480,7 @@ class Service:
             return
         before = self.state
         self.state, effects, accepted, message = self.logic.operator(
-            before, ins.OperatorCommand(cmd.command, cmd.reason), self._vehicle(), self.mono())
+            before, ins.OperatorAsked(cmd.command, cmd.reason), self._vehicle(), self.mono())
         self._carry_out(before, effects)
         if self.state.authority != before.authority:
             log.info("operator: authority %s -> %s (%s)", before.authority.state, self.state.authority.state,
@@ -498,25 +501,9 @@ class Service:
         state = State(status=self._status(), plan=public_plan(self.plan_msg))
         reply_and_drop(query, self.keys.state, encode(state))
 
-    def _on_link_event(self, ev: LinkEvent) -> None:
-        match ev:
-            case Connected(mode=mode):
-                self._feed(ins.LinkConnected(mode))
-            case Lost(detail=detail):
-                self._feed(ins.LinkLost(detail))
-            case Restored(mode=mode):
-                self._feed(ins.LinkRestored(mode))
-            case Restarted(detail=detail):
-                self._feed(ins.VehicleRestarted(detail))
-            case ModeChanged(mode=mode, commanded=commanded):
-                self._feed(ins.ModeChanged(mode, commanded))
-            case ArmedChanged(armed=armed, commanded=commanded):
-                self._feed(ins.ArmedChanged(armed, commanded))
-            case Landed():
-                self._feed(ins.Landed())
-            case _:
-                pass  # the link logs texts, missing telemetry and the position's state; mission
-                # progress is not used: holds are judged from the vehicle's own position
+    def _on_link_event(self, event: LinkEvent) -> None:
+        """What the link reports is an input of the sortie logic as it is."""
+        self._feed(event)
 
     def _event(self, event: ev.ServiceEvent) -> None:
         self.zio.publish(ev.to_wire(event, self.wall()))
@@ -591,7 +578,7 @@ class Service:
             return
         self.intake.closed_reason = f"the service is degraded: {why}"[:256]
         self.zio.withdraw_liveliness()
-        self._feed(ins.Degraded(why))
+        self._feed(ins.PartFailed(why))
 
     # --- sortie end and begin --------------------------------------------------------------------
     def _end_sortie(self, why: str) -> None:

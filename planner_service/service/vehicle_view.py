@@ -23,7 +23,7 @@ from protocol import Area, GeoOrigin, global_to_local
 from ..model import Scenario, pack
 from ..model.energy import flight_energy_j
 from .link import Telemetry
-from .sortie import Vehicle
+from .sortie import VehicleSnapshot
 
 FAR_OUTSIDE_M = 1000.0
 """A position this far outside the served area is not believed (never planned on)."""
@@ -45,7 +45,7 @@ class VehicleView:
         s = self.scenario
         self._power_w = max(s.hover_power_w, flight_energy_j(pack(s), s.speed_mps))  # J in 1 s of cruise
 
-    def see(self, t: Telemetry, now: float) -> tuple[Vehicle, str]:
+    def see(self, t: Telemetry, now: float) -> tuple[VehicleSnapshot, str]:
         """The vehicle, and what its position waits for ('' when it is believed)."""
         xyz = (0.0, 0.0, 0.0)
         position_ok, waiting = t.position_ok, t.waiting_for
@@ -58,7 +58,7 @@ class VehicleView:
                            f"(check [origin] against the autopilot's home)")
         boot = t.position_boot_s if t.position_boot_s is not None else math.nan
         fraction, source = self._battery(t, now)
-        return Vehicle(connected=t.connected, position_ok=position_ok, xyz=xyz if position_ok else (0.0, 0.0, 0.0),
+        return VehicleSnapshot(connected=t.connected, position_ok=position_ok, xyz=xyz if position_ok else (0.0, 0.0, 0.0),
                        boot_s=boot, armed=t.armed, airborne=t.airborne, landed_known=t.landed_known, mode=t.mode,
                        seq=t.mission_seq, mission_total=t.mission_total, mission_id=t.mission_id,
                        battery_fraction=fraction,

@@ -1,4 +1,4 @@
-"""The sortie logic's view of the journal (``sortie.inputs.World``), and the services the
+"""The sortie logic's view of the journal (``sortie.inputs.JournalView``), and the services the
 journal could not record.
 
 A service the journal refuses (its storage failed: the service degrades; or a transient

@@ -55,8 +55,8 @@ from protocol.mission import (
 from .errors import VehicleError
 from .estimator import Stage, stage_at
 from .events import (
-    Armed, CommandStarted, CurrentChanged, Disarmed, FlightEvent, GpsFix, HomeSet, Landed,
-    MissionDone, MissionRestarted, MissionRestartFailed, ModeChanged, OriginSet, Reached,
+    Armed, CommandStarted, CurrentChanged, Disarmed, FlightEvent, GpsFix, HomeSet, TouchedDown,
+    MissionDone, MissionRestarted, MissionRestartFailed, ModeChangedItself, OriginSet, ItemComplete,
     UsingGps, BatteryLow, BatterySwapped,
 )
 from .modes import Mode
@@ -448,7 +448,7 @@ class Flight:
             self.state = MissionState.STOPPED
             if self.mode is Mode.AUTO:
                 self.mode = Mode.HOLD  # no mission to fly: PX4 leaves mission mode
-                self._events.append(ModeChanged())
+                self._events.append(ModeChangedItself())
             return
         if self.state is MissionState.COMPLETE:
             self.state = MissionState.STOPPED
@@ -513,7 +513,7 @@ class Flight:
             if item.command == DO_CHANGE_SPEED and item.param2 > 0:
                 self.speed_mps = float(item.param2)
             if not self.ardupilot:
-                self._events.append(Reached(i, item.command))
+                self._events.append(ItemComplete(i, item.command))
             i += 1
         self._complete()
 
@@ -535,7 +535,7 @@ class Flight:
 
     def _item_done(self, events: list[FlightEvent]) -> None:
         """The loaded command completed: report it and go on with the next item."""
-        events.append(Reached(self.current, self.loaded.command if self.loaded is not None else 0))
+        events.append(ItemComplete(self.current, self.loaded.command if self.loaded is not None else 0))
         self._events_into(events)
         self._advance(self.current + 1)
         self._events_into(events)
@@ -639,7 +639,7 @@ class Flight:
             if self.mode is Mode.AUTO and self.state is MissionState.RUNNING:
                 self.state = MissionState.STOPPED
             self.mode = Mode.RTL
-            self._events.append(ModeChanged())
+            self._events.append(ModeChangedItself())
 
     def _advance_time(self, budget: float, events: list[FlightEvent]) -> float:
         if not self.armed and not self.landed:
@@ -671,7 +671,7 @@ class Flight:
                 self.guided_alt = None
                 if self.mode is Mode.TAKEOFF:
                     self.mode = Mode.HOLD
-                    self._events.append(ModeChanged())
+                    self._events.append(ModeChangedItself())
             return used
         return self._hover(budget)
 
@@ -785,9 +785,9 @@ class Flight:
     def _touchdown(self, events: list[FlightEvent], in_mission: bool) -> float:
         self.landed = True
         self.vel = (0.0, 0.0, 0.0)
-        events.append(Landed())
+        events.append(TouchedDown())
         if in_mission:
-            events.append(Reached(self.current, self.loaded.command if self.loaded is not None else 0))
+            events.append(ItemComplete(self.current, self.loaded.command if self.loaded is not None else 0))
             self.state = MissionState.COMPLETE
             self.loaded = None
             events.append(MissionDone(self.current))

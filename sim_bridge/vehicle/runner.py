@@ -13,7 +13,7 @@ import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Hashable
+from typing import Any, Callable, Hashable, assert_never
 
 from pymavlink.dialects.v20 import common as mavlink
 
@@ -29,7 +29,7 @@ from .errors import VehicleError
 from .estimator import DEFAULT_GPS_DELAY_S
 from .events import (
     Armed, BatteryLow, BatterySwapped, CommandStarted, CurrentChanged, Disarmed, FlightEvent, GpsFix, HomeSet,
-    Landed, MissionDone, MissionRestarted, MissionRestartFailed, ModeChanged, OriginSet, Reached, UsingGps,
+    TouchedDown, MissionDone, MissionRestarted, MissionRestartFailed, ModeChangedItself, OriginSet, ItemComplete, UsingGps,
 )
 from .flight import Flight, MissionState, Refusal
 from .link import Link, Received
@@ -320,7 +320,7 @@ class Vehicle:
     def _report(self, event: FlightEvent) -> None:
         f = self.flight
         match event:
-            case Reached(seq=seq, command=command):
+            case ItemComplete(seq=seq, command=command):
                 log.info("mission item %d reached", seq)
                 self._send_to(M.MAVLink_mission_item_reached_message(seq), None)
                 if self.ardupilot and command == M.MAV_CMD_NAV_WAYPOINT:  # verify_nav_wp's text
@@ -344,9 +344,9 @@ class Vehicle:
             case MissionRestartFailed(seq=seq):
                 log.info("mission changed in flight: item %d is gone, the command in progress goes on", seq)
                 self._text(M.MAV_SEVERITY_CRITICAL, "Auto mission changed but failed to restart command")
-            case ModeChanged():
+            case ModeChangedItself():
                 log.info("mode %s", mode_name(self.config.flavour, f.mode))
-            case Landed():
+            case TouchedDown():
                 log.info("landed at t=%.1f s (sim), battery %.1f%%", f.time_s, 100 * f.battery_fraction)
                 self._send_streamed(M.MAVLINK_MSG_ID_EXTENDED_SYS_STATE, tm.extended_sys_state(f))
             case Armed():
@@ -387,7 +387,7 @@ class Vehicle:
                         if message is not None:
                             self._send_to(message, None)
             case _:
-                log.error("unhandled flight event %r", event)
+                assert_never(event)
 
     def _mission_current(self, message: Any) -> None:
         """MISSION_CURRENT at an event: PX4 sends it to every link; for ArduPilot an extra

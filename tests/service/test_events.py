@@ -20,3 +20,8 @@ def test_an_event_on_the_wire() -> None:
     back = decode(encode(wire), Event)
     assert (back.event, back.user_id, back.request_id, back.time_s) == ("user_served", "u-1", 7, 12.5)
     assert "\n" not in back.detail and "\x1b" not in back.detail and len(back.detail) <= 256
+
+
+def test_each_event_class_is_named_for_its_wire_kind() -> None:
+    # the naming rule of docs/DESIGN.md ("Names"): `landed` is `Landed`, and only that
+    assert all(cls.__name__ == "".join(w.capitalize() for w in kind.split("_")) for kind, cls in ev.KINDS.items())

@@ -89,6 +89,9 @@ def test_vehicle_restart_mid_sortie(stack: Stack, backend: str, flavour: str) ->
     # (a mission uploaded may set its current item, 224: that moves no vehicle out of a hold)
     assert not re.findall(r"command (?:176|300|400|20|21|22) ", second.log()), second.log()[-2000:]
     assert not any(e.event == "mission_resumed" for e in stack.events)
+    needed = stack.wait_event(lambda e: e.event == "resume_needed" and e.time_s > back_at, 30.0,
+                              "the operator told to resume")
+    assert needed.time_s >= uploaded.time_s, (needed, uploaded)
     client = stack.client
     assert client is not None and stack.operator("start", "resume after the restart").accepted
     resumed = stack.wait_event(lambda e: e.event == "mission_resumed", 30.0, "the mission resumed")
@@ -101,6 +104,43 @@ def test_vehicle_restart_mid_sortie(stack: Stack, backend: str, flavour: str) ->
     check_sortie(stack, scenario, flavour, [first.log(), second.log()])
     print(f"\nvehicle restart ({backend}): new mission accepted {uploaded.time_s - back_at:.2f} s after the vehicle was started "
           f"again, resumed at {resumed.time_s - back_at:.2f} s ({uploaded.detail.split(';')[0]})")
+
+
+@pytest.mark.timeout(150)
+def test_a_restart_without_authority_asks_the_operator_to_resume(stack: Stack) -> None:
+    """The operator took the authority back (``hold``) before the autopilot restarted in the
+    air: the mission it lost goes up again, and ``resume_needed`` tells the operator that
+    nothing flies it until ``operator start`` (docs/PROTOCOL.md)."""
+    scenario = field()
+    state = stack.tmp / "vehicle-state.json"
+    args = ("--speedup", SPEEDUP, "--state-file", str(state))
+    first = stack.vehicle(*args)
+    service = stack.service(**SERVICE)
+    users = stack.users("--count", "6", "--speedup", SPEEDUP, "--seed", "3")
+    stack.wait_event(lambda e: e.event == "user_served", 60.0, "a first service")
+    assert stack.operator("hold", "before the restart").accepted
+    stack.wait_event(lambda e: e.event == "authority_released", 10.0, "the authority handed back")
+    kill(first)
+    time.sleep(1.0)
+    back_at = time.time()
+    second = stack.vehicle(*args)
+    assert "restarted from" in second.log() and "airborne" in second.log()
+    uploaded = stack.wait_event(lambda e: e.event == "mission_uploaded" and e.time_s > back_at, 30.0,
+                                "a mission after the restart")
+    needed = stack.wait_event(lambda e: e.event == "resume_needed" and e.time_s > back_at, 30.0,
+                              "the operator told to resume")
+    assert needed.time_s >= uploaded.time_s and "operator start" in needed.detail, needed
+    kinds = [e.event for e in stack.events if e.time_s > back_at]
+    assert "vehicle_restarted" in kinds and "authority_revoked" not in kinds, kinds  # there was none to end
+    assert kinds.count("resume_needed") == 1, kinds
+    assert not re.findall(r"command (?:176|300|400|20|21|22) ", second.log()), second.log()[-2000:]
+    assert stack.operator("start", "resume after the restart").accepted
+    stack.wait_event(lambda e: e.event == "mission_resumed" and e.time_s > needed.time_s, 30.0, "the mission resumed")
+    stack.wait_event(lambda e: e.event == "landed", 120.0, "landing")
+    assert users.stop() == 0 and service.stop() == 0
+    check_sortie(stack, scenario, "ardupilot", [first.log(), second.log()])
+    print(f"\nrestart without authority: mission accepted {uploaded.time_s - back_at:.2f} s after the vehicle was "
+          f"started again, resume_needed at {needed.time_s - back_at:.2f} s")
 
 
 @pytest.mark.timeout(150)

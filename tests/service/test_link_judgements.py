@@ -12,7 +12,7 @@ import pytest
 from pymavlink.dialects.v20 import ardupilotmega as M
 
 from protocol.text import printable
-from planner_service.service.link import (ArmedChanged, Connected, Landed, LinkEvent, ModeChanged, PositionChanged, Restarted,
+from planner_service.service.link import (ArmedChanged, Connected, OnGround, LinkEvent, ModeChanged, PositionChanged, Restarted,
                                           StatusText, TelemetryMissing)
 from planner_service.service.link.state import DERIVED, SILENCE_S, VehicleState
 from planner_service.service.link.streams import (MISSING_AFTER_S, REREQUEST_S, UNAVAILABLE_AFTER_S, Streams,
@@ -209,7 +209,7 @@ def test_forged_messages_from_another_component_change_nothing() -> None:
         assert not feed(state, msg, (1, 2))
     assert not state.on_heartbeat(1, 2, heartbeat(mode=6))  # RTL, says another component
     assert state.telemetry == before and state.untrusted == len(forged) + 1
-    assert [e for e in events if isinstance(e, (Restarted, Landed, StatusText, ModeChanged))] == []
+    assert [e for e in events if isinstance(e, (Restarted, OnGround, StatusText, ModeChanged))] == []
 
 
 def test_a_restart_is_believed_only_on_reports_spread_over_time() -> None:
@@ -294,7 +294,7 @@ def test_landed_state_is_derived_and_said_so_where_the_autopilot_gives_none() ->
         clock.now += 1.0
         boot += 1000
         feed(state, position(boot, alt_mm, 0))
-    assert not state.telemetry.airborne and Landed(DERIVED) in events
+    assert not state.telemetry.airborne and OnGround(DERIVED) in events
 
 
 def test_the_position_event_says_what_is_awaited() -> None:

@@ -18,7 +18,7 @@ import pytest
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavutil  # noqa: E402
 
-from planner_service.service.link import (Current, Landed, LinkEvent, LinkSettings, ModeChanged, Reached,  # noqa: E402
+from planner_service.service.link import (Current, OnGround, LinkEvent, LinkSettings, ModeChanged, Reached,  # noqa: E402
                                           Restarted, open_link)
 from planner_service.service.processes import free_port  # noqa: E402
 
@@ -100,7 +100,7 @@ def test_forged_datagrams_from_another_component_change_nothing(backend: str) ->
             await link.close()
 
     forged, (before, after), untrusted = asyncio.run(run())
-    assert [e for e in forged if isinstance(e, (Restarted, Reached, Landed, ModeChanged, Current))] == []
+    assert [e for e in forged if isinstance(e, (Restarted, Reached, OnGround, ModeChanged, Current))] == []
     assert after.airborne and after.mode == "AUTO" and after.mission_seq == 3 and after.armed
     assert (after.lat_deg, after.lon_deg) == (before.lat_deg, before.lon_deg) != (0.0, 0.0)
     assert after.position_boot_s is not None and before.position_boot_s is not None

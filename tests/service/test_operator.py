@@ -11,7 +11,7 @@ import pytest
 
 from planner_service.model import preset
 from planner_service.service.operator import OperatorGate, read_command, reply_for
-from planner_service.service.sortie import Authority, Rules, SortieLogic, Vehicle, new_sortie
+from planner_service.service.sortie import Authority, Rules, SortieLogic, VehicleSnapshot, new_sortie
 from planner_service.service.sortie import effects as fx
 from planner_service.service.sortie import inputs as ins
 from protocol import (Area, ErrorReply, GeoOrigin, Keys, OperatorCommand, OperatorReply, PendingRequest, State, Status,
@@ -37,15 +37,15 @@ class NoRequests:
 
 
 LOGIC = SortieLogic(Rules(preset("field"), GeoOrigin(), Area(500.0, 120.0, 10.0)), NoRequests())
-READY = Vehicle(connected=True, position_ok=True, boot_s=1.0, landed_known=True, mode="STABILIZE",
+READY = VehicleSnapshot(connected=True, position_ok=True, boot_s=1.0, landed_known=True, mode="STABILIZE",
                 battery_fraction=0.9, battery_source="autopilot", time_rate=1.0)
 NONE = new_sortie(1, LOGIC.rules)
 GIVEN = replace(NONE, authority=Authority.by_operator())
 REVOKED = replace(NONE, authority=GIVEN.authority.revoke("mode changed to LOITER"))
 
 
-def operator(state, command: str, reason: str = "", v: Vehicle = READY):  # type: ignore[no-untyped-def]
-    return LOGIC.operator(state, ins.OperatorCommand(command, reason), v, 0.0)  # type: ignore[arg-type]
+def operator(state, command: str, reason: str = "", v: VehicleSnapshot = READY):  # type: ignore[no-untyped-def]
+    return LOGIC.operator(state, ins.OperatorAsked(command, reason), v, 0.0)  # type: ignore[arg-type]
 
 
 def sent(reply: OperatorReply | ErrorReply) -> OperatorReply | ErrorReply:
@@ -75,7 +75,7 @@ def test_start_after_a_revocation_gives_it_back_and_twice_is_harmless() -> None:
 
 @pytest.mark.parametrize("state, vehicle, words", [
     (replace(NONE, degraded="the status task failed"), READY, "degraded: the status task failed"),
-    (NONE, Vehicle(), "not connected"),
+    (NONE, VehicleSnapshot(), "not connected"),
     (NONE, replace(READY, position_ok=False), "no position"),
     (NONE, replace(READY, battery_fraction=None, battery_source="unknown"), "battery's charge is unknown"),
     (NONE, replace(READY, battery_fraction=0.5, battery_source="model"), "battery's charge is model"),

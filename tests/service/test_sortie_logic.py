@@ -6,13 +6,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, replace
+from typing import get_args
 
 import pytest
 
 from planner_service.model import preset
 from planner_service.service.rows import RequestRow
 from planner_service.service.planning import PlannedPath, PlannedPoint
-from planner_service.service.sortie import Rules, Sortie, SortieLogic, Vehicle, new_sortie
+from planner_service.service.sortie import Rules, Sortie, SortieLogic, VehicleSnapshot, new_sortie
 from planner_service.service.sortie import effects as fx
 from planner_service.service.sortie import inputs as ins
 from planner_service.service.sortie.authority import Authority, next_sortie
@@ -58,7 +59,7 @@ def rules(**kw: object) -> Rules:
     return Rules(SCENARIO, GeoOrigin(), Area(500.0, 120.0, 10.0), start_mission=True, **kw)  # type: ignore[arg-type]
 
 
-GROUND = Vehicle(connected=True, position_ok=True, xyz=(0.0, 0.0, 0.0), boot_s=1.0, landed_known=True,
+GROUND = VehicleSnapshot(connected=True, position_ok=True, xyz=(0.0, 0.0, 0.0), boot_s=1.0, landed_known=True,
                  mode="STABILIZE", battery_fraction=1.0, battery_source="autopilot", time_rate=1.0)
 
 
@@ -98,7 +99,7 @@ def fly_to_first_point(world: FakeWorld) -> tuple[Run, fx.Upload]:
     world.ask("b", 320.0, 200.0, 12, 2)
     run = Run(world)
     out = run.tick()
-    (plan,) = only(out, fx.Plan)
+    (plan,) = only(out, fx.MakePlan)
     assert plan.basis.keep_through is None
     out = run.feed(ins.Planned(plan.basis, path(point(3, 120.0, 200.0, "a", 1), point(7, 320.0, 200.0, "b", 2))))
     (up,) = only(out, fx.Upload)
@@ -120,7 +121,7 @@ def test_a_sortie_records_only_holds_the_vehicle_was_seen_at() -> None:
     assert run.s.watch is not None and run.s.watch.phase == "approaching"
     # Arrives: the request in force is bound and the next point is decided from there.
     out = run.tick(seq=2, xyz=(119.0, 200.5, 100.0), boot_s=12.0)
-    (plan,) = only(out, fx.Plan)
+    (plan,) = only(out, fx.MakePlan)
     assert plan.basis.keep_through == 2 and plan.basis.serving == "a" and plan.basis.at_point.hover_index == 3
     assert plan.basis.serving_reward == 0.4, "the planned q of the planned tasks, as the hold's end records it"
     assert run.s.binding.request_id == 1 and run.s.binding.planned
@@ -186,8 +187,8 @@ def test_nothing_is_planned_while_the_vehicles_clock_rate_is_unknown() -> None:
     world = FakeWorld()
     run, _ = fly_to_first_point(world)
     out = run.tick(seq=2, xyz=(120.0, 200.0, 100.0), boot_s=20.0, time_rate=None)
-    assert run.s.watch.phase == "holding" and not only(out, fx.Plan)
-    (plan,) = only(run.tick(seq=2, xyz=(120.0, 200.0, 100.0), boot_s=21.0, time_rate=80.0), fx.Plan)
+    assert run.s.watch.phase == "holding" and not only(out, fx.MakePlan)
+    (plan,) = only(run.tick(seq=2, xyz=(120.0, 200.0, 100.0), boot_s=21.0, time_rate=80.0), fx.MakePlan)
     out = run.feed(ins.Planned(plan.basis, path(point(9, 400.0, 300.0, "b", 2))), time_rate=None)
     assert not only(out, fx.Upload) and run.s.dirty
 
@@ -196,7 +197,7 @@ def test_a_hold_longer_than_needed_ends_once_the_next_decision_is_on_board() -> 
     world = FakeWorld()
     run, _ = fly_to_first_point(world)
     out = run.tick(seq=2, xyz=(120.0, 200.0, 100.0), boot_s=20.0)
-    (plan,) = only(out, fx.Plan)
+    (plan,) = only(out, fx.MakePlan)
     needed = run.s.binding.needed_s
     run.tick(seq=2, boot_s=20.0 + needed + 1)
     assert not only(run.effects, fx.Command)[1:], "no early end before the replacement is uploaded"
@@ -213,15 +214,15 @@ def test_a_hold_is_not_ended_early_without_the_authority_or_degraded(after: str)
     # the authority, and in the degraded state.
     world = FakeWorld()
     run, _ = fly_to_first_point(world)
-    (plan,) = only(run.tick(seq=2, xyz=(120.0, 200.0, 100.0), boot_s=20.0), fx.Plan)
+    (plan,) = only(run.tick(seq=2, xyz=(120.0, 200.0, 100.0), boot_s=20.0), fx.MakePlan)
     needed = run.s.binding.needed_s
     (up,) = only(run.feed(ins.Planned(plan.basis, path(point(9, 400.0, 300.0, "b", 2)))), fx.Upload)
     run.feed(ins.Uploaded(up, 2))
     if after == "the journal failed":
-        run.feed(ins.Degraded("the journal failed"))
+        run.feed(ins.PartFailed("the journal failed"))
     else:
-        run.feed(ins.ModeChanged("LOITER"), mode="LOITER")
-        run.feed(ins.ModeChanged("AUTO"), mode="AUTO")
+        run.feed(ins.ModeChanged("LOITER", commanded=False), mode="LOITER")
+        run.feed(ins.ModeChanged("AUTO", commanded=False), mode="AUTO")
     out = run.tick(seq=2, boot_s=20.0 + needed + 2)
     assert not only(out, fx.Command), after
 
@@ -229,8 +230,8 @@ def test_a_hold_is_not_ended_early_without_the_authority_or_degraded(after: str)
 def test_restart_read_back_and_a_lost_mission_resumed_from_where_it_is() -> None:
     world = FakeWorld()
     run, up = fly_to_first_point(world)
-    (searching,) = only(run.tick(seq=2, xyz=(120.0, 200.0, 100.0), boot_s=20.0), fx.Plan)
-    out = run.feed(ins.VehicleRestarted("its clock went back"), boot_s=1.0, mode="LOITER", seq=0)
+    (searching,) = only(run.tick(seq=2, xyz=(120.0, 200.0, 100.0), boot_s=20.0), fx.MakePlan)
+    out = run.feed(ins.Restarted("its clock went back"), boot_s=1.0, mode="LOITER", seq=0)
     assert [e.event.kind for e in only(out, fx.Emit)][:2] == ["authority_revoked", "vehicle_restarted"]
     assert not only(out, fx.RecordService), "a hold of no measurable length serves nothing"
     # The decision being searched was made on the mission the restart lost: dropped.
@@ -240,15 +241,18 @@ def test_restart_read_back_and_a_lost_mission_resumed_from_where_it_is() -> None
     assert run.s.authority.state == "revoked", "a restart ends the authority"
     out = run.feed(ins.ReadBackDone((), 3))  # the mission is gone
     assert run.s.must_upload and run.s.resume_pending
-    (plan,) = only(out, fx.Plan)
+    (plan,) = only(out, fx.MakePlan)
     assert plan.basis.keep_through is None and plan.basis.reason == "the vehicle lost its mission"
     (up2,) = only(run.feed(ins.Planned(plan.basis, path(point(7, 320.0, 200.0, "b", 2)))), fx.Upload)
     assert up2.current_seq == 2, "a fresh mission in the air is flown from its first point"
     out = run.feed(ins.Uploaded(up2, 4))
     assert not only(out, fx.Command), "the mission is on board; only the operator resumes it"
-    run.s, out, ok, _ = run.logic.operator(run.s, ins.OperatorCommand("start"), run.v, run.now)
+    (asked,) = [e.event for e in only(out, fx.Emit) if e.event.kind == "resume_needed"]
+    assert "plan 2" in asked.detail and "LOITER" in asked.detail, asked.detail
+    assert not any(e.event.kind == "resume_needed" for e in only(run.tick(), fx.Emit)), "told once"
+    run.s, out, ok, _ = run.logic.operator(run.s, ins.OperatorAsked("start"), run.v, run.now)
     assert ok and run.s.authority.granted
-    (plan,) = only(out, fx.Plan)  # from where the vehicle is now, then resumed
+    (plan,) = only(out, fx.MakePlan)  # from where the vehicle is now, then resumed
     (up3,) = only(run.feed(ins.Planned(plan.basis, path(point(7, 320.0, 200.0, "b", 2)))), fx.Upload)
     (cmd,) = only(run.feed(ins.Uploaded(up3, 4)), fx.Command)
     assert (cmd.kind, cmd.seq) == ("resume", 2)
@@ -262,20 +266,20 @@ def test_a_hold_found_under_way_is_left_to_the_autopilot() -> None:
     run.s = replace(run.s, watch=None)
     out = run.tick(seq=2, xyz=(120.0, 200.0, 100.0), boot_s=20.0)
     assert run.s.watch.phase == "holding" and not run.s.watch.approached
-    assert not only(out, fx.Plan) and not only(run.tick(seq=2, boot_s=25.0), fx.Plan)
+    assert not only(out, fx.MakePlan) and not only(run.tick(seq=2, boot_s=25.0), fx.MakePlan)
 
 
 def test_a_link_gap_read_back_as_ours_keeps_the_hold() -> None:
     world = FakeWorld()
     run, up = fly_to_first_point(world)
-    (searching,) = only(run.tick(seq=2, xyz=(120.0, 200.0, 100.0), boot_s=20.0), fx.Plan)
-    run.feed(ins.LinkRestored("AUTO"))
+    (searching,) = only(run.tick(seq=2, xyz=(120.0, 200.0, 100.0), boot_s=20.0), fx.MakePlan)
+    run.feed(ins.Restored("AUTO"))
     out = run.feed(ins.Planned(searching.basis, path(point(9, 400.0, 300.0, "b", 2))))
     (rb,) = only(out, fx.ReadBack)
     out = run.feed(ins.ReadBackDone(up.items, 3))
     assert run.s.held_gen == 3 and run.s.watch is not None and run.s.watch.phase == "holding"
     # The decision dropped during the doubt is made again from the point.
-    (plan,) = only(out, fx.Plan)
+    (plan,) = only(out, fx.MakePlan)
     assert plan.basis.keep_through == 2
 
 
@@ -285,7 +289,7 @@ def test_holds_flown_while_in_doubt_are_judged_once_the_read_back_shows_our_miss
     # the doubt are kept and judged once the vehicle is known to fly our mission.
     world = FakeWorld()
     run, up = fly_to_first_point(world)
-    (rb,) = only(run.feed(ins.LinkRestored("AUTO")), fx.ReadBack)
+    (rb,) = only(run.feed(ins.Restored("AUTO")), fx.ReadBack)
     for t in range(10, 80):  # the whole hold at point 3 (item 2), in doubt
         run.tick(seq=2, xyz=(120.0, 200.0, 100.0), boot_s=float(t))
     run.tick(seq=3, xyz=(160.0, 200.0, 100.0), boot_s=82.0)  # and on to item 3
@@ -299,9 +303,9 @@ def test_holds_flown_while_in_doubt_are_judged_once_the_read_back_shows_our_miss
 def test_reports_in_doubt_are_judged_against_the_upload_that_went_through() -> None:
     world = FakeWorld()
     run, _ = fly_to_first_point(world)
-    (plan,) = only(run.tick(seq=2, xyz=(120.0, 200.0, 100.0), boot_s=10.0), fx.Plan)
+    (plan,) = only(run.tick(seq=2, xyz=(120.0, 200.0, 100.0), boot_s=10.0), fx.MakePlan)
     (up,) = only(run.feed(ins.Planned(plan.basis, path(point(9, 400.0, 300.0, "b", 2)))), fx.Upload)
-    run.feed(ins.UploadFailed(up, "no ACK", outcome_unknown=True))
+    run.feed(ins.NotUploaded(up, "no ACK", outcome_unknown=True))
     for t in range(11, 80):
         run.tick(seq=2, xyz=(120.0, 200.0, 100.0), boot_s=float(t))
     run.tick(seq=3, xyz=(160.0, 210.0, 100.0), boot_s=82.0)  # item 3: point 7 before, point 9 now
@@ -318,7 +322,7 @@ def test_holds_flown_while_an_upload_waits_for_its_ack_are_judged_against_the_mi
     # points were judged against plan 1's (never reached: skipped): 2 services of 5 holds.
     world = FakeWorld()
     run, _ = fly_to_first_point(world)
-    (plan,) = only(run.tick(seq=2, xyz=(120.0, 200.0, 100.0), boot_s=10.0), fx.Plan)
+    (plan,) = only(run.tick(seq=2, xyz=(120.0, 200.0, 100.0), boot_s=10.0), fx.MakePlan)
     (up,) = only(run.feed(ins.Planned(plan.basis, path(point(9, 400.0, 300.0, "b", 2)))), fx.Upload)
     for t in range(11, 60):  # the rest of the hold at point 3
         run.tick(seq=2, xyz=(120.0, 200.0, 100.0), boot_s=float(t))
@@ -333,7 +337,7 @@ def test_holds_flown_while_an_upload_waits_for_its_ack_are_judged_against_the_mi
 def test_reports_in_doubt_count_for_nothing_when_the_vehicle_holds_another_mission() -> None:
     world = FakeWorld()
     run, up = fly_to_first_point(world)
-    run.feed(ins.LinkRestored("AUTO"))
+    run.feed(ins.Restored("AUTO"))
     for t in range(10, 80):
         run.tick(seq=2, xyz=(120.0, 200.0, 100.0), boot_s=float(t))
     out = run.feed(ins.ReadBackDone(up.items[:2], 3))  # not ours: nothing it flew is ours to record
@@ -354,7 +358,7 @@ def test_another_stations_mission_ends_the_authority_and_is_left_alone() -> None
     out = run.feed(ins.ReadBackDone(theirs, 3))
     assert run.s.authority.state == "revoked" and "not ours" in run.s.authority.detail
     assert run.s.held is None and not run.s.must_upload and not run.s.resume_pending
-    assert not only(out, fx.Plan) and not only(run.tick(seq=2, mission_total=3, boot_s=11.0), fx.Plan), \
+    assert not only(out, fx.MakePlan) and not only(run.tick(seq=2, mission_total=3, boot_s=11.0), fx.MakePlan), \
         "another station's mission is not replaced"
 
 
@@ -370,20 +374,20 @@ def test_a_count_a_read_back_showed_to_be_ours_doubts_nothing_again() -> None:
 def test_uncommanded_mode_change_ends_authority_and_no_command_follows() -> None:
     world = FakeWorld()
     run, _ = fly_to_first_point(world)
-    out = run.feed(ins.ModeChanged("LOITER"), mode="LOITER")
+    out = run.feed(ins.ModeChanged("LOITER", commanded=False), mode="LOITER")
     assert [e.event.kind for e in only(out, fx.Emit)] == ["authority_revoked"]
     assert run.s.authority.state == "revoked"
     out = run.tick(battery_fraction=0.05)  # the battery guard would fire with authority
     assert not only(out, fx.Command)
     out = run.tick(seq=2, xyz=(120.0, 200.0, 100.0), boot_s=20.0)
-    assert not only(out, fx.Plan), "the pilot has the vehicle: no plans for a mission it does not fly"
+    assert not only(out, fx.MakePlan), "the pilot has the vehicle: no plans for a mission it does not fly"
 
 
 def test_a_pilots_landing_ends_the_sortie_and_the_next_never_arms() -> None:
     world = FakeWorld()
     run, _ = fly_to_first_point(world)
-    run.feed(ins.ModeChanged("LAND"), mode="LAND")
-    run.feed(ins.Landed(), airborne=False)
+    run.feed(ins.ModeChanged("LAND", commanded=False), mode="LAND")
+    run.feed(ins.OnGround("EXTENDED_SYS_STATE"), airborne=False)
     assert run.s.over == "the vehicle landed"
     out = run.tick(armed=False)
     (begin,) = only(out, fx.BeginSortie)
@@ -392,12 +396,12 @@ def test_a_pilots_landing_ends_the_sortie_and_the_next_never_arms() -> None:
     assert run.s.number == 2 and run.s.authority.state == "none"
     world.ask("c", 200.0, 200.0, 9, 3)
     out = run.feed(ins.RequestIn("c", 9))
-    (plan,) = only(out, fx.Plan)
+    (plan,) = only(out, fx.MakePlan)
     (up,) = only(run.feed(ins.Planned(plan.basis, path(point(5, 200.0, 200.0, "c", 3)))), fx.Upload)
     out = run.feed(ins.Uploaded(up, 5))
     out += run.tick()
     assert not only(out, fx.Command), "no arming after a landing the service did not command"
-    s, out, ok, reply = run.logic.operator(run.s, ins.OperatorCommand("start"), run.v, run.now)
+    s, out, ok, reply = run.logic.operator(run.s, ins.OperatorAsked("start"), run.v, run.now)
     assert ok and only(out, fx.Command)[0].kind == "start"
 
 
@@ -407,16 +411,16 @@ def test_after_its_own_landing_the_next_sortie_waits_for_the_operator() -> None:
     world = FakeWorld()
     run, _ = fly_to_first_point(world)
     run.feed(ins.ModeChanged("RTL", commanded=True), mode="RTL")
-    run.feed(ins.ArmedChanged(False), armed=False, xyz=(0.0, 0.0, 0.3))
-    run.feed(ins.Landed(), airborne=False)  # reported after the disarming
+    run.feed(ins.ArmedChanged(False, commanded=False), armed=False, xyz=(0.0, 0.0, 0.3))
+    run.feed(ins.OnGround("EXTENDED_SYS_STATE"), airborne=False)  # reported after the disarming
     run.tick()
     assert run.s.authority.granted, "the autopilot's disarming on touching down at our return"
-    (plan,) = only(run.feed(ins.SortieBegun(2)), fx.Plan)
+    (plan,) = only(run.feed(ins.SortieBegun(2)), fx.MakePlan)
     assert run.s.authority.state == "none"
     (up,) = only(run.feed(ins.Planned(plan.basis, path(point(5, 200.0, 200.0, "c", 3)))), fx.Upload)
     out = run.feed(ins.Uploaded(up, 5)) + run.tick()
     assert not only(out, fx.Command), "no arming before the operator's start"
-    s, out, ok, _ = run.logic.operator(run.s, ins.OperatorCommand("start"), run.v, run.now)
+    s, out, ok, _ = run.logic.operator(run.s, ins.OperatorAsked("start"), run.v, run.now)
     assert ok and only(out, fx.Command)[0].kind == "start"
 
 
@@ -434,7 +438,7 @@ def test_an_arming_or_disarming_the_service_did_not_command_ends_the_authority(
         world.ask("a", 120.0, 200.0, 10, 1)
         run = Run(world)
         run.tick(armed=not armed)
-    out = run.feed(ins.ArmedChanged(armed), armed=armed, airborne=airborne, xyz=xyz)
+    out = run.feed(ins.ArmedChanged(armed, commanded=False), armed=armed, airborne=airborne, xyz=xyz)
     assert run.s.authority.state == "revoked", why
     assert "authority_revoked" in [e.event.kind for e in only(out, fx.Emit)]
     assert ("armed" if armed else "disarmed") in run.s.authority.detail
@@ -452,7 +456,7 @@ def test_the_services_own_arming_and_its_landings_disarming_keep_the_authority()
     assert run.s.authority.on_arming(False, commanded=False, landing=False).state == "revoked"
     # At the mission's return item: the touchdown's disarming, its report within 2 s.
     rtl = run.s.held.rtl_seq
-    run.feed(ins.ArmedChanged(False), armed=False, seq=rtl, xyz=(0.0, 0.0, 0.5))
+    run.feed(ins.ArmedChanged(False, commanded=False), armed=False, seq=rtl, xyz=(0.0, 0.0, 0.5))
     run.now += 1.5
     run.tick(airborne=False)
     run.now += 5.0
@@ -460,15 +464,15 @@ def test_the_services_own_arming_and_its_landings_disarming_keep_the_authority()
     assert run.s.authority.granted
     # Reported landed first at the return item, then disarmed: the landing's.
     run2, _ = fly_to_first_point(FakeWorld())
-    run2.feed(ins.Landed(), airborne=False, seq=run2.s.held.rtl_seq, xyz=(0.0, 0.0, 0.1))
-    run2.feed(ins.ArmedChanged(False), armed=False)
+    run2.feed(ins.OnGround("EXTENDED_SYS_STATE"), airborne=False, seq=run2.s.held.rtl_seq, xyz=(0.0, 0.0, 0.1))
+    run2.feed(ins.ArmedChanged(False, commanded=False), armed=False)
     assert run2.s.authority.granted
 
 
 def test_a_disarming_on_the_way_home_not_followed_by_a_landing_is_nobodys() -> None:
     world = FakeWorld()
     run, _ = fly_to_first_point(world)
-    run.feed(ins.ArmedChanged(False), armed=False, seq=run.s.held.rtl_seq, xyz=(50.0, 50.0, 60.0))
+    run.feed(ins.ArmedChanged(False, commanded=False), armed=False, seq=run.s.held.rtl_seq, xyz=(50.0, 50.0, 60.0))
     run.now += 1.0
     run.tick()
     assert run.s.authority.granted, "its landing's report may still come"
@@ -483,9 +487,9 @@ def test_a_disarming_in_the_air_reported_landed_first_is_not_a_landing() -> None
     # EXTENDED_SYS_STATE may reach the service before the heartbeat showing the disarming.
     world = FakeWorld()
     run, _ = fly_to_first_point(world)
-    run.feed(ins.Landed(), airborne=False, xyz=(30.0, 50.0, 40.0))
+    run.feed(ins.OnGround("EXTENDED_SYS_STATE"), airborne=False, xyz=(30.0, 50.0, 40.0))
     assert run.s.over is not None
-    run.feed(ins.ArmedChanged(False), armed=False)
+    run.feed(ins.ArmedChanged(False, commanded=False), armed=False)
     assert run.s.authority.state == "revoked", "away from the mission's return: not ours"
 
 
@@ -503,10 +507,10 @@ def test_unknown_battery_neither_plans_nor_arms() -> None:
     world.ask("a", 120.0, 200.0, 10, 1)
     run = Run(world)
     out = run.tick(battery_fraction=None, battery_source="unknown")
-    assert not only(out, fx.Plan)
+    assert not only(out, fx.MakePlan)
     # A fallback estimate from the model plans, but arming waits for a reading.
     out = run.tick(battery_fraction=0.9, battery_source="model")
-    (plan,) = only(out, fx.Plan)
+    (plan,) = only(out, fx.MakePlan)
     (up,) = only(run.feed(ins.Planned(plan.basis, path(point(3, 120.0, 200.0, "a", 1)))), fx.Upload)
     out = run.feed(ins.Uploaded(up, 1))
     assert not only(out, fx.Command)
@@ -522,15 +526,15 @@ def test_failed_uploads_back_off_and_stop_after_the_bound() -> None:
     for n in range(3):
         run.now = max(run.now, run.s.retry_at)
         out = run.tick()
-        (plan,) = only(out, fx.Plan)
+        (plan,) = only(out, fx.MakePlan)
         (up,) = only(run.feed(ins.Planned(plan.basis, path(point(3, 120.0, 200.0, "a", 1)))), fx.Upload)
-        run.feed(ins.UploadFailed(up, "NO_ANSWER"))
+        run.feed(ins.NotUploaded(up, "NO_ANSWER"))
         waits.append(run.s.retry_at - run.now)
     assert waits[0] == pytest.approx(1.0, abs=0.1) and waits[1] == pytest.approx(2.0, abs=0.1)
     assert math.isinf(run.s.retry_at)
     assert "upload_abandoned" in [e.event.kind for e in only(run.effects, fx.Emit)]
     run.now += 100.0
-    assert not only(run.tick(), fx.Plan)
+    assert not only(run.tick(), fx.MakePlan)
     run.feed(ins.RequestIn("a", 11))
     assert run.s.failures == 0
 
@@ -538,7 +542,7 @@ def test_failed_uploads_back_off_and_stop_after_the_bound() -> None:
 def test_operator_hold_releases_authority() -> None:
     world = FakeWorld()
     run, _ = fly_to_first_point(world)
-    s, out, ok, reply = run.logic.operator(run.s, ins.OperatorCommand("hold"), run.v, run.now)
+    s, out, ok, reply = run.logic.operator(run.s, ins.OperatorAsked("hold"), run.v, run.now)
     assert ok and only(out, fx.Command)[0].kind == "hold" and s.authority.state == "none"
 
 
@@ -546,7 +550,7 @@ def test_a_backlog_grown_since_the_plan_lengthens_the_hold_it_is_bound_to() -> N
     world = FakeWorld()
     run, _ = fly_to_first_point(world)
     world.ask("a", 120.0, 200.0, 20, 5)  # twice the tasks the plan saw, before the vehicle arrives
-    (plan,) = only(run.tick(seq=2, xyz=(120.0, 200.0, 100.0), boot_s=20.0), fx.Plan)
+    (plan,) = only(run.tick(seq=2, xyz=(120.0, 200.0, 100.0), boot_s=20.0), fx.MakePlan)
     b = run.s.binding
     assert (b.request_id, b.tasks, b.planned) == (5, 20, False)
     assert b.needed_s > 60.0, "the planned 60 s hold cannot carry 20 tasks"
@@ -565,7 +569,7 @@ def test_a_hold_the_battery_cannot_carry_is_cut_to_what_keeps_the_reserve() -> N
     world = FakeWorld()
     run, _ = fly_to_first_point(world)
     world.ask("a", 120.0, 200.0, 100, 5)
-    (plan,) = only(run.tick(seq=2, xyz=(120.0, 200.0, 100.0), boot_s=20.0), fx.Plan)
+    (plan,) = only(run.tick(seq=2, xyz=(120.0, 200.0, 100.0), boot_s=20.0), fx.MakePlan)
     bound = plan.basis.at_point.hold_s
     assert bound >= run.s.binding.needed_s > 300.0
     home = PlannedPath((), 4000.0, SCENARIO.energy_floor_j - 2000.0, "the energy reserve")
@@ -580,9 +584,9 @@ def test_a_restart_never_gives_back_an_authority_the_pilot_ended() -> None:
     # LOITER gave the authority back: the service switched the vehicle to AUTO again.
     world = FakeWorld()
     run, _ = fly_to_first_point(world)
-    run.feed(ins.ModeChanged("LOITER"), mode="LOITER", boot_s=1.0)
+    run.feed(ins.ModeChanged("LOITER", commanded=False), mode="LOITER", boot_s=1.0)
     assert run.s.authority.state == "revoked"
-    out = run.feed(ins.VehicleRestarted("its clock went back"))
+    out = run.feed(ins.Restarted("its clock went back"))
     assert run.s.authority.state == "revoked" and "authority_granted" not in [e.event.kind for e in only(out, fx.Emit)]
     assert not only(run.effects[-len(out):], fx.Command)
 
@@ -592,7 +596,7 @@ def test_a_restart_ends_the_authority_and_after_it_any_mode_change_is_unexplaine
     # mode expected was unset, and unset explained every change.
     world = FakeWorld()
     run, _ = fly_to_first_point(world)
-    out = run.feed(ins.VehicleRestarted("its clock went back"))
+    out = run.feed(ins.Restarted("its clock went back"))
     assert run.s.authority.state == "revoked" and "authority_revoked" in [e.event.kind for e in only(out, fx.Emit)]
     given = Authority.by_operator("again")
     assert given.on_mode("LOITER", armed=True, mission_return=False).state == "revoked", "expected unknown"
@@ -606,10 +610,10 @@ def test_a_restart_that_landed_the_vehicle_leaves_the_next_sortie_to_the_operato
     # the restart is judged first.
     world = FakeWorld()
     run, _ = fly_to_first_point(world)
-    run.feed(ins.ModeChanged("STABILIZE"), mode="STABILIZE", boot_s=1.0)
-    run.feed(ins.Landed(), airborne=False, armed=False)
+    run.feed(ins.ModeChanged("STABILIZE", commanded=False), mode="STABILIZE", boot_s=1.0)
+    run.feed(ins.OnGround("EXTENDED_SYS_STATE"), airborne=False, armed=False)
     assert run.s.over is not None and run.s.authority.state == "revoked"
-    run.feed(ins.VehicleRestarted("its clock went back"))
+    run.feed(ins.Restarted("its clock went back"))
     run.tick()
     run.feed(ins.SortieBegun(2))
     assert not run.s.authority.granted, run.s.authority
@@ -653,7 +657,7 @@ def test_a_mission_on_the_ground_starts_at_its_takeoff_after_a_sortie() -> None:
     world.ask("a", 120.0, 200.0, 10, 1)
     run = Run(world)
     run.v = replace(run.v, seq=6)
-    (plan,) = only(run.tick(), fx.Plan)
+    (plan,) = only(run.tick(), fx.MakePlan)
     (up,) = only(run.feed(ins.Planned(plan.basis, path(point(3, 120.0, 200.0, "a", 1)))), fx.Upload)
     assert up.current_seq == 1
 
@@ -673,7 +677,7 @@ def test_the_user_served_is_the_models_choice_at_arrival() -> None:
 def test_a_user_done_early_ends_the_hold_but_not_the_physics() -> None:
     world = FakeWorld()
     run, _ = fly_to_first_point(world)
-    (plan,) = only(run.tick(seq=2, xyz=(120.0, 200.0, 100.0), boot_s=20.0), fx.Plan)
+    (plan,) = only(run.tick(seq=2, xyz=(120.0, 200.0, 100.0), boot_s=20.0), fx.MakePlan)
     (up,) = only(run.feed(ins.Planned(plan.basis, path(point(9, 400.0, 300.0, "b", 2)))), fx.Upload)
     run.feed(ins.Uploaded(up, 2))
     needed = run.s.binding.needed_s
@@ -694,15 +698,15 @@ def test_on_the_way_home_a_new_request_is_decided_on_only_if_the_battery_allows_
     run.tick(seq=rtl, xyz=(200.0, 150.0, 100.0), boot_s=60.0, battery_fraction=0.105)  # flying home
     run.now += 2.0
     world.ask("c", 300.0, 300.0, 10, 9)
-    assert not only(run.feed(ins.RequestIn("c", 10)) + run.tick(), fx.Plan)
-    assert not only(run.tick(), fx.Plan), "nor at a later tick"
+    assert not only(run.feed(ins.RequestIn("c", 10)) + run.tick(), fx.MakePlan)
+    assert not only(run.tick(), fx.MakePlan), "nor at a later tick"
     world.ask("d", 250.0, 200.0, 10, 10)
     before = run.s
-    (plan,) = only(run.feed(ins.RequestIn("d", 10), battery_fraction=0.6), fx.Plan)
+    (plan,) = only(run.feed(ins.RequestIn("d", 10), battery_fraction=0.6), fx.MakePlan)
     assert plan.basis.reason == "new requests on the way home" and plan.basis.keep_through == rtl - 1
     # the configured margin is the planner's too: 50 % of the battery kept back leaves nothing
     run.s, run.logic = before, SortieLogic(rules(energy_margin_j=0.5 * SCENARIO.battery_j), world)
-    assert not only(run.feed(ins.RequestIn("d", 10)), fx.Plan)
+    assert not only(run.feed(ins.RequestIn("d", 10)), fx.MakePlan)
 
 
 def _replacement_arriving_late(world: FakeWorld, then: PlannedPoint) -> tuple[Run, list[fx.Effect]]:
@@ -712,7 +716,7 @@ def _replacement_arriving_late(world: FakeWorld, then: PlannedPoint) -> tuple[Ru
     then, against the mission it took (it may have flown the new one before its ACK came)."""
     run, _ = fly_to_first_point(world)
     out = run.tick(seq=2, xyz=(120.0, 200.0, 100.0), boot_s=12.0)
-    (plan,) = only(out, fx.Plan)
+    (plan,) = only(out, fx.MakePlan)
     (up,) = only(run.feed(ins.Planned(plan.basis, path(then, point(9, 400.0, 300.0, "b", 2)))), fx.Upload)
     run.tick(seq=3, xyz=(200.0, 200.0, 100.0), boot_s=60.0)  # the autopilot's timer ended the hold
     run.tick(seq=3, xyz=(319.0, 200.0, 100.0), boot_s=70.0)
@@ -729,7 +733,7 @@ def test_a_replacement_that_flies_the_point_reached_meanwhile_keeps_its_hold() -
     world = FakeWorld()
     run, out = _replacement_arriving_late(world, point(7, 320.0, 200.0, "b", 2))
     assert run.s.watch.seq == 3 and run.s.watch.phase == "holding" and run.s.binding.user_id == "b"
-    (plan,) = only(out, fx.Plan)  # and decides from there at once
+    (plan,) = only(out, fx.MakePlan)  # and decides from there at once
     assert plan.basis.keep_through == 3 and plan.basis.at_point.hover_index == 7 and plan.basis.serving == "b"
     needed = run.s.binding.needed_s
     run.tick(seq=3, xyz=(320.0, 200.0, 100.0), boot_s=70.0 + needed)
@@ -752,9 +756,9 @@ def test_an_upload_failed_part_way_is_read_back_at_once_whatever_the_back_off() 
     # second of back-off is three points flown unrecorded.
     world = FakeWorld()
     run, _ = fly_to_first_point(world)
-    (plan,) = only(run.tick(seq=2, xyz=(120.0, 200.0, 100.0), boot_s=12.0), fx.Plan)
+    (plan,) = only(run.tick(seq=2, xyz=(120.0, 200.0, 100.0), boot_s=12.0), fx.MakePlan)
     (up,) = only(run.feed(ins.Planned(plan.basis, path(point(9, 400.0, 300.0, "b", 2)))), fx.Upload)
-    out = run.feed(ins.UploadFailed(up, "MAV_MISSION_OPERATION_CANCELLED"))
+    out = run.feed(ins.NotUploaded(up, "MAV_MISSION_OPERATION_CANCELLED"))
     assert run.s.retry_at > run.now, "the next plan still backs off"
     (read,) = only(out, fx.ReadBack)
     assert "failed part-way" in read.why
@@ -786,10 +790,10 @@ def test_nothing_is_planned_or_started_while_the_planner_warms_up() -> None:
     world.ask("a", 120.0, 200.0, 10, 1)
     run = Run(world)
     run.s = replace(run.s, warming=True)
-    assert not only(run.tick(), fx.Plan)
+    assert not only(run.tick(), fx.MakePlan)
     run.feed(ins.SortieBegun(run.s.number))  # (a sortie begun meanwhile keeps waiting)
     assert run.s.warming
-    (plan,) = only(run.feed(ins.WarmedUp()), fx.Plan)
+    (plan,) = only(run.feed(ins.WarmedUp()), fx.MakePlan)
     (up,) = only(run.feed(ins.Planned(plan.basis, path(point(3, 120.0, 200.0, "a", 1)))), fx.Upload)
     assert only(run.feed(ins.Uploaded(up, 1)), fx.Command)[0].kind == "start"
 
@@ -802,8 +806,43 @@ def test_a_disarming_after_the_mission_index_went_back_to_0_on_touching_down_is_
     rtl = run.s.held.rtl_seq
     run.tick(seq=rtl, xyz=(10.0, 10.0, 30.0), boot_s=30.0)  # on the way home
     run.tick(seq=0, xyz=(0.0, 0.0, 0.2), boot_s=40.0)
-    run.feed(ins.ArmedChanged(False), armed=False)
-    run.feed(ins.Landed(), airborne=False)
+    run.feed(ins.ArmedChanged(False, False), armed=False)
+    run.feed(ins.OnGround("EXTENDED_SYS_STATE"), airborne=False)
     run.now += 3.0
     run.tick()
     assert run.s.authority.granted, run.s.authority
+
+
+QUIET_REPORTS = [ins.Reached(2, 1), ins.Current(2, 5, 1), ins.PositionChanged(False, "a GPS fix"),
+                 ins.StatusText("EKF3 IMU0 is using GPS", 6), ins.TelemetryMissing(("BATTERY_STATUS",))]
+"""Link events the logic takes and that change nothing: it reads progress and position from
+the telemetry at each tick."""
+
+
+def test_every_link_event_is_an_input() -> None:
+    assert set(get_args(ins.LinkEvent)) <= set(get_args(ins.Input))
+    acting = {ins.Connected, ins.Lost, ins.Restored, ins.Restarted, ins.ModeChanged, ins.ArmedChanged, ins.OnGround}
+    assert acting | {type(r) for r in QUIET_REPORTS} == set(get_args(ins.LinkEvent))
+
+
+@pytest.mark.parametrize("report", QUIET_REPORTS, ids=lambda r: type(r).__name__)
+def test_reports_read_from_telemetry_change_nothing(report: ins.LinkEvent) -> None:
+    run, _ = fly_to_first_point(FakeWorld())
+    before = run.s
+    assert run.feed(report) == [] and run.s == before
+
+
+def test_a_refused_command_and_a_failed_part_are_announced() -> None:
+    world = FakeWorld()
+    world.ask("a", 120.0, 200.0, 10, 1)
+    world.ask("b", 320.0, 200.0, 12, 2)
+    run = Run(world)
+    (plan,) = only(run.tick(), fx.MakePlan)
+    (up,) = only(run.feed(ins.Planned(plan.basis, path(point(3, 120.0, 200.0, "a", 1)))), fx.Upload)
+    (start,) = only(run.feed(ins.Uploaded(up, 1)), fx.Command)
+    out = run.feed(ins.CommandNotDone(start, "MAV_RESULT_DENIED"))
+    assert [(e.event.kind, e.event.detail) for e in only(out, fx.Emit)] == [("command_failed",
+                                                                            "start: MAV_RESULT_DENIED")]
+    out = run.feed(ins.PartFailed("journal: disk full"))
+    assert [(e.event.kind, e.event.detail) for e in only(out, fx.Emit)] == [("degraded", "journal: disk full")]
+    assert run.s.degraded == "journal: disk full" and not only(run.tick(), fx.Command)

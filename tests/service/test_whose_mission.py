@@ -29,7 +29,7 @@ def test_a_mission_id_not_ours_reads_back_and_a_same_length_mission_ends_the_aut
     assert "0x1234abcd" in rb.why and "0x7d59a53b" in rb.why, rb.why
     run.feed(ins.ReadBackDone(moved(up.items), 3, THEIRS))
     assert run.s.authority.state == "revoked" and "not ours" in run.s.authority.detail
-    assert run.s.held is None and not only(run.tick(boot_s=11.0), fx.Plan), "theirs is not replaced"
+    assert run.s.held is None and not only(run.tick(boot_s=11.0), fx.MakePlan), "theirs is not replaced"
 
 
 def test_an_id_the_link_did_not_learn_is_read_back_once_then_known() -> None:

@@ -54,7 +54,7 @@ def test_a_service_the_journal_refuses_is_served_and_announced_once(tmp_path: Pa
     a, _ = journal.accept("a", 120.0, 200.0, 0.0, 10, None, T0)
     b, _ = journal.accept("b", 480.0, 480.0, 0.0, 12, None, T0)
     run = Run(world)  # type: ignore[arg-type]
-    (plan,) = only(run.tick(), fx.Plan)
+    (plan,) = only(run.tick(), fx.MakePlan)
     # two points near a: the second finds a served, or finds nobody
     out = run.feed(ins.Planned(plan.basis, path(point(3, 120.0, 200.0, "a", a), point(4, 125.0, 205.0, "a", a))))
     (up,) = only(out, fx.Upload)
@@ -66,7 +66,7 @@ def test_a_service_the_journal_refuses_is_served_and_announced_once(tmp_path: Pa
     refused = hold(run, world, 2, (120.0, 200.0, 100.0), 10.0)
     if fails:
         assert refused and "deleted" in refused[0], refused
-        run.feed(ins.Degraded(journal.failed or ""))
+        run.feed(ins.PartFailed(journal.failed or ""))
         assert world.services_of("a") == 1 and world.request_for("a") is None
         assert [r.user_id for r in world.pending()] == ["b"] and world.pending_count() == 1
     else:

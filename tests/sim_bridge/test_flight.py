@@ -11,7 +11,7 @@ from planner_service.model.energy import flight_energy_j
 from protocol.geodesy import GeoOrigin
 from protocol.mission import HoverPoint, encode_path, item_local
 from sim_bridge.vehicle.errors import VehicleError
-from sim_bridge.vehicle.events import BatteryLow, BatterySwapped, Disarmed, Landed, Reached
+from sim_bridge.vehicle.events import BatteryLow, BatterySwapped, Disarmed, TouchedDown, ItemComplete
 from sim_bridge.vehicle.flight import FALL_MPS, Flight
 from sim_bridge.vehicle.modes import Mode
 
@@ -45,7 +45,7 @@ def test_a_mission_costs_what_the_model_says(name: str, flavour: str) -> None:
     flight.set_mission(encode_path(points, ORIGIN, flavour))
     start(flight)
     events = fly(flight)
-    reached = [e.seq for e in events if isinstance(e, Reached)]
+    reached = [e.seq for e in events if isinstance(e, ItemComplete)]
     first = 1 if flavour == "ardupilot" else 0
     assert reached == list(range(first, len(flight.mission)))
     assert flight.landed and not flight.armed and flight.pos == [0.0, 0.0, 0.0]
@@ -81,7 +81,7 @@ def test_battery_threshold_returns_home_and_lands() -> None:
     flight.set_mission(encode_path([HoverPoint(400.0, 300.0, 50.0, 3000.0)], ORIGIN, "ardupilot"))
     start(flight)
     events = kinds(fly(flight))
-    assert BatteryLow in events and events.index(BatteryLow) < events.index(Landed)
+    assert BatteryLow in events and events.index(BatteryLow) < events.index(TouchedDown)
     assert flight.mode is Mode.RTL and flight.landed and flight.pos == [0.0, 0.0, 0.0]
     floor = scenario.battery_threshold * scenario.battery_j
     # It turned back at the threshold; the flight home costs what the model says.
@@ -106,7 +106,7 @@ def test_commands() -> None:
     assert flight.disarm() is not None
     flight.set_mode(Mode.LAND)
     events = flight.step(5.0)
-    assert kinds(events) == [Landed, Disarmed] and events[1].why == "landed"
+    assert kinds(events) == [TouchedDown, Disarmed] and events[1].why == "landed"
     assert math.isclose(flight.pos[2], 0.0)
 
 
@@ -122,9 +122,9 @@ def test_a_vehicle_disarmed_in_the_air_falls_and_lands() -> None:
     energy = flight.energy_j
     assert flight.disarm(force=True) is None and not flight.armed
     events = flight.step(1.0)
-    assert flight.pos[2] == pytest.approx(30.0 - FALL_MPS) and not flight.landed and Landed not in kinds(events)
+    assert flight.pos[2] == pytest.approx(30.0 - FALL_MPS) and not flight.landed and TouchedDown not in kinds(events)
     events = flight.step(5.0)
-    assert Landed in kinds(events) and flight.landed and flight.pos[2] == 0.0
+    assert TouchedDown in kinds(events) and flight.landed and flight.pos[2] == 0.0
     assert flight.energy_j == energy, "the motors are off"
 
 
@@ -146,7 +146,7 @@ def test_battery_swap_after_landing_and_disarming() -> None:
     # and it flies the next sortie
     flight.set_mission(encode_path([HoverPoint(100.0, 100.0, 50.0, 10.0)], ORIGIN, "px4"))
     start(flight)
-    assert Landed in kinds(fly(flight))
+    assert TouchedDown in kinds(fly(flight))
     assert flight.energy_j < scenario.battery_j
 
 

@@ -15,7 +15,7 @@ from protocol.mission import NAV_WAYPOINT, HoverPoint, MissionItem, encode_path,
 from sim_bridge.vehicle.estimator import Stage
 from sim_bridge.vehicle.events import (
     CurrentChanged, Disarmed, GpsFix, HomeSet, MissionDone, MissionRestarted, MissionRestartFailed, OriginSet,
-    Reached, UsingGps,
+    ItemComplete, UsingGps,
 )
 from sim_bridge.vehicle.flight import Flight, MissionState
 from sim_bridge.vehicle.modes import Mode
@@ -64,8 +64,8 @@ def test_ardupilot_an_upload_during_a_hold_restarts_it_even_unchanged() -> None:
     events = flight.drain()
     assert of(events, MissionRestarted) and all(e.seq == 3 for e in of(events, MissionRestarted))
     assert flight.current == 3 and flight.hold_left is None
-    events = until(flight, lambda f, ev: bool(of(ev, Reached)))
-    assert of(events, Reached)[0].seq == 3
+    events = until(flight, lambda f, ev: bool(of(ev, ItemComplete)))
+    assert of(events, ItemComplete)[0].seq == 3
     assert flight.time_s - restart_at == pytest.approx(30.0, abs=0.6)  # the whole hold again
 
 
@@ -89,7 +89,7 @@ def test_ardupilot_an_index_that_is_gone_fails_to_restart_and_the_command_goes_o
     flight.mission_changed(list(flight.mission), frozenset({1}))
     assert flight.drain() == []
     events = until(flight, lambda f, ev: bool(of(ev, MissionDone)))
-    assert of(events, Reached)[0].seq == 3 and flight.pos == target  # its hold ended where it was
+    assert of(events, ItemComplete)[0].seq == 3 and flight.pos == target  # its hold ended where it was
     assert flight.state is MissionState.COMPLETE and flight.mode is Mode.AUTO and not flight.landed
     flight.step(100.0)
     assert flight.pos == target  # hovering in AUTO after the end
@@ -100,7 +100,7 @@ def test_ardupilot_an_empty_mission_in_flight_never_completes_the_command() -> N
     until(flight, lambda f, _: at(f, 2))
     flight.mission_changed([], frozenset())
     events = flight.step(200.0)
-    assert not of(events, Reached) and flight.current == 2 and flight.state is MissionState.RUNNING
+    assert not of(events, ItemComplete) and flight.current == 2 and flight.state is MissionState.RUNNING
 
 
 def test_ardupilot_set_current_goes_now_when_running_and_only_moves_the_index_otherwise() -> None:
@@ -200,7 +200,7 @@ def test_a_first_waypoint_at_ground_level_does_not_stall(flavour: str) -> None:
     started = time.process_time()
     events = until(flight, lambda f, ev: not f.armed, limit_s=600.0, dt=1.0)
     assert time.process_time() - started < 2.0
-    assert [e.seq for e in of(events, Reached)] == list(range(len(items)))
+    assert [e.seq for e in of(events, ItemComplete)] == list(range(len(items)))
     assert flight.landed and flight.pos == [0.0, 0.0, 0.0]
 
 
@@ -213,6 +213,6 @@ def test_ardupilot_reads_back_whole_seconds_and_flies_them() -> None:
     assert flight.mission[2].param1 == 46.0 and flight.mission[2].command == NAV_WAYPOINT
     until(flight, lambda f, _: at(f, 2))
     started = flight.time_s
-    events = until(flight, lambda f, ev: bool(of(ev, Reached)), dt=0.25)
+    events = until(flight, lambda f, ev: bool(of(ev, ItemComplete)), dt=0.25)
     assert flight.time_s - started == pytest.approx(46.0, abs=0.3)
-    assert math.isfinite(flight.energy_j) and of(events, Reached)[0].seq == 2
+    assert math.isfinite(flight.energy_j) and of(events, ItemComplete)[0].seq == 2

@@ -13,7 +13,7 @@ from planner_service.model import preset
 from protocol.geodesy import GeoOrigin, global_to_local
 from protocol.mission import HoverPoint, encode_path
 from sim_bridge.vehicle.errors import VehicleError
-from sim_bridge.vehicle.events import Reached
+from sim_bridge.vehicle.events import ItemComplete
 from sim_bridge.vehicle.flight import Flight
 from sim_bridge.vehicle.modes import Mode
 from sim_bridge.vehicle.state_file import load_state, parse_state, save_state
@@ -57,7 +57,7 @@ def test_resume_in_the_air_holds_where_it_was_with_its_mission_lost(flavour: str
     while after.armed and after.time_s < 2000:
         events += after.step(1.0)
     assert after.landed and after.pos == [0.0, 0.0, 0.0]
-    assert [e.seq for e in events if isinstance(e, Reached)] == list(range(after.first_item, len(after.mission)))
+    assert [e.seq for e in events if isinstance(e, ItemComplete)] == list(range(after.first_item, len(after.mission)))
 
 
 def test_resume_on_the_ground_is_disarmed() -> None:

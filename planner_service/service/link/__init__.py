@@ -7,14 +7,14 @@ from __future__ import annotations
 from typing import Callable, Literal
 
 from .base import LinkSettings, VehicleLink
-from .events import (EVENT_TYPES, ArmedChanged, Connected, Current, Landed, LinkEvent, Lost, ModeChanged,
+from .events import (ArmedChanged, Connected, Current, OnGround, LinkEvent, Lost, ModeChanged,
                      PositionChanged, Reached, Restarted, Restored, StatusText, TelemetryMissing)
 from .modes import HOLDING_MODES, MISSION_MODES, RETURNING_MODES, mode_name
 from .telemetry import Telemetry
 
-__all__ = ["ArmedChanged", "Connected", "Current", "EVENT_TYPES", "HOLDING_MODES", "Landed", "LinkEvent", "LinkSettings", "Lost",
-           "MISSION_MODES", "ModeChanged", "PositionChanged", "RETURNING_MODES", "Reached", "Restarted", "Restored",
-           "StatusText", "Telemetry", "TelemetryMissing", "VehicleLink", "mode_name", "open_link"]
+__all__ = ["ArmedChanged", "Connected", "Current", "HOLDING_MODES", "LinkEvent", "LinkSettings", "Lost",
+           "MISSION_MODES", "mode_name", "ModeChanged", "OnGround", "open_link", "PositionChanged", "Reached",
+           "Restarted", "Restored", "RETURNING_MODES", "StatusText", "Telemetry", "TelemetryMissing", "VehicleLink"]
 
 
 def open_link(backend: Literal["pymavlink", "mavsdk"], settings: LinkSettings,

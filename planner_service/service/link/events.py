@@ -92,7 +92,7 @@ class ArmedChanged:
 
 
 @dataclass(frozen=True)
-class Landed:
+class OnGround:
     """The vehicle was airborne and is now on the ground (``source``: EXTENDED_SYS_STATE or
     how it was derived)."""
 
@@ -124,9 +124,6 @@ class PositionChanged:
     waiting_for: str
 
 
-LinkEvent = Union[Connected, Lost, Restored, Restarted, Reached, Current, ModeChanged, ArmedChanged, Landed,
+LinkEvent = Union[Connected, Lost, Restored, Restarted, Reached, Current, ModeChanged, ArmedChanged, OnGround,
                   StatusText, TelemetryMissing, PositionChanged]
 """Every event a link reports."""
-
-EVENT_TYPES: tuple[type, ...] = (Connected, Lost, Restored, Restarted, Reached, Current, ModeChanged, ArmedChanged,
-                                 Landed, StatusText, TelemetryMissing, PositionChanged)

@@ -21,7 +21,7 @@ from pymavlink.dialects.v20 import ardupilotmega as M
 
 from protocol.text import printable
 
-from .events import (MAX_TEXT, ArmedChanged, Connected, Landed, LinkEvent, Lost, ModeChanged, PositionChanged,
+from .events import (MAX_TEXT, ArmedChanged, Connected, OnGround, LinkEvent, Lost, ModeChanged, PositionChanged,
                      Restarted, Restored, StatusText, TelemetryMissing)
 from .modes import mode_name
 from .streams import Request, Streams, stream_plan
@@ -287,7 +287,7 @@ class VehicleState:
         was = self.telemetry.airborne
         self._set(airborne=airborne, landed_known=True, landed_source=source)
         if was and not airborne:
-            self.emit(Landed(source))
+            self.emit(OnGround(source))
 
     def _derive_landed(self) -> None:
         """Where the autopilot gives no landed state (EXTENDED_SYS_STATE refused or silent),

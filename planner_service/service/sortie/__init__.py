@@ -6,9 +6,9 @@ held (``mission``), the watch over a hold (``hold``), who may command the vehicl
 from .authority import Authority
 from .effects import Effect, PlanBasis
 from .hold import HoldWatch, Sample
-from .inputs import Input, Vehicle, World
+from .inputs import Input, JournalView, VehicleSnapshot
 from .machine import Binding, Rules, Sortie, SortieLogic, new_sortie
 from .mission import HeldMission, item_dict, item_from_dict
 
-__all__ = ["Authority", "Binding", "Effect", "HeldMission", "HoldWatch", "Input", "PlanBasis", "Rules", "Sample",
-           "Sortie", "SortieLogic", "Vehicle", "World", "item_dict", "item_from_dict", "new_sortie"]
+__all__ = ["Authority", "Binding", "Effect", "HeldMission", "HoldWatch", "Input", "item_dict", "item_from_dict",
+           "JournalView", "new_sortie", "PlanBasis", "Rules", "Sample", "Sortie", "SortieLogic", "VehicleSnapshot"]

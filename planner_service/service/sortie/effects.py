@@ -33,7 +33,9 @@ class PlanBasis:
 
 
 @dataclass(frozen=True)
-class Plan:
+class MakePlan:
+    """Search the next plan from ``basis`` (answered by ``Planned`` or ``PlanFailed``)."""
+
     basis: PlanBasis
 
 
@@ -129,5 +131,5 @@ class MarkFlown:
     still ends it)."""
 
 
-Effect = (Plan | Upload | ReadBack | Command | RecordService | RecordMission | Emit | PublishPlan | Log | EndSortie
+Effect = (MakePlan | Upload | ReadBack | Command | RecordService | RecordMission | Emit | PublishPlan | Log | EndSortie
           | BeginSortie | MarkFlown)

@@ -1,21 +1,26 @@
 """What the sortie logic is told: one frozen record per input, and the view of the vehicle
-and of the journal it decides on. Nothing here does I/O."""
+and of the journal it decides on. Nothing here does I/O.
+
+The link's events (``link/events.py``) are inputs as they are, one class each, re-exported
+here: what the autopilot reported reaches the logic without being renamed on the way."""
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Literal, Protocol, Sequence
+from typing import Literal, Protocol
 
 from protocol import MissionItem
 
+from ..link.events import (ArmedChanged, Connected, Current, OnGround, LinkEvent, Lost, ModeChanged, PositionChanged,
+                           Reached, Restarted, Restored, StatusText, TelemetryMissing)
 from ..planning import PlannedPath
 from ..rows import RequestRow
 from .effects import Command, PlanBasis, Upload
 
 
 @dataclass(frozen=True)
-class Vehicle:
+class VehicleSnapshot:
     """The vehicle as its telemetry shows it, in local metres (from the link's snapshot)."""
 
     connected: bool = False
@@ -45,7 +50,7 @@ class Vehicle:
 
 
 
-class World(Protocol):
+class JournalView(Protocol):
     """What the sortie logic reads of the journal (the current sortie)."""
 
     def request_for(self, user_id: str) -> RequestRow | None:
@@ -68,45 +73,6 @@ class World(Protocol):
 @dataclass(frozen=True)
 class Tick:
     now: float
-
-
-@dataclass(frozen=True)
-class LinkConnected:
-    mode: str
-
-
-@dataclass(frozen=True)
-class LinkLost:
-    why: str
-
-
-@dataclass(frozen=True)
-class LinkRestored:
-    mode: str
-
-
-@dataclass(frozen=True)
-class VehicleRestarted:
-    why: str
-
-
-@dataclass(frozen=True)
-class ModeChanged:
-    mode: str
-    commanded: bool = False
-    """The link asked for this mode (a step of a start, a resume, a return or a hold)."""
-
-
-@dataclass(frozen=True)
-class ArmedChanged:
-    armed: bool
-    commanded: bool = False
-    """The link asked for it (the start's arming, a failed start's disarming)."""
-
-
-@dataclass(frozen=True)
-class Landed:
-    pass
 
 
 @dataclass(frozen=True)
@@ -135,7 +101,10 @@ class Uploaded:
 
 
 @dataclass(frozen=True)
-class UploadFailed:
+class NotUploaded:
+    """The upload failed (``outcome_unknown``: no answer, the vehicle may hold it); the
+    service's ``upload_failed`` event is what the logic makes of it."""
+
     upload: Upload
     error: str
     outcome_unknown: bool = False
@@ -161,7 +130,9 @@ class CommandDone:
 
 
 @dataclass(frozen=True)
-class CommandFailed:
+class CommandNotDone:
+    """The autopilot refused the command, or never answered."""
+
     command: Command
     error: str
 
@@ -175,7 +146,9 @@ class RequestIn:
 
 
 @dataclass(frozen=True)
-class OperatorCommand:
+class OperatorAsked:
+    """The operator's command, read and checked at the edge (the wire's ``OperatorCommand``)."""
+
     command: Literal["start", "hold", "status"]
     reason: str = ""
 
@@ -186,7 +159,10 @@ class SortieBegun:
 
 
 @dataclass(frozen=True)
-class Degraded:
+class PartFailed:
+    """A part the service needs (the journal) failed: the service degrades (its
+    ``degraded`` event)."""
+
     why: str
 
 
@@ -195,8 +171,10 @@ class WarmedUp:
     """The planner's kernels are compiled (or loaded from numba's cache): plans may begin."""
 
 
-Input = (Tick | LinkConnected | LinkLost | LinkRestored | VehicleRestarted | ModeChanged | ArmedChanged | Landed
-         | Planned | PlanFailed | Uploaded | UploadFailed | ReadBackDone | ReadBackFailed | CommandDone
-         | CommandFailed | RequestIn | OperatorCommand | SortieBegun | Degraded | WarmedUp)
+Input = (Tick | LinkEvent | Planned | PlanFailed | Uploaded | NotUploaded | ReadBackDone | ReadBackFailed | CommandDone
+         | CommandNotDone | RequestIn | OperatorAsked | SortieBegun | PartFailed | WarmedUp)
 
-__all__ = ["Input", "Vehicle", "World", "Sequence"]
+__all__ = ["ArmedChanged", "CommandDone", "CommandNotDone", "Connected", "Current", "Input", "JournalView",
+           "LinkEvent", "Lost", "ModeChanged", "NotUploaded", "OnGround", "OperatorAsked", "PartFailed", "PlanFailed",
+           "Planned", "PositionChanged", "Reached", "ReadBackDone", "ReadBackFailed", "RequestIn", "Restarted",
+           "Restored", "SortieBegun", "StatusText", "TelemetryMissing", "Tick", "Uploaded", "VehicleSnapshot"]

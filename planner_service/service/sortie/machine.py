@@ -17,7 +17,8 @@ What it decides, in the order a sortie goes:
 - **Doubt**: after a link gap, a vehicle restart or our own restart, the vehicle may hold
   another mission: read it back before anything else, the reports seen meanwhile (and
   during an upload) judged once the mission it holds is known; a lost mission in the air is
-  re-planned from where the vehicle is and resumed (with authority) or left to the operator.
+  re-planned from where the vehicle is and resumed (with authority) or left to the operator
+  (``resume_needed``).
 - **Authority** (``authority.py``): modes and arming only when granted; any change the
   service did not command ends it.
 - **Bounded retries**: a failed plan or upload is retried with a growing wait, and given up
@@ -28,7 +29,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, replace
-from typing import Literal
+from typing import Literal, assert_never
 
 import numpy as np
 
@@ -218,28 +219,28 @@ Step = tuple[Sortie, list[fx.Effect]]
 class SortieLogic:
     """``step`` with the rules and the journal view it needs (both fixed for its life)."""
 
-    def __init__(self, rules: Rules, world: ins.World) -> None:
+    def __init__(self, rules: Rules, world: ins.JournalView) -> None:
         self.rules = rules
         self.world = world
         self.p = pack(rules.scenario)
         self.points = hover_points(rules.scenario)
 
     # --- entry ------------------------------------------------------------------------------
-    def step(self, s: Sortie, event: ins.Input, v: ins.Vehicle, now: float) -> Step:
+    def step(self, s: Sortie, event: ins.Input, v: ins.VehicleSnapshot, now: float) -> Step:
         out: list[fx.Effect] = []
         match event:
             case ins.Tick():
                 s = self._tick(s, v, now, out)
-            case ins.LinkConnected(mode=mode):
+            case ins.Connected(mode=mode):
                 s = self._connected(s, v, mode, out)
-            case ins.LinkLost(why=why):
+            case ins.Lost(detail=why):
                 out += [fx.Emit(ev.LinkLost(why)), fx.Log("warning", f"link lost: {why}")]
-            case ins.LinkRestored(mode=mode):
+            case ins.Restored(mode=mode):
                 out += [fx.Emit(ev.LinkRestored(mode)), fx.Log("info", f"link restored ({mode})")]
                 if s.held is not None or s.flown:
                     s = self._doubt(s, "the link was lost", out)
                 s = replace(s, retry_at=min(s.retry_at, now), failures=0)
-            case ins.VehicleRestarted(why=why):
+            case ins.Restarted(detail=why):
                 # A restart only ever ends the authority: nothing the service commanded holds
                 # across it, and a restart is what an unsigned link can forge.
                 s = self._revoke(replace(s, restarted=True), f"the autopilot restarted ({why})", out)
@@ -249,7 +250,7 @@ class SortieLogic:
                 s = self._mode(s, v, mode, commanded, now, out)
             case ins.ArmedChanged(armed=armed, commanded=commanded):
                 s = self._arming(s, v, armed, commanded, now, out)
-            case ins.Landed():
+            case ins.OnGround():
                 if s.flown:
                     s = self._end(s, "the vehicle landed", v, out)
             case ins.Planned():
@@ -260,7 +261,7 @@ class SortieLogic:
             case ins.Uploaded():
                 s = self._uploaded(replace(s, busy=""), event, v, out)
                 s = self._known(s, now, event.mission_id)
-            case ins.UploadFailed(upload=up, error=error, outcome_unknown=unknown):
+            case ins.NotUploaded(upload=up, error=error, outcome_unknown=unknown):
                 s = self._upload_failed(replace(s, busy=""), up, error, unknown, v, now, out)
             case ins.ReadBackDone(items=items, generation=gen):
                 s = self._read_back(replace(s, busy=""), items, gen, v, out)
@@ -271,26 +272,34 @@ class SortieLogic:
                 s = replace(s, busy="", readback_at=now + self.rules.retry_s)
             case ins.CommandDone(command=cmd):
                 s = self._command_done(replace(s, commanding="", top_seq=-1, leg=None, off_leg=0), cmd, now, out)
-            case ins.CommandFailed(command=cmd, error=error):
+            case ins.CommandNotDone(command=cmd, error=error):
                 s = self._command_failed(replace(s, commanding=""), cmd, error, now, out)
             case ins.RequestIn(user_id=user, tasks=tasks):
                 s = self._request(s, user, tasks, out)
-            case ins.OperatorCommand():
+            case ins.OperatorAsked():
                 raise TypeError("operator commands go through SortieLogic.operator")
             case ins.SortieBegun(number=number):
                 s = self._begun(s, number, out)
-            case ins.Degraded(why=why):
+            case ins.PartFailed(why=why):
                 if s.degraded is None:
                     s = replace(s, degraded=why, version=s.version + 1)
                     out += [fx.Emit(ev.Degraded(why[:256])), fx.Log("error", f"degraded: {why}")]
             case ins.WarmedUp():
                 s = replace(s, warming=False)
+            case ins.Reached() | ins.Current() | ins.PositionChanged():
+                # Progress and position are read from the telemetry at each tick: holds are
+                # judged from where the vehicle is, never from a mission index alone.
+                return s, out
+            case ins.StatusText() | ins.TelemetryMissing():
+                return s, out  # the link logs them; what they change shows in its telemetry
+            case _:
+                assert_never(event)
         if not isinstance(event, ins.Tick):
             s = self._next(s, v, now, out)
         return s, out
 
     # --- the periodic look at the vehicle --------------------------------------------------------
-    def _tick(self, s: Sortie, v: ins.Vehicle, now: float, out: list[fx.Effect]) -> Sortie:
+    def _tick(self, s: Sortie, v: ins.VehicleSnapshot, now: float, out: list[fx.Effect]) -> Sortie:
         if s.just_started and v.connected and v.landed_known:
             s = replace(s, just_started=False)
             if v.airborne or (v.armed and not s.started and s.commanding != "start"):
@@ -318,7 +327,7 @@ class SortieLogic:
         s = self._safety(s, v, out)
         return self._next(s, v, now, out)
 
-    def _next(self, s: Sortie, v: ins.Vehicle, now: float, out: list[fx.Effect]) -> Sortie:
+    def _next(self, s: Sortie, v: ins.VehicleSnapshot, now: float, out: list[fx.Effect]) -> Sortie:
         """Start whatever is due and not running: a read-back, a plan, a command."""
         if s.over is not None or s.degraded is not None:
             return s
@@ -328,14 +337,14 @@ class SortieLogic:
         if s.busy == "" and s.doubt is None and now >= s.retry_at:
             basis = self._plan_wanted(s, v, now)
             if basis is not None:
-                out.append(fx.Plan(basis))
+                out.append(fx.MakePlan(basis))
                 s = replace(s, busy="plan", dirty=False)
         if s.commanding == "" and now >= s.retry_at:
             s = self._command_due(s, v, out)
-        return s
+        return self._resume_needed(s, v, out)
 
     # --- holds: truth from the vehicle's position ---------------------------------------------
-    def _watch(self, s: Sortie, v: ins.Vehicle, out: list[fx.Effect]) -> Sortie:
+    def _watch(self, s: Sortie, v: ins.VehicleSnapshot, out: list[fx.Effect]) -> Sortie:
         if s.held is None or not (v.connected and v.position_ok) or math.isnan(v.boot_s):
             return s
         sample = Sample(v.boot_s, v.xyz, v.seq)
@@ -348,7 +357,7 @@ class SortieLogic:
             return s
         return self._maybe_end_hold(self._seen(s, sample, v, out), out)
 
-    def _seen(self, s: Sortie, sample: Sample, v: ins.Vehicle, out: list[fx.Effect]) -> Sortie:
+    def _seen(self, s: Sortie, sample: Sample, v: ins.VehicleSnapshot, out: list[fx.Effect]) -> Sortie:
         """One report of the vehicle flying ``held``: the watch fed, or begun at its item."""
         held = s.held
         assert held is not None
@@ -368,7 +377,7 @@ class SortieLogic:
                 s = self._feed(s, watch, sample, v, out)
         return s
 
-    def _count_check(self, s: Sortie, v: ins.Vehicle, out: list[fx.Effect]) -> Sortie:
+    def _count_check(self, s: Sortie, v: ins.VehicleSnapshot, out: list[fx.Effect]) -> Sortie:
         """MISSION_CURRENT's count of items against the mission held: another station's
         upload shows there first (ArduPilot tells only the uploading station that it took a
         plan), as does a mission lost. A count a read-back has shown to go with our mission
@@ -383,12 +392,12 @@ class SortieLogic:
                            f"the vehicle counts {v.mission_total} mission items, plan {held.plan_id} has "
                            f"{len(held.items)}", out)
 
-    def _checkable(self, s: Sortie, v: ins.Vehicle) -> bool:
+    def _checkable(self, s: Sortie, v: ins.VehicleSnapshot) -> bool:
         """The vehicle is known to hold ``held`` and nothing the service does now changes it."""
         return (s.held is not None and s.held_gen is not None and not s.busy and s.doubt is None and v.connected
                 and s.over is None)
 
-    def _id_check(self, s: Sortie, v: ins.Vehicle, out: list[fx.Effect]) -> Sortie:
+    def _id_check(self, s: Sortie, v: ins.VehicleSnapshot, out: list[fx.Effect]) -> Sortie:
         """MISSION_CURRENT's ``mission_id`` (PX4: a CRC32 of the items) against the id the
         autopilot gave our upload: another station's mission of the same length shows here,
         not in the count. An id the link could not learn (0) is read back once, then known."""
@@ -401,7 +410,7 @@ class SortieLogic:
                            f"the vehicle names its mission {v.mission_id:#010x}, plan {held.plan_id}'s id is {said}",
                            out)
 
-    def _seq_check(self, s: Sortie, v: ins.Vehicle, out: list[fx.Effect]) -> Sortie:
+    def _seq_check(self, s: Sortie, v: ins.VehicleSnapshot, out: list[fx.Effect]) -> Sortie:
         """The item flown against the mission held: an item it does not have, or a step back
         that nothing the service commanded explains (ArduPilot keeps its index across an
         upload; a mission's items are flown forward), is someone else's doing."""
@@ -416,7 +425,7 @@ class SortieLogic:
                                f"of plan {held.plan_id}, not commanded by the service", out)
         return replace(s, top_seq=v.seq) if v.seq > s.top_seq else s
 
-    def _leg_check(self, s: Sortie, v: ins.Vehicle, out: list[fx.Effect]) -> Sortie:
+    def _leg_check(self, s: Sortie, v: ins.VehicleSnapshot, out: list[fx.Effect]) -> Sortie:
         """The vehicle's track against the leg it flies: from where it was when it began
         item ``seq`` to that item's point. Another station's mission of the same length
         has the same items at other places: the vehicle heads off the leg before any count
@@ -445,7 +454,7 @@ class SortieLogic:
                            f"the vehicle is {off:.0f} m off its leg to point {point.hover_index} (item {seq} of plan "
                            f"{held.plan_id})", out)
 
-    def _periodic(self, s: Sortie, v: ins.Vehicle, now: float, out: list[fx.Effect]) -> Sortie:
+    def _periodic(self, s: Sortie, v: ins.VehicleSnapshot, now: float, out: list[fx.Effect]) -> Sortie:
         """Read the mission back every ``readback_interval_s`` while the service flies it
         under authority: ArduPilot names no mission, and a station's mission of the same
         length leaves every report as it was. Only between a plan and an upload (``busy``
@@ -472,7 +481,7 @@ class SortieLogic:
         return replace(s, mission_id=mission_id, id_explained=0, id_at_doubt=0, checked_at=now, top_seq=-1, leg=None,
                        off_leg=0)
 
-    def _replay(self, s: Sortie, v: ins.Vehicle, out: list[fx.Effect]) -> Sortie:
+    def _replay(self, s: Sortie, v: ins.VehicleSnapshot, out: list[fx.Effect]) -> Sortie:
         """The reports kept during a doubt or an upload, judged now that the vehicle is known
         to hold ``s.held``: a hold flown meanwhile (on a lossy link a read-back or an upload
         takes seconds, tens of seconds of flight at x40, in which whole holds were flown) is
@@ -488,7 +497,7 @@ class SortieLogic:
             s = self._seen(s, sample, v, out)
         return s
 
-    def _feed(self, s: Sortie, watch: HoldWatch, sample: Sample, v: ins.Vehicle, out: list[fx.Effect]) -> Sortie:
+    def _feed(self, s: Sortie, watch: HoldWatch, sample: Sample, v: ins.VehicleSnapshot, out: list[fx.Effect]) -> Sortie:
         before = watch
         watch = watch.feed(sample)
         s = replace(s, watch=watch)
@@ -496,7 +505,7 @@ class SortieLogic:
             s = self._arrived(s, v, out)
         return self._judge(s, out) if watch.over else s
 
-    def _arrived(self, s: Sortie, v: ins.Vehicle, out: list[fx.Effect]) -> Sortie:
+    def _arrived(self, s: Sortie, v: ins.VehicleSnapshot, out: list[fx.Effect]) -> Sortie:
         """The vehicle is at the point: bind the request in force of the user the model's
         rule serves from here now (the nearest eligible, ties to the larger backlog: the rule
         the planner's futures follow), the planned user or, if its backlog or place changed,
@@ -606,7 +615,7 @@ class SortieLogic:
         return point.reward if tasks == point.tasks else interval_reward(self.p, tasks, point.energy_j)
 
     # --- deciding ------------------------------------------------------------------------------
-    def _plan_wanted(self, s: Sortie, v: ins.Vehicle, now: float) -> fx.PlanBasis | None:
+    def _plan_wanted(self, s: Sortie, v: ins.VehicleSnapshot, now: float) -> fx.PlanBasis | None:
         r = self.rules
         if s.warming:
             return None  # a plan now would wait for the compiler (minutes on a cold cache)
@@ -650,7 +659,7 @@ class SortieLogic:
             return fx.PlanBasis("new requests on the way home", s.version, s.held.rtl_seq - 1)
         return None
 
-    def _could_turn_back(self, s: Sortie, v: ins.Vehicle) -> bool:
+    def _could_turn_back(self, s: Sortie, v: ins.VehicleSnapshot) -> bool:
         """Whether a decision on the way home could find a point to fly to: the model's first
         step on the pending requests, with the battery the vehicle reports less the landing
         and the margin (the planner counts less still: what is spent while it searches), so
@@ -662,7 +671,7 @@ class SortieLogic:
         served = [counts.get(row.user_id, 0) for row in rows]
         return first_steps(sc, self.points, rows, served, v.xyz, s.last_hover_index, battery) > 0
 
-    def _planned(self, s: Sortie, planned: ins.Planned, v: ins.Vehicle, now: float, out: list[fx.Effect]) -> Sortie:
+    def _planned(self, s: Sortie, planned: ins.Planned, v: ins.VehicleSnapshot, now: float, out: list[fx.Effect]) -> Sortie:
         basis, path = planned.basis, planned.path
         if (basis.version != s.version or s.over is not None or s.doubt is not None or s.degraded is not None
                 or v.time_rate is None):
@@ -734,7 +743,7 @@ class SortieLogic:
         return replace(path, points=tuple(points), battery_after_j=battery - extra * len(points),
                        predicted_energy_j=spent, stop_reason=reason)
 
-    def _margin_s(self, v: ins.Vehicle) -> float:
+    def _margin_s(self, v: ins.VehicleSnapshot) -> float:
         """How much longer than its upload needs a hold is flown: the configured margin and a
         command's latency in vehicle time (the service ends a hold a command after it sees it;
         planning waits for the clock's rate, ``_plan_wanted``)."""
@@ -777,7 +786,7 @@ class SortieLogic:
         items = [replace(i, param1=encoded_hold_s(hold_s, self.rules.flavour)) if i.seq == seq else i for i in items]  # type: ignore[arg-type]
         return held, items
 
-    def _uploaded(self, s: Sortie, uploaded: ins.Uploaded, v: ins.Vehicle, out: list[fx.Effect]) -> Sortie:
+    def _uploaded(self, s: Sortie, uploaded: ins.Uploaded, v: ins.VehicleSnapshot, out: list[fx.Effect]) -> Sortie:
         up, gen, keep = uploaded.upload, uploaded.generation, uploaded.upload.keep_through
         judged = frozenset(q for q in s.judged if keep is not None and q <= keep)
         watch, binding = s.watch, s.binding
@@ -807,7 +816,7 @@ class SortieLogic:
             return False  # a mission begun afresh: its items are not the old ones'
         return s.held.point_at(seq) is not None and _same_point(s.held, up.mission, seq)
 
-    def _upload_failed(self, s: Sortie, up: fx.Upload, error: str, unknown: bool, v: ins.Vehicle, now: float,
+    def _upload_failed(self, s: Sortie, up: fx.Upload, error: str, unknown: bool, v: ins.VehicleSnapshot, now: float,
                        out: list[fx.Effect]) -> Sortie:
         out.append(fx.RecordMission(up.plan_id, up.mission, f"{'unknown' if unknown else 'failed'}: {error}"))
         if unknown:  # the vehicle may hold it: find out before anything else
@@ -844,7 +853,7 @@ class SortieLogic:
             s = self._judge(replace(s, watch=s.watch.abandon(why)), out)
         return s
 
-    def _read_back(self, s: Sortie, items: tuple, gen: int, v: ins.Vehicle, out: list[fx.Effect]) -> Sortie:
+    def _read_back(self, s: Sortie, items: tuple, gen: int, v: ins.VehicleSnapshot, out: list[fx.Effect]) -> Sortie:
         why = s.doubt
         s = replace(s, doubt=None)
         for candidate in (s.held, s.unconfirmed):
@@ -882,7 +891,7 @@ class SortieLogic:
         return replace(gone, must_upload=v.airborne, resume_pending=v.airborne)
 
     # --- link events -------------------------------------------------------------------------------
-    def _connected(self, s: Sortie, v: ins.Vehicle, mode: str, out: list[fx.Effect]) -> Sortie:
+    def _connected(self, s: Sortie, v: ins.VehicleSnapshot, mode: str, out: list[fx.Effect]) -> Sortie:
         out.append(fx.Log("info", f"autopilot connected ({mode})"))
         if v.airborne:
             s = replace(s, started=True)
@@ -890,7 +899,7 @@ class SortieLogic:
             s = self._doubt(s, f"the service started with plan {s.held.plan_id} in its journal", out)
         return s
 
-    def _mode(self, s: Sortie, v: ins.Vehicle, mode: str, commanded: bool, now: float,
+    def _mode(self, s: Sortie, v: ins.VehicleSnapshot, mode: str, commanded: bool, now: float,
               out: list[fx.Effect]) -> Sortie:
         held = s.held
         mission_return = (held is not None and v.seq == held.rtl_seq and mode in RETURNING_MODES)
@@ -902,14 +911,14 @@ class SortieLogic:
             out.append(fx.Emit(ev.Returning(f"mode {mode}")))
         return replace(s, authority=authority)
 
-    def _on_return(self, s: Sortie, v: ins.Vehicle) -> bool:
+    def _on_return(self, s: Sortie, v: ins.VehicleSnapshot) -> bool:
         """The vehicle flies the service's own way home: its mission's return item, or the
         return mode the service expects."""
         held = s.held
         return ((held is not None and v.seq == held.rtl_seq)
                 or (v.mode in RETURNING_MODES and v.mode == s.authority.expected_mode))
 
-    def _homing(self, s: Sortie, v: ins.Vehicle) -> Sortie:
+    def _homing(self, s: Sortie, v: ins.VehicleSnapshot) -> Sortie:
         """Remember that the vehicle was seen on the service's own way home, until it is seen
         flying to a point again: ArduCopter's disarming on touching down resets its mission
         index to 0, and that MISSION_CURRENT may come before the heartbeat showing the
@@ -922,7 +931,7 @@ class SortieLogic:
             return replace(s, homing=False)
         return s
 
-    def _arming(self, s: Sortie, v: ins.Vehicle, armed: bool, commanded: bool, now: float,
+    def _arming(self, s: Sortie, v: ins.VehicleSnapshot, armed: bool, commanded: bool, now: float,
                 out: list[fx.Effect]) -> Sortie:
         returning = s.flown and (s.homing or self._on_return(s, v))
         if not armed and not commanded and returning and v.airborne and s.authority.granted:
@@ -934,7 +943,7 @@ class SortieLogic:
             out += self._revoked_effects(authority)
         return replace(s, authority=authority, disarmed_at=None)
 
-    def _disarm_check(self, s: Sortie, v: ins.Vehicle, now: float, out: list[fx.Effect]) -> Sortie:
+    def _disarm_check(self, s: Sortie, v: ins.VehicleSnapshot, now: float, out: list[fx.Effect]) -> Sortie:
         """A disarming on the service's own return is its landing's once the vehicle is
         reported on the ground within ``DISARM_LANDING_S``; otherwise nobody's."""
         if s.disarmed_at is None:
@@ -962,7 +971,7 @@ class SortieLogic:
                                   f"grants it again")]
 
     # --- commands ------------------------------------------------------------------------------
-    def _command_due(self, s: Sortie, v: ins.Vehicle, out: list[fx.Effect]) -> Sortie:
+    def _command_due(self, s: Sortie, v: ins.VehicleSnapshot, out: list[fx.Effect]) -> Sortie:
         """Start or resume the mission when the service may and should (not while the
         planner warms up: the decisions in flight would wait for the compiler)."""
         if not s.authority.granted or s.held is None or not v.connected or s.warming:
@@ -980,7 +989,22 @@ class SortieLogic:
             return self._command(s, fx.Command("resume", first, f"plan {s.held.plan_id} (was {v.mode})"), out)
         return s
 
-    def _start_lapsed(self, s: Sortie, v: ins.Vehicle, now: float, out: list[fx.Effect]) -> Sortie:
+    def _resume_needed(self, s: Sortie, v: ins.VehicleSnapshot, out: list[fx.Effect]) -> Sortie:
+        """A mission re-planned after the vehicle lost ours in the air (a restart, a link
+        gap), on board, the vehicle holding, and no authority to resume it: the operator is
+        told once (``resume_needed``); ``operator start`` plans from where the vehicle is then
+        and resumes."""
+        held = s.held
+        if (not s.resume_pending or s.authority.granted or held is None or s.held_gen is None or s.busy != ""
+                or not v.airborne or v.mode not in HOLDING_MODES):
+            return s
+        out += [fx.Emit(ev.ResumeNeeded(f"plan {held.plan_id} is on board and the vehicle holds in {v.mode}: the "
+                                        f"service has no authority ({s.authority.state}); operator start resumes it")),
+                fx.Log("warning", f"plan {held.plan_id} is on board, the vehicle holds in {v.mode}: the operator "
+                                  f"must resume it (operator start)")]
+        return replace(s, resume_pending=False)
+
+    def _start_lapsed(self, s: Sortie, v: ins.VehicleSnapshot, now: float, out: list[fx.Effect]) -> Sortie:
         """A start the autopilot accepted but that never took off (it disarmed on the ground
         again: its own auto-disarm, a refused takeoff) is started again."""
         if not s.started or s.flown or v.airborne or v.armed or not v.landed_known or now - s.started_at < START_LAPSE_S:
@@ -1010,7 +1034,8 @@ class SortieLogic:
             case "set_current":
                 out.append(fx.Log("info", cmd.why))
                 return s
-        return s
+            case _:
+                assert_never(cmd.kind)
 
     def _command_failed(self, s: Sortie, cmd: fx.Command, error: str, now: float, out: list[fx.Effect]) -> Sortie:
         out += [fx.Emit(ev.CommandFailed(f"{cmd.kind}: {error}"[:256])),
@@ -1021,7 +1046,7 @@ class SortieLogic:
             return replace(s, early_end=None)
         return replace(s, failures=n, retry_at=now + wait)
 
-    def _safety(self, s: Sortie, v: ins.Vehicle, out: list[fx.Effect]) -> Sortie:
+    def _safety(self, s: Sortie, v: ins.VehicleSnapshot, out: list[fx.Effect]) -> Sortie:
         """Return to launch when the battery reaches the threshold (the planner should never
         let it: this is the guard if the model and the aircraft disagree)."""
         f = v.battery_fraction
@@ -1040,7 +1065,7 @@ class SortieLogic:
             s = replace(s, failures=0, retry_at=0.0)
         return replace(s, dirty=True)
 
-    def operator(self, s: Sortie, cmd: ins.OperatorCommand, v: ins.Vehicle,
+    def operator(self, s: Sortie, cmd: ins.OperatorAsked, v: ins.VehicleSnapshot,
                  now: float) -> tuple[Sortie, list[fx.Effect], bool, str]:
         """An operator command: the new state, its effects, whether it was accepted, and what
         the service did (the reply). ``hold`` is always accepted: taking authority away from
@@ -1085,7 +1110,7 @@ class SortieLogic:
         s = self._next(s, v, now, out)
         return s, out, True, said
 
-    def _start_refusal(self, s: Sortie, v: ins.Vehicle) -> str | None:
+    def _start_refusal(self, s: Sortie, v: ins.VehicleSnapshot) -> str | None:
         """Why the operator's start cannot be taken now, or None."""
         if s.degraded is not None:
             return f"the service is degraded: {s.degraded}"
@@ -1099,7 +1124,7 @@ class SortieLogic:
             return f"the battery's charge is {v.battery_source}: no arming on it"
         return None
 
-    def describe(self, s: Sortie, v: ins.Vehicle) -> str:
+    def describe(self, s: Sortie, v: ins.VehicleSnapshot) -> str:
         held = f"plan {s.held.plan_id}" if s.held is not None else "no mission"
         state = f"over ({s.over})" if s.over else "running"
         return (f"authority {s.authority.state}: {s.authority.detail}; sortie {s.number} {state}; {held}; "
@@ -1107,7 +1132,7 @@ class SortieLogic:
                 f"{', airborne' if v.airborne else ''}" + (f"; degraded: {s.degraded}" if s.degraded else ""))
 
     # --- sortie end and begin -------------------------------------------------------------------
-    def _end(self, s: Sortie, why: str, v: ins.Vehicle, out: list[fx.Effect]) -> Sortie:
+    def _end(self, s: Sortie, why: str, v: ins.VehicleSnapshot, out: list[fx.Effect]) -> Sortie:
         if s.over is not None:
             return s
         if s.watch is not None:
@@ -1115,7 +1140,7 @@ class SortieLogic:
         out.append(fx.EndSortie(why))
         return replace(s, over=why, version=s.version + 1, busy="" if s.busy == "plan" else s.busy)
 
-    def _maybe_begin(self, s: Sortie, v: ins.Vehicle, out: list[fx.Effect]) -> Sortie:
+    def _maybe_begin(self, s: Sortie, v: ins.VehicleSnapshot, out: list[fx.Effect]) -> Sortie:
         """Begin the next sortie once the vehicle is ready again: on the ground, disarmed,
         its battery swapped or charged (a known reading)."""
         r = self.rules
