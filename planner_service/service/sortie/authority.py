@@ -78,10 +78,10 @@ class Authority:
         """The vehicle reports it is now ``armed`` (or disarmed). An arming or disarming the
         link asked for is the service's, and so is a disarming at the end of a ``landing``
         of the service's (its mission's return, its own return to launch: the autopilot
-        disarms on touching down). Anything else ends the
-        authority: a pilot's or another station's arming, a disarming in the air (a motor
-        kill) or on the ground (the ground crew's hand, the autopilot's own disarming of a
-        start that did not take off: which of them cannot be told apart)."""
+        disarms on touching down). Anything else ends the authority: a pilot's or another
+        station's arming, a disarming in the air (a motor kill) or on the ground (the
+        ground crew's hand, the autopilot's own disarming of a start that did not take off:
+        which of them cannot be told apart)."""
         if not self.granted or commanded or (not armed and landing):
             return self
         what = "armed" if armed else "disarmed"
