@@ -1006,11 +1006,12 @@ class SortieLogic:
 
     def _start_lapsed(self, s: Sortie, v: ins.VehicleSnapshot, now: float, out: list[fx.Effect]) -> Sortie:
         """A start the autopilot accepted but that never took off (it disarmed on the ground
-        again: its own auto-disarm, a refused takeoff) is started again."""
+        again: its own auto-disarm, a refused takeoff, the ground crew) is not started: the
+        disarming ended the authority (``_arming``), and the operator's start starts it again."""
         if not s.started or s.flown or v.airborne or v.armed or not v.landed_known or now - s.started_at < START_LAPSE_S:
             return s
-        out.append(fx.Log("warning", "the vehicle is on the ground and disarmed after the mission was started: "
-                                     "starting it again"))
+        then = "starting it again" if s.authority.granted else "the operator's start starts it again"
+        out.append(fx.Log("warning", f"the vehicle is on the ground and disarmed after the mission was started: {then}"))
         return replace(s, started=False)
 
     def _command(self, s: Sortie, cmd: fx.Command, out: list[fx.Effect]) -> Sortie:
