@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import abc
 import asyncio
+import logging
 import time
 from dataclasses import dataclass, field
 from typing import Callable, Sequence
@@ -23,6 +24,7 @@ from pymavlink.dialects.v20 import ardupilotmega as M
 from protocol import MissionItem
 from protocol.mission import Flavour
 
+from ..errors import LinkError
 from .events import LinkEvent
 from .modes import HOLDING_MODES, MISSION_MODES, RETURNING_MODES, mode_name, mode_number
 from .state import VehicleState
@@ -31,6 +33,7 @@ from .telemetry import ClockRate, Telemetry
 __all__ = ["ClockRate", "HOLDING_MODES", "LinkSettings", "MISSION_MODES", "RETURNING_MODES", "Telemetry",
            "VehicleLink", "mode_name"]
 
+log = logging.getLogger(__name__)
 CURRENT_WAIT_S = 2.0
 """Wall seconds to wait for a MISSION_CURRENT after an upload or a set_current (the link
 asks for it at 2 Hz of vehicle time) before asking again."""
@@ -128,12 +131,38 @@ class VehicleLink(abc.ABC):
         """The mission the autopilot holds (``generation`` grows: later reports are about
         it)."""
 
-    @abc.abstractmethod
     async def start(self) -> None:
         """Arm and fly the mission from its start (the operator allowed it). Only with a
         position (``telemetry.position_ok``); a refused arm or mode change leaves the
         vehicle disarmed (disarmed again if it was armed and is still on the ground) and
         raises ``LinkError`` naming the autopilot's refusal."""
+        t = self.telemetry
+        self._check_link("start()")
+        if not t.position_ok:
+            raise LinkError("start()", f"no position: waiting for {t.waiting_for}")
+        armed_here, was_armed = False, t.armed  # a vehicle someone else armed is left to them
+        try:
+            if self.settings.flavour == "ardupilot" and t.mode != "GUIDED":
+                # ArduCopter refuses to arm in AUTO (unless AUTO_OPTIONS allows it); GUIDED
+                # arms from a ground station and checks the position as AUTO will.
+                await self._set_mode("GUIDED")
+            await self._arm(True)
+            armed_here = True
+            await self._resume()
+        except LinkError as err:
+            if (armed_here or self.telemetry.armed) and not was_armed:
+                await self._disarm_on_ground(err)
+            raise
+
+    async def _disarm_on_ground(self, why: LinkError) -> None:
+        """A start that failed after arming must not leave motors armed on the ground."""
+        if self.telemetry.airborne:
+            return
+        try:
+            await self._arm(False)
+            log.warning("start failed (%s): disarmed again", why)
+        except LinkError as err:
+            log.error("start failed (%s) and disarming failed too: %s", why, err)
 
     @abc.abstractmethod
     async def command(self, command: int, *params: float, what: str) -> None:
