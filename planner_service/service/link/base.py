@@ -22,6 +22,7 @@ from typing import Callable, Sequence
 from pymavlink.dialects.v20 import ardupilotmega as M
 
 from protocol import MissionItem
+from protocol.autopilot import autopilot_for
 from protocol.mission import Flavour
 
 from ..errors import LinkError
@@ -63,7 +64,9 @@ class VehicleLink(abc.ABC):
     def __init__(self, settings: LinkSettings, on_event: Callable[[LinkEvent], None]) -> None:
         self.settings = settings
         self.on_event = on_event
-        self.state = VehicleState(settings.flavour, self._emit, link_timeout_s=settings.link_timeout_s)
+        self.profile = autopilot_for(settings.flavour)
+        """The autopilot's conventions (``protocol.autopilot``), from the configured name."""
+        self.state = VehicleState(self.profile, self._emit, link_timeout_s=settings.link_timeout_s)
         self.generation = 0
         """Which mission the vehicle holds, as far as this link knows (see ``events``)."""
         self.mission_id = 0
@@ -142,10 +145,8 @@ class VehicleLink(abc.ABC):
             raise LinkError("start()", f"no position: waiting for {t.waiting_for}")
         armed_here, was_armed = False, t.armed  # a vehicle someone else armed is left to them
         try:
-            if self.settings.flavour == "ardupilot" and t.mode != "GUIDED":
-                # ArduCopter refuses to arm in AUTO (unless AUTO_OPTIONS allows it); GUIDED
-                # arms from a ground station and checks the position as AUTO will.
-                await self._set_mode("GUIDED")
+            if self.profile.arm_mode is not None and t.mode != self.profile.arm_mode:
+                await self._set_mode(self.profile.arm_mode)  # ArduCopter refuses to arm in AUTO
             await self._arm(True)
             armed_here = True
             await self._resume()
@@ -174,7 +175,7 @@ class VehicleLink(abc.ABC):
         """``LinkError`` naming ``operation`` unless the autopilot is connected."""
 
     async def _set_mode(self, name: str) -> None:
-        main, sub = mode_number(self.settings.flavour, name)
+        main, sub = mode_number(self.profile, name)
         self.state.expect_mode(name)
         await self.command(M.MAV_CMD_DO_SET_MODE, M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, main, sub,
                            what=f"set_mode({name})")
@@ -192,18 +193,18 @@ class VehicleLink(abc.ABC):
         await self._resume()
 
     async def _resume(self) -> None:
-        await self._set_mode("AUTO.MISSION" if self.settings.flavour == "px4" else "AUTO")
+        await self._set_mode(self.profile.mission_mode)
         await self.command(M.MAV_CMD_MISSION_START, 0, 0, what="start_mission()")
 
     async def return_to_launch(self) -> None:
         """Command return to launch now."""
-        self.state.expect_mode("AUTO.RTL" if self.settings.flavour == "px4" else "RTL")
+        self.state.expect_mode(self.profile.return_mode)
         await self.command(M.MAV_CMD_NAV_RETURN_TO_LAUNCH, what="return_to_launch()")
 
     async def hold(self) -> None:
         """Hold position where the vehicle is (LOITER, PX4's AUTO.LOITER): the operator's hold."""
         self._check_link("hold()")
-        await self._set_mode("AUTO.LOITER" if self.settings.flavour == "px4" else "LOITER")
+        await self._set_mode(self.profile.hold_mode)
 
     @abc.abstractmethod
     async def close(self) -> None:
