@@ -12,15 +12,16 @@ from .messages import (
     OPERATOR_SCHEMA_VERSION, STATUS_SCHEMA_VERSION, OperatorCommand, OperatorReply, decode_operator_command,
     decode_operator_reply,
 )
+from .autopilot import ARDUPILOT, FLAVOURS, PROFILES, PX4, Autopilot, Flavour, autopilot_for
 from .mission import (
-    FLAVOURS, Flavour, HoverPoint, MissionItem, MissionPlan, decode_path, encode_path, mission_digest,
+    HoverPoint, MissionItem, MissionPlan, decode_path, encode_path, mission_digest,
     replacement_items, same_items, same_mission, stored_item, validate_mission,
 )
 from .mission_files import read_plan, read_wpl, write_plan, write_wpl
 from .text import printable
 
 __all__ = [
-    "Area", "DEFAULT_PREFIX", "ErrorReply", "Event", "FLAVOURS", "Flavour", "GeoOrigin",
+    "ARDUPILOT", "Autopilot", "PROFILES", "PX4", "autopilot_for", "Area", "DEFAULT_PREFIX", "ErrorReply", "Event", "FLAVOURS", "Flavour", "GeoOrigin",
     "HoverPoint", "Keys", "MAX_PAYLOAD_BYTES", "MissionError", "MissionItem", "MissionPlan",
     "PendingRequest", "Plan", "PlanPoint", "ProtocolError", "SCHEMA_VERSION", "SigningError", "State", "Status",
     "TaskAck", "TaskRequest", "UserPlace", "check_user_id", "decode", "decode_path", "decode_reply", "decode_request", "encode",

@@ -25,16 +25,17 @@ import math
 import struct
 import zlib
 from dataclasses import dataclass, field, replace
-from typing import Any, Iterable, Literal, Sequence
+from typing import Any, Iterable, Sequence
 
 from pymavlink.dialects.v20 import common as mavlink
 
 from .area import Area
+from .autopilot import Autopilot, Flavour, autopilot_for
 from .errors import MissionError
 from .geodesy import GeoOrigin, global_to_local, local_to_global
 
-Flavour = Literal["ardupilot", "px4"]
-FLAVOURS: tuple[str, ...] = ("ardupilot", "px4")
+AnyAutopilot = Flavour | Autopilot
+"""An autopilot as the configuration names it or as its profile (``autopilot``)."""
 
 MAX_MISSION_ITEMS = 512
 MAX_HOLD_S = 3600.0
@@ -150,7 +151,7 @@ INT_FRAMES = {FRAME_GLOBAL_INT: FRAME_GLOBAL, FRAME_RELATIVE_INT: FRAME_RELATIVE
 UINT16_MAX = 65535
 
 
-def stored_item(item: MissionItem, flavour: Flavour = "ardupilot") -> MissionItem:
+def stored_item(item: MissionItem, flavour: AnyAutopilot = "ardupilot") -> MissionItem:
     """``item`` as the autopilot stores it and returns it on a download (``current`` left
     as it is: it marks where to fly, not what).
 
@@ -159,11 +160,11 @@ def stored_item(item: MissionItem, flavour: Flavour = "ardupilot") -> MissionIte
     a position (return to launch, change speed) has frame 0 and no position; a waypoint
     keeps only its hold, in whole seconds (uint16, truncated), not its acceptance radius,
     pass radius or yaw (``AP_Mission::mavlink_int_to_mission_cmd``)."""
-    _check_flavour(flavour)
+    autopilot = _check_flavour(flavour)
     frame = INT_FRAMES.get(item.frame, item.frame)
     params = [item.param1, item.param2, item.param3, item.param4]
     x, y, z = item.x, item.y, item.z
-    if flavour == "ardupilot":
+    if autopilot.compacts_items:
         params = [0.0 if math.isnan(p) else p for p in params]
         if item.command == NAV_RTL:
             frame, x, y, z = FRAME_GLOBAL, 0, 0, 0.0
@@ -176,15 +177,15 @@ def stored_item(item: MissionItem, flavour: Flavour = "ardupilot") -> MissionIte
                        param4=params[3], x=x, y=y, z=z if math.isnan(z) else f32(z), mission_type=item.mission_type)
 
 
-def mission_digest(items: Sequence[MissionItem], flavour: Flavour = "ardupilot") -> str:
+def mission_digest(items: Sequence[MissionItem], flavour: AnyAutopilot = "ardupilot") -> str:
     """A short fingerprint (CRC-32, 8 hex digits) of what a mission flies: each item's
     command, frame, parameters and position as the autopilot stores them (``stored_item``,
     float32), in order. ``current`` is left out (it marks where to start, not what to
     fly), and so is ArduPilot's item 0, which the autopilot replaces with home. The
     vehicle stub logs it for every mission it commits, so a test can tell which upload the
     vehicle holds; a mission read back from ArduPilot has the digest of the one uploaded."""
-    _check_flavour(flavour)
-    start = 1 if flavour == "ardupilot" and items else 0
+    autopilot = _check_flavour(flavour)
+    start = autopilot.home_slots if items else 0
     crc = 0
     for item in (stored_item(i, flavour) for i in items[start:]):
         params = (item.param1, item.param2, item.param3, item.param4, item.z)
@@ -194,7 +195,7 @@ def mission_digest(items: Sequence[MissionItem], flavour: Flavour = "ardupilot")
     return f"{crc:08x}"
 
 
-def same_mission(a: Sequence[MissionItem], b: Sequence[MissionItem], flavour: Flavour = "ardupilot") -> bool:
+def same_mission(a: Sequence[MissionItem], b: Sequence[MissionItem], flavour: AnyAutopilot = "ardupilot") -> bool:
     """``a`` and ``b`` fly the same (a mission read back from the vehicle against the one
     uploaded: compared as the autopilot stores them, ``stored_item``; ArduPilot's item 0
     and ``current`` aside)."""
@@ -220,9 +221,8 @@ class MissionPlan:
     takeoff_alt_m: float | None = None
 
 
-def _check_flavour(flavour: str) -> None:
-    if flavour not in FLAVOURS:
-        raise MissionError("flavour", f"{flavour!r} is not one of {FLAVOURS}")
+def _check_flavour(flavour: AnyAutopilot) -> Autopilot:
+    return autopilot_for(flavour)
 
 
 def home_item(origin: GeoOrigin) -> MissionItem:
@@ -236,7 +236,7 @@ def home_item(origin: GeoOrigin) -> MissionItem:
 def encode_path(
     points: Iterable[HoverPoint],
     origin: GeoOrigin,
-    flavour: Flavour = "ardupilot",
+    flavour: AnyAutopilot = "ardupilot",
     *,
     takeoff: bool = True,
     acceptance_radius_m: float = 0.0,
@@ -251,12 +251,12 @@ def encode_path(
     The takeoff item climbs over home to the first point's altitude; a vehicle already in
     the air completes it at once, so a re-planned mission may keep it.
     """
-    _check_flavour(flavour)
+    autopilot = _check_flavour(flavour)
     points = list(points)
     for i, point in enumerate(points):
         _check_point(f"points[{i}]", point)
     items: list[MissionItem] = []
-    if flavour == "ardupilot":
+    if autopilot.home_slots:
         items.append(home_item(origin))
     if takeoff and points:
         items.append(MissionItem(
@@ -272,14 +272,14 @@ def encode_path(
     return items
 
 
-def encoded_hold_s(hold_s: float, flavour: Flavour = "ardupilot") -> float:
+def encoded_hold_s(hold_s: float, flavour: AnyAutopilot = "ardupilot") -> float:
     """The hold as encoded in a waypoint's param1: ArduPilot flies whole seconds (it stores
     a uint16 and truncates), so the hold is rounded up there, never cut short (46.117 s
     is sent as 47 s); PX4 takes the float."""
-    return float(math.ceil(hold_s)) if flavour == "ardupilot" else f32(hold_s)
+    return float(math.ceil(hold_s)) if autopilot_for(flavour).whole_second_holds else f32(hold_s)
 
 
-def _waypoints(points: Sequence[HoverPoint], first_seq: int, origin: GeoOrigin, flavour: Flavour,
+def _waypoints(points: Sequence[HoverPoint], first_seq: int, origin: GeoOrigin, flavour: AnyAutopilot,
                acceptance_radius_m: float) -> list[MissionItem]:
     items = []
     for i, point in enumerate(points):
@@ -299,7 +299,7 @@ def replacement_items(
     keep_through_seq: int,
     points: Sequence[HoverPoint],
     origin: GeoOrigin,
-    flavour: Flavour = "ardupilot",
+    flavour: AnyAutopilot = "ardupilot",
     *,
     acceptance_radius_m: float = 0.0,
 ) -> tuple[list[MissionItem], int]:
@@ -349,11 +349,10 @@ def replacement_items(
     return items, next_seq
 
 
-def max_points(max_items: int, flavour: Flavour = "ardupilot") -> int:
+def max_points(max_items: int, flavour: AnyAutopilot = "ardupilot") -> int:
     """The most hovering points ``encode_path`` fits in ``max_items`` mission items: the
     items around them are ArduPilot's home, the takeoff and the return to launch."""
-    _check_flavour(flavour)
-    around = 3 if flavour == "ardupilot" else 2
+    around = _check_flavour(flavour).home_slots + 2  # the takeoff and the return
     return max(max_items - around, 0)
 
 
@@ -382,12 +381,12 @@ def item_local(item: MissionItem, origin: GeoOrigin) -> tuple[float, float, floa
     return x_m, y_m, z_rel
 
 
-def decode_path(items: Sequence[MissionItem], origin: GeoOrigin, flavour: Flavour = "ardupilot") -> MissionPlan:
+def decode_path(items: Sequence[MissionItem], origin: GeoOrigin, flavour: AnyAutopilot = "ardupilot") -> MissionPlan:
     """Mission items -> the hovering points (with hold times) they fly, in order."""
-    _check_flavour(flavour)
+    autopilot = _check_flavour(flavour)
     points: list[HoverPoint] = []
     takeoff_alt: float | None = None
-    start = 1 if flavour == "ardupilot" and items else 0
+    start = autopilot.home_slots if items else 0
     for item in items[start:]:
         if item.command == NAV_WAYPOINT:
             x_m, y_m, z_m = item_local(item, origin)
@@ -402,7 +401,7 @@ def validate_mission(
     items: Sequence[MissionItem],
     origin: GeoOrigin,
     area: Area,
-    flavour: Flavour = "ardupilot",
+    flavour: AnyAutopilot = "ardupilot",
     *,
     max_items: int = MAX_MISSION_ITEMS,
 ) -> None:
@@ -413,13 +412,13 @@ def validate_mission(
     the area and altitudes within the limits, holds in [0, MAX_HOLD_S], and a last item
     that brings the aircraft down (return to launch or land).
     """
-    _check_flavour(flavour)
+    autopilot = _check_flavour(flavour)
     if not items:
         raise MissionError("items", "the mission is empty")
     if len(items) > max_items:
         raise MissionError("items", f"{len(items)} items exceed the limit of {max_items}")
     for i, item in enumerate(items):
-        _validate_item(i, item, origin, area, skip_position=(flavour == "ardupilot" and i == 0))
+        _validate_item(i, item, origin, area, skip_position=i < autopilot.home_slots)
     if items[-1].command not in (NAV_RTL, NAV_LAND):
         raise MissionError(f"items[{len(items) - 1}].command", "the mission must end in return to launch or land")
 

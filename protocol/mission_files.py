@@ -19,16 +19,14 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from .errors import MissionError
 from .geodesy import GeoOrigin
-from .mission import E7, GLOBAL_FRAMES, Flavour, MissionItem, _check_flavour, home_item
+from .mission import E7, GLOBAL_FRAMES, AnyAutopilot, MissionItem, _check_flavour, home_item
 
 WPL_HEADER = "QGC WPL 110"
-_FIRMWARE = {"ardupilot": mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA, "px4": mavlink.MAV_AUTOPILOT_PX4}
 _VEHICLE_QUADROTOR = mavlink.MAV_TYPE_QUADROTOR
 
 
-def _split_home(items: Sequence[MissionItem], flavour: Flavour, home: GeoOrigin) -> tuple[GeoOrigin, list[MissionItem]]:
-    _check_flavour(flavour)
-    if flavour == "ardupilot":
+def _split_home(items: Sequence[MissionItem], flavour: AnyAutopilot, home: GeoOrigin) -> tuple[GeoOrigin, list[MissionItem]]:
+    if _check_flavour(flavour).home_slots:
         if not items:
             raise MissionError("items", "an ArduPilot mission has at least its home item")
         first = items[0]
@@ -36,17 +34,18 @@ def _split_home(items: Sequence[MissionItem], flavour: Flavour, home: GeoOrigin)
     return home, list(items)
 
 
-def _join_home(home: GeoOrigin, body: list[MissionItem], flavour: Flavour,
+def _join_home(home: GeoOrigin, body: list[MissionItem], flavour: AnyAutopilot,
                home_current: int | None = None) -> list[MissionItem]:
     """The mission in ``flavour``'s convention. A .plan stores no ``current`` flag: the
     first item is marked, as ``encode_path`` and QGroundControl do."""
-    if flavour == "ardupilot":
+    autopilot = _check_flavour(flavour)
+    if autopilot.home_slots:
         items = [home_item(home)] + [_renumber(item, i + 1) for i, item in enumerate(body)]
     else:
         items = [_renumber(item, i) for i, item in enumerate(body)]
     if items and home_current is None:
         items = [_with(item, current=int(i == 0)) for i, item in enumerate(items)]
-    elif items and flavour == "ardupilot":
+    elif items and autopilot.home_slots:
         items[0] = _with(items[0], current=home_current)
     return items
 
@@ -85,16 +84,17 @@ def _json_number(value: float) -> float | None:
 # --- QGroundControl .plan -------------------------------------------------------------
 
 
-def write_plan(items: Sequence[MissionItem], flavour: Flavour, home: GeoOrigin | None = None) -> str:
+def write_plan(items: Sequence[MissionItem], flavour: AnyAutopilot, home: GeoOrigin | None = None) -> str:
     """The mission as a QGroundControl .plan document. ``home`` is needed for PX4 (whose
     missions hold no home item); for ArduPilot item 0 is the home."""
+    autopilot = _check_flavour(flavour)
     home_pos, body = _split_home(items, flavour, home or GeoOrigin())
     plan_items = []
     for item in body:
         plan_items.append({
             "autoContinue": bool(item.autocontinue),
             "command": item.command,
-            "doJumpId": item.seq + (0 if flavour == "ardupilot" else 1),
+            "doJumpId": item.seq + 1 - autopilot.home_slots,
             "frame": item.frame,
             "params": [
                 _json_number(item.param1), _json_number(item.param2), _json_number(item.param3),
@@ -109,7 +109,7 @@ def write_plan(items: Sequence[MissionItem], flavour: Flavour, home: GeoOrigin |
         "groundStation": "uav-mcts-planner",
         "mission": {
             "cruiseSpeed": 15,
-            "firmwareType": _FIRMWARE[flavour],
+            "firmwareType": autopilot.mav_autopilot,
             "globalPlanAltitudeMode": 1,
             "hoverSpeed": 5,
             "items": plan_items,
@@ -123,7 +123,7 @@ def write_plan(items: Sequence[MissionItem], flavour: Flavour, home: GeoOrigin |
     return json.dumps(document, indent=2, allow_nan=False) + "\n"
 
 
-def read_plan(text: str, flavour: Flavour) -> tuple[list[MissionItem], GeoOrigin]:
+def read_plan(text: str, flavour: AnyAutopilot) -> tuple[list[MissionItem], GeoOrigin]:
     """A QGroundControl .plan -> (mission items in ``flavour``'s convention, home)."""
     _check_flavour(flavour)
     try:
@@ -175,14 +175,14 @@ def _wpl_number(value: float) -> str:
     return "nan" if math.isnan(value) else repr(float(value))
 
 
-def write_wpl(items: Sequence[MissionItem], flavour: Flavour, home: GeoOrigin | None = None) -> str:
+def write_wpl(items: Sequence[MissionItem], flavour: AnyAutopilot, home: GeoOrigin | None = None) -> str:
     """The mission as a WPL 110 text file (line 0 is home, as Mission Planner expects)."""
     home_pos, body = _split_home(items, flavour, home or GeoOrigin())
     lines = [WPL_HEADER]
     # Exactly one line is current (MAVSDK refuses a mission with none or two). ArduPilot's
     # item 0 keeps its own flag; for PX4 home is not an item: its line is current only when
     # no item is, as Mission Planner marks it.
-    if flavour == "ardupilot":
+    if _check_flavour(flavour).home_slots:
         home_current = items[0].current
     else:
         home_current = 0 if any(item.current for item in body) else 1
@@ -202,7 +202,7 @@ def write_wpl(items: Sequence[MissionItem], flavour: Flavour, home: GeoOrigin | 
     return "\n".join(lines) + "\n"
 
 
-def read_wpl(text: str, flavour: Flavour) -> tuple[list[MissionItem], GeoOrigin]:
+def read_wpl(text: str, flavour: AnyAutopilot) -> tuple[list[MissionItem], GeoOrigin]:
     """A WPL 110 file -> (mission items in ``flavour``'s convention, home from line 0)."""
     _check_flavour(flavour)
     lines = [line for line in text.splitlines() if line.strip()]

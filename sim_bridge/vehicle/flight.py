@@ -46,6 +46,7 @@ import numpy as np
 from planner_service.model import Scenario, pack
 from planner_service.model.channel import channel_gain, upload_rate_bps
 from planner_service.model.energy import computation_energy_j, flight_energy_j
+from protocol.autopilot import autopilot_for
 from protocol.geodesy import GeoOrigin
 from protocol.mission import (
     DO_CHANGE_SPEED, GLOBAL_FRAMES, NAV_LAND, NAV_RTL, NAV_TAKEOFF, NAV_WAYPOINT, MissionItem,
@@ -221,8 +222,8 @@ class Flight:
 
     @property
     def first_item(self) -> int:
-        """ArduPilot's item 0 is home and never flown."""
-        return 1 if self.ardupilot else 0
+        """ArduPilot's item 0 is home and never flown (``Autopilot.home_slots``)."""
+        return autopilot_for(self.flavour).first_item
 
     @property
     def since_boot_s(self) -> float:

@@ -8,8 +8,10 @@ DO_SET_MODE carries them in param2 and param3.
 from __future__ import annotations
 
 import enum
+from dataclasses import dataclass
+from typing import Callable, Mapping
 
-from pymavlink.dialects.v20 import common as mavlink
+from protocol.autopilot import ARDUPILOT, PX4, Autopilot, autopilot_for
 
 
 class Mode(enum.Enum):
@@ -43,14 +45,11 @@ ARDUPILOT_MODES: dict[int, Mode] = {
     16: Mode.HOLD,  # POSHOLD
     17: Mode.HOLD,  # BRAKE
 }
-ARDUPILOT_NAMES: dict[int, str] = {
-    0: "STABILIZE", 2: "ALT_HOLD", 3: "AUTO", 4: "GUIDED", 5: "LOITER", 6: "RTL", 9: "LAND", 16: "POSHOLD",
-    17: "BRAKE",
-}
-"""Copter's mode names (Mode::name()), as its STATUSTEXTs spell them."""
-ARDUPILOT_NUMBERS: dict[Mode, int] = {
-    Mode.MANUAL: 0, Mode.HOLD: 5, Mode.GUIDED: 4, Mode.TAKEOFF: 4, Mode.AUTO: 3,
-    Mode.RTL: 6, Mode.LAND: 9,
+ARDUPILOT_NAMES: dict[int, str] = {main: name for (main, _), name in ARDUPILOT.modes.items()}
+"""Copter's mode names (Mode::name()), as its STATUSTEXTs spell them (the profile's table)."""
+ARDUPILOT_NUMBERS: dict[Mode, tuple[int, int]] = {
+    Mode.MANUAL: (0, 0), Mode.HOLD: (5, 0), Mode.GUIDED: (4, 0), Mode.TAKEOFF: (4, 0), Mode.AUTO: (3, 0),
+    Mode.RTL: (6, 0), Mode.LAND: (9, 0),
 }
 
 # PX4 main modes and AUTO sub modes (px4_custom_mode.h).
@@ -82,22 +81,46 @@ PX4_NUMBERS: dict[Mode, tuple[int, int]] = {
     Mode.LAND: (PX4_MAIN_AUTO, PX4_AUTO_LAND),
 }
 
-AUTOPILOT = {"ardupilot": mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA, "px4": mavlink.MAV_AUTOPILOT_PX4}
 
 
-def custom_mode(flavour: str, mode: Mode) -> int:
+def _ardupilot_mode(main: int, sub: int) -> Mode | None:
+    return ARDUPILOT_MODES.get(main)
+
+
+@dataclass(frozen=True)
+class ModeTable:
+    """What the stub does in each of an autopilot's modes, and how it numbers them (the
+    names and the packing into custom_mode are the profile's, ``protocol.autopilot``)."""
+
+    autopilot: Autopilot
+    numbers: Mapping[Mode, tuple[int, int]]
+    """Mode -> (custom main mode, custom sub mode) the vehicle reports it as."""
+    decode: Callable[[int, int], "Mode | None"]
+    """(main, sub) -> the mode they ask for; None if unknown."""
+
+
+TABLES: dict[str, ModeTable] = {
+    ARDUPILOT.name: ModeTable(ARDUPILOT, ARDUPILOT_NUMBERS, _ardupilot_mode),
+    PX4.name: ModeTable(PX4, PX4_NUMBERS, lambda main, sub: mode_from_px4(main, sub)),
+}
+
+
+def _table(flavour: str | Autopilot) -> ModeTable:
+    return TABLES[autopilot_for(flavour).name]
+
+
+def custom_mode(flavour: str | Autopilot, mode: Mode) -> int:
     """HEARTBEAT.custom_mode of ``mode``."""
-    if flavour == "px4":
-        main, sub = PX4_NUMBERS[mode]
-        return (main << 16) | (sub << 24)
-    return ARDUPILOT_NUMBERS[mode]
+    table = _table(flavour)
+    return table.autopilot.custom_mode(*table.numbers[mode])
 
 
-def mode_from_custom(flavour: str, custom: int) -> Mode | None:
+def mode_from_custom(flavour: str | Autopilot, custom: int) -> Mode | None:
     """The mode a HEARTBEAT-style custom_mode (or SET_MODE) names; None if unknown."""
-    if flavour == "px4":
-        return mode_from_px4(((custom >> 16) & 0xFF), ((custom >> 24) & 0xFF))
-    return ARDUPILOT_MODES.get(int(custom))
+    table = _table(flavour)
+    a = table.autopilot
+    sub = (int(custom) >> a.sub_shift) & 0xFF if a.sub_shift is not None else 0
+    return table.decode((int(custom) >> a.main_shift) & a.main_mask, sub)
 
 
 def mode_from_px4(main: int, sub: int) -> Mode | None:
@@ -109,22 +132,11 @@ def mode_from_px4(main: int, sub: int) -> Mode | None:
     return PX4_MAIN_ONLY.get(main) if main != PX4_MAIN_AUTO else None
 
 
-def mode_from_command(flavour: str, param2: float, param3: float) -> Mode | None:
+def mode_from_command(flavour: str | Autopilot, param2: float, param3: float) -> Mode | None:
     """The mode requested by MAV_CMD_DO_SET_MODE's custom mode parameters."""
-    if flavour == "px4":
-        return mode_from_px4(int(param2), int(param3))
-    return ARDUPILOT_MODES.get(int(param2))
+    return _table(flavour).decode(int(param2), int(param3))
 
 
-def mode_name(flavour: str, mode: Mode) -> str:
-    """The name a ground station shows for ``mode`` in this flavour."""
-    if flavour == "px4":
-        return {
-            Mode.MANUAL: "POSCTL", Mode.HOLD: "AUTO.LOITER", Mode.GUIDED: "OFFBOARD",
-            Mode.TAKEOFF: "AUTO.TAKEOFF", Mode.AUTO: "AUTO.MISSION", Mode.RTL: "AUTO.RTL",
-            Mode.LAND: "AUTO.LAND",
-        }[mode]
-    return {
-        Mode.MANUAL: "STABILIZE", Mode.HOLD: "LOITER", Mode.GUIDED: "GUIDED", Mode.TAKEOFF: "GUIDED",
-        Mode.AUTO: "AUTO", Mode.RTL: "RTL", Mode.LAND: "LAND",
-    }[mode]
+def mode_name(flavour: str | Autopilot, mode: Mode) -> str:
+    """The name a ground station shows for ``mode`` in this autopilot."""
+    return autopilot_for(flavour).mode_name(custom_mode(flavour, mode))

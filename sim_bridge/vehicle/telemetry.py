@@ -7,12 +7,13 @@ from typing import Any
 
 from pymavlink.dialects.v20 import common as mavlink
 
+from protocol.autopilot import autopilot_for
 from protocol.geodesy import local_to_global
 
 from .estimator import EKF_FLAGS_GPS, EKF_FLAGS_NO_GPS, Stage
 from .flight import Flight, MissionState
 from .mission_id import MissionCurrent, px4_mission_id
-from .modes import AUTOPILOT, Mode, custom_mode
+from .modes import Mode, custom_mode
 
 # A 4S lithium pack: 16.8 V full, 14.0 V at the end of its useful charge.
 CELLS = 4
@@ -61,7 +62,7 @@ def heartbeat(flight: Flight) -> Any:
     if flight.failsafe and not flight.landed:
         state = mavlink.MAV_STATE_CRITICAL
     return mavlink.MAVLink_heartbeat_message(
-        mavlink.MAV_TYPE_QUADROTOR, AUTOPILOT[flight.flavour], base,
+        mavlink.MAV_TYPE_QUADROTOR, autopilot_for(flight.flavour).mav_autopilot, base,
         custom_mode(flight.flavour, flight.mode), state, 3,
     )
 

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import abc
 import asyncio
+import logging
 import time
 from dataclasses import dataclass, field
 from typing import Callable, Sequence
@@ -21,8 +22,10 @@ from typing import Callable, Sequence
 from pymavlink.dialects.v20 import ardupilotmega as M
 
 from protocol import MissionItem
+from protocol.autopilot import autopilot_for
 from protocol.mission import Flavour
 
+from ..errors import LinkError
 from .events import LinkEvent
 from .modes import HOLDING_MODES, MISSION_MODES, RETURNING_MODES, mode_name, mode_number
 from .state import VehicleState
@@ -31,6 +34,7 @@ from .telemetry import ClockRate, Telemetry
 __all__ = ["ClockRate", "HOLDING_MODES", "LinkSettings", "MISSION_MODES", "RETURNING_MODES", "Telemetry",
            "VehicleLink", "mode_name"]
 
+log = logging.getLogger(__name__)
 CURRENT_WAIT_S = 2.0
 """Wall seconds to wait for a MISSION_CURRENT after an upload or a set_current (the link
 asks for it at 2 Hz of vehicle time) before asking again."""
@@ -60,7 +64,9 @@ class VehicleLink(abc.ABC):
     def __init__(self, settings: LinkSettings, on_event: Callable[[LinkEvent], None]) -> None:
         self.settings = settings
         self.on_event = on_event
-        self.state = VehicleState(settings.flavour, self._emit, link_timeout_s=settings.link_timeout_s)
+        self.profile = autopilot_for(settings.flavour)
+        """The autopilot's conventions (``protocol.autopilot``), from the configured name."""
+        self.state = VehicleState(self.profile, self._emit, link_timeout_s=settings.link_timeout_s)
         self.generation = 0
         """Which mission the vehicle holds, as far as this link knows (see ``events``)."""
         self.mission_id = 0
@@ -128,12 +134,36 @@ class VehicleLink(abc.ABC):
         """The mission the autopilot holds (``generation`` grows: later reports are about
         it)."""
 
-    @abc.abstractmethod
     async def start(self) -> None:
         """Arm and fly the mission from its start (the operator allowed it). Only with a
         position (``telemetry.position_ok``); a refused arm or mode change leaves the
         vehicle disarmed (disarmed again if it was armed and is still on the ground) and
         raises ``LinkError`` naming the autopilot's refusal."""
+        t = self.telemetry
+        self._check_link("start()")
+        if not t.position_ok:
+            raise LinkError("start()", f"no position: waiting for {t.waiting_for}")
+        armed_here, was_armed = False, t.armed  # a vehicle someone else armed is left to them
+        try:
+            if self.profile.arm_mode is not None and t.mode != self.profile.arm_mode:
+                await self._set_mode(self.profile.arm_mode)  # ArduCopter refuses to arm in AUTO
+            await self._arm(True)
+            armed_here = True
+            await self._resume()
+        except LinkError as err:
+            if (armed_here or self.telemetry.armed) and not was_armed:
+                await self._disarm_on_ground(err)
+            raise
+
+    async def _disarm_on_ground(self, why: LinkError) -> None:
+        """A start that failed after arming must not leave motors armed on the ground."""
+        if self.telemetry.airborne:
+            return
+        try:
+            await self._arm(False)
+            log.warning("start failed (%s): disarmed again", why)
+        except LinkError as err:
+            log.error("start failed (%s) and disarming failed too: %s", why, err)
 
     @abc.abstractmethod
     async def command(self, command: int, *params: float, what: str) -> None:
@@ -145,7 +175,7 @@ class VehicleLink(abc.ABC):
         """``LinkError`` naming ``operation`` unless the autopilot is connected."""
 
     async def _set_mode(self, name: str) -> None:
-        main, sub = mode_number(self.settings.flavour, name)
+        main, sub = mode_number(self.profile, name)
         self.state.expect_mode(name)
         await self.command(M.MAV_CMD_DO_SET_MODE, M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, main, sub,
                            what=f"set_mode({name})")
@@ -163,18 +193,18 @@ class VehicleLink(abc.ABC):
         await self._resume()
 
     async def _resume(self) -> None:
-        await self._set_mode("AUTO.MISSION" if self.settings.flavour == "px4" else "AUTO")
+        await self._set_mode(self.profile.mission_mode)
         await self.command(M.MAV_CMD_MISSION_START, 0, 0, what="start_mission()")
 
     async def return_to_launch(self) -> None:
         """Command return to launch now."""
-        self.state.expect_mode("AUTO.RTL" if self.settings.flavour == "px4" else "RTL")
+        self.state.expect_mode(self.profile.return_mode)
         await self.command(M.MAV_CMD_NAV_RETURN_TO_LAUNCH, what="return_to_launch()")
 
     async def hold(self) -> None:
         """Hold position where the vehicle is (LOITER, PX4's AUTO.LOITER): the operator's hold."""
         self._check_link("hold()")
-        await self._set_mode("AUTO.LOITER" if self.settings.flavour == "px4" else "LOITER")
+        await self._set_mode(self.profile.hold_mode)
 
     @abc.abstractmethod
     async def close(self) -> None:

@@ -17,17 +17,9 @@ again (``streams``): a restarted ArduPilot streams nothing until asked.
 
 Which mission a report is about: the mission protocol runs on the reader's order (each
 message is fed to the upload or download state machine as it is handed over), and the
-MISSION_ACK that accepts an upload starts a new ``generation``. A MISSION_CURRENT or
-MISSION_ITEM_REACHED the vehicle sent before that ACK but that arrives after it (a delayed
-or reordered datagram) is not about the new one: the MAVLink packet sequence number
-(mod 256) says which was sent first, within ``REORDER_WINDOW_S`` of the ACK. A
-MISSION_ITEM_REACHED sent before the ACK is passed on with the previous mission's
-generation (a point completed just before the new mission replaced it is a service all the
-same); a MISSION_CURRENT sent before it is dropped, since an autopilot may announce the
-new mission's current item just before acking it (the stub does). Between our sending the
-last item and the end of the upload the vehicle may already fly the new mission: reports
-of that span are held back and sorted by the ACK's sequence number when it comes (all
-about the old mission if the upload fails; dropped if only a read-back could tell).
+MISSION_ACK that accepts an upload starts a new ``generation``; the pure ``reports``
+module sorts MISSION_CURRENT and MISSION_ITEM_REACHED between missions by their MAVLink
+packet sequence number, and this link applies what it decides.
 
 Trust: only the autopilot's own (system, component) counts (``state.VehicleState``), for
 telemetry, mission replies, reports and COMMAND_ACKs alike.
@@ -60,6 +52,7 @@ from .base import CURRENT_WAIT_S, LinkSettings, VehicleLink  # noqa: E402
 from .events import Current, LinkEvent, Reached  # noqa: E402
 from .extensions import (MISSION_ACK_ID_OFFSET, MISSION_COUNT_ID_OFFSET, MISSION_CURRENT_ID_OFFSET,  # noqa: E402
                          extension_u32)
+from .reports import Begin, Pass, ReportSequencer  # noqa: E402
 from .rtt import RetryTimer  # noqa: E402
 from .streams import INTERVAL_CMD, Request  # noqa: E402
 from .upload import MissionDownload, MissionUpload, cancel_message  # noqa: E402
@@ -68,8 +61,6 @@ M = mavutil.mavlink
 log = logging.getLogger(__name__)
 MISSION_REPLIES = frozenset({"MISSION_REQUEST_INT", "MISSION_REQUEST", "MISSION_ACK", "MISSION_COUNT",
                              "MISSION_ITEM_INT"})
-REORDER_WINDOW_S = 1.0
-"""A datagram sent before another arrives after it only within this much wall time."""
 SIGNING_WARN_S = 10.0
 """Least time between two warnings about dropped (wrongly signed or unsigned) messages."""
 REFUSAL_TEXT_WAIT_S = 0.3
@@ -107,12 +98,8 @@ class PymavlinkLink(VehicleLink):
         self._mission_op: MissionUpload | MissionDownload | None = None
         self._mission_moved = asyncio.Event()
         """Set when the operation in progress sent something or ended."""
-        self._mark: tuple[int, float] | None = None
-        """(packet seq, monotonic time) of the message that began this generation."""
-        self._commit_possible = False
-        """An upload's last item went out: the vehicle may hold either mission until it ends."""
-        self._unsorted: list[Any] = []
-        """Progress reports that came while ``_commit_possible``: sorted when the upload ends."""
+        self.reports: ReportSequencer[Any] = ReportSequencer()
+        """Which mission each progress report is about (pure; ``reports``)."""
         self._generation_on_download = True
         self._acks: dict[int, asyncio.Future[int]] = {}
         self._mission_lock = asyncio.Lock()
@@ -357,20 +344,10 @@ class PymavlinkLink(VehicleLink):
             await self._command_result(M.MAV_CMD_REQUEST_MESSAGE, spec.msg_id, retries=1)
 
     # --- incoming -------------------------------------------------------------------------
-    def _fresh(self, msg: Any) -> bool:
-        """Was ``msg`` sent after the message that began the current generation?"""
-        if self._mark is None:
-            return True
-        seq, at = self._mark
-        if time.monotonic() - at > REORDER_WINDOW_S:
-            self._mark = None
-            return True
-        return 0 < (msg.get_seq() - seq) % 256 < 128
-
     def _new_generation(self, msg: Any | None) -> None:
         self.generation += 1
         self._current = None
-        self._mark = (msg.get_seq(), time.monotonic()) if msg is not None else None
+        self.reports.begin(msg.get_seq() if msg is not None else None, time.monotonic())
 
     def _set_progress(self, seq: int, total: int, mission_id: int = 0) -> None:
         self.state.set_progress(seq, total, mission_id)
@@ -408,13 +385,7 @@ class PymavlinkLink(VehicleLink):
             if future is not None and not future.done():
                 future.set_result(int(msg.result))
         elif kind in ("MISSION_CURRENT", "MISSION_ITEM_REACHED"):
-            if self._commit_possible:
-                self._unsorted.append(msg)  # about either mission: the ACK's sequence number will say
-            elif self._fresh(msg):
-                self._report(msg, self.generation)
-            elif kind == "MISSION_ITEM_REACHED":
-                self._report(msg, self.generation - 1)
-            # else a MISSION_CURRENT sent before the ACK: about either mission (below)
+            self._apply(self.reports.on_report(msg, kind, msg.get_seq(), time.monotonic()))
 
     def _report(self, msg: Any, mission: int) -> None:
         """A progress report about ``mission`` (a generation): the current one updates the
@@ -438,28 +409,15 @@ class PymavlinkLink(VehicleLink):
         if changed:
             self.on_event(Current(int(msg.seq), total, mission))
 
-    def _sort_reports(self, ack: Any | None, total: int = 0) -> None:
-        """Pass on the reports held back while an upload could commit: a MISSION_ITEM_REACHED
-        the vehicle sent before the ``ack`` that accepted it (packet sequence, mod 256) is
-        about the mission before; what it sent after, about the new one (of ``total``
-        items). A MISSION_CURRENT sent before the ACK is about either (an autopilot may
-        announce the new mission's current item just before it acks it): dropped, the
-        stream repeats it. Without an ACK (the upload failed) all are about the mission the
-        vehicle kept."""
-        held, self._unsorted = self._unsorted, []
-        if ack is None:
-            for msg in held:
-                self._report(msg, self.generation)
-            return
-        before = [m for m in held if 0 < (ack.get_seq() - m.get_seq()) % 256 < 128]
-        for msg in before:
-            if msg.get_type() == "MISSION_ITEM_REACHED":
-                self._report(msg, self.generation)
-        self._new_generation(ack)
-        self._set_progress(0, total)
-        for msg in held:
-            if msg not in before:
-                self._report(msg, self.generation)
+    def _apply(self, decisions: Sequence[Pass[Any] | Begin]) -> None:
+        """Carry out the sequencer's decisions in order (``reports``)."""
+        for decision in decisions:
+            if isinstance(decision, Begin):
+                self.generation += 1
+                self._current = None
+                self._set_progress(0, decision.total)
+            else:
+                self._report(decision.report, self.generation - 1 if decision.before else self.generation)
 
     def _on_mission_reply(self, msg: Any) -> None:
         """Feed the upload or download in progress, in the order messages arrived."""
@@ -474,7 +432,7 @@ class PymavlinkLink(VehicleLink):
         if done is not None and isinstance(op, MissionUpload) and done.accepted:
             # Accepted: from this message on the vehicle's reports are about the new mission.
             self.mission_id = extension_u32(msg, "opaque_id", MISSION_ACK_ID_OFFSET)
-            self._sort_reports(msg, len(op.items))
+            self._apply(self.reports.on_accepted(msg.get_seq(), time.monotonic(), len(op.items)))
         elif done is not None and isinstance(op, MissionDownload) and done.ok and self._generation_on_download:
             self._new_generation(msg)
             self._set_progress(-1, -1)  # the next MISSION_CURRENT is news
@@ -512,7 +470,7 @@ class PymavlinkLink(VehicleLink):
 
     def _note_commit_possible(self, op: MissionUpload | MissionDownload) -> None:
         if isinstance(op, MissionUpload) and op.last_sent == len(op.items) - 1 and op.done is None:
-            self._commit_possible = True
+            self.reports.upload_may_commit()
 
     def _cancel_upload(self) -> None:
         for _ in range(2):  # best effort: either copy may be lost
@@ -534,8 +492,7 @@ class PymavlinkLink(VehicleLink):
             try:
                 await self._upload(items)
             finally:
-                self._commit_possible = False
-                self._sort_reports(None)  # left over: the upload failed, the vehicle kept its mission
+                self._apply(self.reports.on_upload_ended())  # left over: the vehicle kept its mission
             if current_seq is not None:
                 await self._ensure_current(current_seq, wait_for_report=True, restart=restart_current)
 
@@ -551,11 +508,11 @@ class PymavlinkLink(VehicleLink):
         try:
             held = await self._download(new_generation=False)
         except LinkError as err:
-            self._unsorted.clear()  # about either mission: nobody can tell
+            self.reports.forget()  # about either mission: nobody can tell
             raise LinkError("upload_mission()", f"{done.result}; reading the mission back failed too "
                             f"({err.result}): the vehicle may hold either mission", outcome_unknown=True) from None
         if same_mission(held, items, self.settings.flavour):  # type: ignore[arg-type]
-            self._unsorted.clear()  # about either mission, sent while it committed
+            self.reports.forget()  # about either mission, sent while it committed
             self._new_generation(None)
             self._set_progress(-1, -1)  # the next MISSION_CURRENT is news
             return
@@ -658,36 +615,6 @@ class PymavlinkLink(VehicleLink):
         if result == "NO_ANSWER":
             raise LinkError(what, f"NO_ANSWER after {self.settings.retries} tries{self.signing_hint()}")
         raise LinkError(what, result + await self._refusal_texts(sent_at))
-
-    async def start(self) -> None:
-        t = self.telemetry
-        self._check_link("start()")
-        if not t.position_ok:
-            raise LinkError("start()", f"no position: waiting for {t.waiting_for}")
-        armed_here, was_armed = False, t.armed  # a vehicle someone else armed is left to them
-        try:
-            if self.settings.flavour == "ardupilot" and t.mode != "GUIDED":
-                # ArduCopter refuses to arm in AUTO (unless AUTO_OPTIONS allows it); GUIDED
-                # arms from a ground station and checks the position as AUTO will.
-                await self._set_mode("GUIDED")
-            await self._arm(True)
-            armed_here = True
-            await self._resume()
-        except LinkError as err:
-            if (armed_here or self.telemetry.armed) and not was_armed:
-                await self._disarm_on_ground(err)
-            raise
-
-    async def _disarm_on_ground(self, why: LinkError) -> None:
-        """A start that failed after arming must not leave motors armed on the ground."""
-        if self.telemetry.airborne:
-            return
-        try:
-            await self._arm(False)
-            log.warning("start failed (%s): disarmed again", why)
-        except LinkError as err:
-            log.error("start failed (%s) and disarming failed too: %s", why, err)
-
 
 
 def _close_quietly(conn: Any) -> None:

@@ -396,24 +396,3 @@ class MavsdkLink(VehicleLink):
             self._expect_until = time.monotonic() + STALE_REPORT_S
             self.state.set_progress(-1, -1)
             return [mission_item(r) for r in raw]
-
-    async def start(self) -> None:
-        t = self.telemetry
-        self._check_link("start()")
-        if not t.position_ok:
-            raise LinkError("start()", f"no position: waiting for {t.waiting_for}")
-        armed_here, was_armed = False, t.armed  # a vehicle someone else armed is left to them
-        try:
-            if self.settings.flavour == "ardupilot" and t.mode != "GUIDED":
-                await self._set_mode("GUIDED")  # ArduCopter refuses to arm in AUTO (see the pymavlink backend)
-            await self._arm(True)
-            armed_here = True
-            await self._resume()
-        except LinkError as err:
-            if (armed_here or self.telemetry.armed) and not was_armed and not self.telemetry.airborne:
-                try:
-                    await self._arm(False)
-                    log.warning("start failed (%s): disarmed again", err)
-                except LinkError as disarm:
-                    log.error("start failed (%s) and disarming failed too: %s", err, disarm)
-            raise

@@ -23,6 +23,8 @@ from protocol.text import printable
 
 from .events import (MAX_TEXT, ArmedChanged, Connected, OnGround, LinkEvent, Lost, ModeChanged, PositionChanged,
                      Restarted, Restored, StatusText, TelemetryMissing)
+from protocol.autopilot import Autopilot, autopilot_for
+
 from .modes import mode_name
 from .streams import Request, Streams, stream_plan
 from .telemetry import (ClockRate, ClockWatch, PositionInputs, Telemetry, assess_position, battery_fraction,
@@ -47,16 +49,17 @@ TEXTS_KEPT_S = 30.0
 
 
 class VehicleState:
-    def __init__(self, flavour: str, emit: Callable[[LinkEvent], None], *, link_timeout_s: float = 3.0,
+    def __init__(self, flavour: str | Autopilot, emit: Callable[[LinkEvent], None], *, link_timeout_s: float = 3.0,
                  clock: Callable[[], float] = time.monotonic) -> None:
-        self.flavour = flavour
+        self.profile = autopilot_for(flavour)
+        self.flavour = self.profile.name
         self.emit = emit
         self.clock = clock
         self.link_timeout_s = link_timeout_s
         self.telemetry = Telemetry()
         self.autopilot: tuple[int, int] | None = None
-        self.streams = Streams(stream_plan(flavour), clock)
-        self.estimator = "ESTIMATOR_STATUS" if flavour == "px4" else "EKF_STATUS_REPORT"
+        self.streams = Streams(stream_plan(self.profile), clock)
+        self.estimator = self.profile.estimator_message
         self.request_streams: Callable[[], None] = lambda: None
         """Set by the backend: ask for every stream again (after a restart or a gap)."""
         self.on_restart: Callable[[], None] = lambda: None
@@ -158,7 +161,7 @@ class VehicleState:
             self.untrusted += 1
             return False
         armed = bool(msg.base_mode & M.MAV_MODE_FLAG_SAFETY_ARMED)
-        mode = mode_name(self.flavour, msg.custom_mode)
+        mode = mode_name(self.profile, msg.custom_mode)
         old_mode, was_armed = self.telemetry.mode, self.telemetry.armed
         self._set(armed=armed, mode=mode, connected=not self._lost or first)
         if first:

@@ -26,6 +26,8 @@ from typing import Callable
 
 from pymavlink.dialects.v20 import ardupilotmega as M
 
+from protocol.autopilot import Autopilot, autopilot_for
+
 INTERVAL_CMD = M.MAV_CMD_SET_MESSAGE_INTERVAL
 MISSING_AFTER_S = 2.0
 """Wall seconds after a request (or the last arrival, with 3 intervals) before a message is missing."""
@@ -47,11 +49,10 @@ class StreamSpec:
     group: int | None = None
 
 
-def stream_plan(flavour: str) -> tuple[StreamSpec, ...]:
-    """The messages the service needs and their intervals, per autopilot flavour."""
-    estimator = (StreamSpec("ESTIMATOR_STATUS", M.MAVLINK_MSG_ID_ESTIMATOR_STATUS, 1.0) if flavour == "px4"
-                 else StreamSpec("EKF_STATUS_REPORT", M.MAVLINK_MSG_ID_EKF_STATUS_REPORT, 1.0,
-                                 M.MAV_DATA_STREAM_EXTRA3))
+def stream_plan(flavour: str | Autopilot) -> tuple[StreamSpec, ...]:
+    """The messages the service needs and their intervals, per autopilot."""
+    autopilot = autopilot_for(flavour)
+    estimator = StreamSpec(autopilot.estimator_message, autopilot.estimator_msg_id, 1.0, autopilot.estimator_stream)
     return (
         # 10 Hz: holds are judged from these reports (a gap is the tolerance of a hold's length)
         StreamSpec("GLOBAL_POSITION_INT", M.MAVLINK_MSG_ID_GLOBAL_POSITION_INT, 0.1, M.MAV_DATA_STREAM_POSITION),

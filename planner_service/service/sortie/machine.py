@@ -35,6 +35,7 @@ import numpy as np
 
 from protocol import Area, GeoOrigin, HoverPoint, MissionItem, encode_path, replacement_items, same_mission, validate_mission
 from protocol.errors import MissionError
+from protocol.autopilot import Autopilot, autopilot_for
 from protocol.mission import MAX_HOLD_S, Flavour, encoded_hold_s
 
 from ...model import Scenario, hover_points, pack
@@ -100,10 +101,14 @@ class Rules:
     before the mission is read back (``_leg_check``); 0: not checked."""
 
     @property
+    def autopilot(self) -> Autopilot:
+        """The configured autopilot's profile (``protocol.autopilot``)."""
+        return autopilot_for(self.flavour)
+
+    @property
     def mode_names(self) -> dict[str, str]:
-        if self.flavour == "px4":
-            return {"start": "AUTO.MISSION", "resume": "AUTO.MISSION", "return": "AUTO.RTL", "hold": "AUTO.LOITER"}
-        return {"start": "AUTO", "resume": "AUTO", "return": "RTL", "hold": "LOITER"}
+        a = self.autopilot
+        return {"start": a.mission_mode, "resume": a.mission_mode, "return": a.return_mode, "hold": a.hold_mode}
 
 
 @dataclass(frozen=True)
@@ -692,7 +697,7 @@ class SortieLogic:
                 mission = HeldMission.fresh(plan_id, items, path.points, self.rules.flavour)
                 # The autopilot keeps its index across an upload, also from the last sortie's
                 # mission: in the air fly the first point, on the ground start at the takeoff.
-                takeoff = 1 if self.rules.flavour == "ardupilot" else 0
+                takeoff = self.rules.autopilot.first_item
                 if not mission.points:
                     current = None
                 elif airborne:
@@ -822,7 +827,7 @@ class SortieLogic:
         if unknown:  # the vehicle may hold it: find out before anything else
             s = self._doubt(replace(s, unconfirmed=up.mission), f"the outcome of plan {up.plan_id}'s upload is unknown",
                             out)
-        elif self.rules.flavour == "ardupilot" and s.held is not None:
+        elif self.rules.autopilot.writes_items_as_they_arrive and s.held is not None:
             # ArduPilot writes an upload's items as they arrive: a failed one may leave part of
             # it in the mission held, or all of it if only its ACK was lost (PX4 switches over
             # only when the upload is complete). The read-back tells which.
@@ -876,7 +881,7 @@ class SortieLogic:
         ours = f"plan {lost.plan_id}" if lost is not None else "a mission of ours"
         gone = replace(s, held=None, held_gen=None, judged=frozenset(), unconfirmed=None, restarted=False,
                        decided_at=None, count_explained=None)
-        if s.unconfirmed is None and len(items) > (1 if self.rules.flavour == "ardupilot" else 0):
+        if s.unconfirmed is None and len(items) > self.rules.autopilot.home_slots:
             # A mission no upload of ours explains (not one cut short: an upload of ours is
             # then unconfirmed): another station's. Not ours to fly, nor to replace.
             detail = f"{why}: the vehicle holds a mission of {len(items)} items that is not ours ({ours}): " \

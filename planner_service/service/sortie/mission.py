@@ -16,6 +16,7 @@ from dataclasses import dataclass
 from typing import Any, Iterable, Sequence
 
 from protocol import MissionItem
+from protocol.autopilot import Autopilot, autopilot_for
 from protocol.mission import NAV_RTL, Flavour
 
 from ..planning import PlannedPoint
@@ -33,9 +34,9 @@ class HeldMission:
 
     @classmethod
     def fresh(cls, plan_id: int, items: Sequence[MissionItem], points: Sequence[PlannedPoint],
-              flavour: Flavour) -> "HeldMission":
+              flavour: Flavour | Autopilot) -> "HeldMission":
         """A mission flown from its start: [home (ArduPilot)], takeoff, the points, RTL."""
-        first = (1 if flavour == "ardupilot" else 0) + (1 if points else 0)
+        first = autopilot_for(flavour).first_item + (1 if points else 0)
         return cls(plan_id, tuple(items), tuple((first + i, p) for i, p in enumerate(points)))
 
     @classmethod
@@ -74,7 +75,7 @@ class HeldMission:
 
     @classmethod
     def from_journal(cls, plan_id: int, items: list[dict[str, Any]], points: list[dict[str, Any]],
-                     flavour: Flavour) -> "HeldMission":
+                     flavour: Flavour | Autopilot) -> "HeldMission":
         """Back from the journal (rows written before seqs were kept are numbered as a fresh
         mission's)."""
         its = [item_from_dict(i) for i in items]

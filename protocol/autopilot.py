@@ -1,0 +1,137 @@
+"""What differs between the autopilots this project speaks to, as data: one frozen profile
+per autopilot (ArduPilot Copter, PX4), read by the service, the protocol's mission encoding
+and the vehicle stub alike. The configuration names an autopilot by its string
+(``mavlink.flavour = "ardupilot" | "px4"``, ``--flavour``); ``autopilot_for`` turns it into
+its profile once, at the edge, and the profile goes where the string went. A second
+autopilot is a third profile, not a hundred ``if``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from types import MappingProxyType
+from typing import Literal, Mapping, Union
+
+from pymavlink.dialects.v20 import ardupilotmega as M
+
+from .errors import MissionError
+
+Flavour = Literal["ardupilot", "px4"]
+
+
+@dataclass(frozen=True)
+class Autopilot:
+    """One autopilot's conventions on the wire and in its mission store."""
+
+    name: str
+    """As the configuration spells it (``mavlink.flavour``)."""
+    modes: Mapping[tuple[int, int], str]
+    """(custom main mode, custom sub mode) -> the name ground stations show."""
+    main_shift: int
+    """HEARTBEAT.custom_mode: the main mode is ``(custom_mode >> main_shift) & main_mask``."""
+    main_mask: int
+    sub_shift: int | None
+    """... and the sub mode ``(custom_mode >> sub_shift) & 0xFF``; None: no sub mode (0)."""
+    unknown_mode: str
+    """The name shown for a mode not in ``modes`` (``str.format`` of main and sub)."""
+    mission_mode: str
+    """The mode that flies the mission (start, resume)."""
+    return_mode: str
+    """The mode of a commanded return to launch."""
+    hold_mode: str
+    """The mode that holds position where the vehicle is (the operator's hold)."""
+    arm_mode: str | None
+    """The mode to arm in before flying the mission; None: arm in any."""
+    home_slots: int
+    """Mission items the autopilot keeps for itself at the start of the mission: ArduPilot
+    stores home as item 0 and overwrites whatever is uploaded there
+    (``AP_Mission::write_home_to_storage``); PX4 keeps home apart (0)."""
+    whole_second_holds: bool
+    """A waypoint's hold is stored in whole seconds (uint16, truncated): ArduPilot
+    (``AP_Mission::mavlink_int_to_mission_cmd``); the hold is then rounded up when encoded,
+    never cut short. PX4 stores the float."""
+    compacts_items: bool
+    """The stored copy of an item loses what the autopilot does not use: ArduPilot turns NaN
+    parameters into 0, keeps a waypoint's hold only, and a return to launch without a
+    position (frame 0), as read back from ArduCopter 4.7 SITL. PX4 keeps the item as sent."""
+    writes_items_as_they_arrive: bool
+    """An upload's items replace the mission held as they arrive: ArduPilot writes each to
+    storage on receipt (``GCS_MAVLINK::handle_mission_item`` -> ``AP_Mission::replace_cmd``),
+    so a failed upload may leave part of itself; PX4 switches over only when the upload is
+    complete (``MavlinkMissionManager``'s dataman swap)."""
+    mav_autopilot: int
+    """MAV_AUTOPILOT: its HEARTBEAT's ``autopilot``, a .plan's ``firmwareType``."""
+    estimator_message: str
+    """The message that says whether the position estimate can be trusted."""
+    estimator_msg_id: int
+    estimator_stream: int | None
+    """The legacy REQUEST_DATA_STREAM group carrying it (None: no group)."""
+
+    @property
+    def first_item(self) -> int:
+        """The index of the first item a mission of ours flies (the takeoff)."""
+        return self.home_slots
+
+    def mode_name(self, custom_mode: int) -> str:
+        """The mode a HEARTBEAT's custom_mode names, as a ground station shows it."""
+        main = (custom_mode >> self.main_shift) & self.main_mask
+        sub = (custom_mode >> self.sub_shift) & 0xFF if self.sub_shift is not None else 0
+        return self.modes.get((main, sub), self.modes.get((main, 0), self.unknown_mode.format(main, sub)))
+
+    def mode_number(self, name: str) -> tuple[int, int]:
+        """MAV_CMD_DO_SET_MODE's (custom main mode, custom sub mode) for ``name``."""
+        for number, known in self.modes.items():
+            if known == name:
+                return number
+        raise ValueError(f"no {self.name} mode named {name!r}")
+
+    def custom_mode(self, main: int, sub: int = 0) -> int:
+        """HEARTBEAT.custom_mode of a (main, sub) mode."""
+        return (main << self.main_shift) | ((sub << self.sub_shift) if self.sub_shift is not None else 0)
+
+
+
+ARDUPILOT = Autopilot(
+    name="ardupilot",
+    # Copter's mode numbers and names (ArduCopter/mode.h, Mode::name()).
+    modes=MappingProxyType({(0, 0): "STABILIZE", (2, 0): "ALT_HOLD", (3, 0): "AUTO", (4, 0): "GUIDED",
+                            (5, 0): "LOITER", (6, 0): "RTL", (9, 0): "LAND", (16, 0): "POSHOLD",
+                            (17, 0): "BRAKE"}),
+    main_shift=0, main_mask=0xFFFFFFFF, sub_shift=None, unknown_mode="MODE {0}",
+    mission_mode="AUTO", return_mode="RTL", hold_mode="LOITER",
+    # ArduCopter refuses to arm in AUTO (unless AUTO_OPTIONS allows it); GUIDED arms from a
+    # ground station and checks the position as AUTO will.
+    arm_mode="GUIDED",
+    home_slots=1, whole_second_holds=True, compacts_items=True, writes_items_as_they_arrive=True,
+    mav_autopilot=M.MAV_AUTOPILOT_ARDUPILOTMEGA, estimator_message="EKF_STATUS_REPORT", estimator_msg_id=M.MAVLINK_MSG_ID_EKF_STATUS_REPORT,
+    estimator_stream=M.MAV_DATA_STREAM_EXTRA3,
+)
+PX4 = Autopilot(
+    name="px4",
+    # PX4 main modes and AUTO sub modes (px4_custom_mode.h): custom_mode = main << 16 | sub << 24.
+    modes=MappingProxyType({(1, 0): "MANUAL", (2, 0): "ALTCTL", (3, 0): "POSCTL", (4, 1): "AUTO.READY",
+                            (4, 2): "AUTO.TAKEOFF", (4, 3): "AUTO.LOITER", (4, 4): "AUTO.MISSION",
+                            (4, 5): "AUTO.RTL", (4, 6): "AUTO.LAND", (5, 0): "ACRO", (6, 0): "OFFBOARD",
+                            (7, 0): "STABILIZED"}),
+    main_shift=16, main_mask=0xFF, sub_shift=24, unknown_mode="PX4 {0}/{1}",
+    mission_mode="AUTO.MISSION", return_mode="AUTO.RTL", hold_mode="AUTO.LOITER", arm_mode=None,
+    home_slots=0, whole_second_holds=False, compacts_items=False, writes_items_as_they_arrive=False,
+    mav_autopilot=M.MAV_AUTOPILOT_PX4, estimator_message="ESTIMATOR_STATUS", estimator_msg_id=M.MAVLINK_MSG_ID_ESTIMATOR_STATUS, estimator_stream=None,
+)
+
+PROFILES: Mapping[str, Autopilot] = MappingProxyType({p.name: p for p in (ARDUPILOT, PX4)})
+FLAVOURS: tuple[str, ...] = tuple(PROFILES)
+
+
+def autopilot_for(flavour: Union[str, Autopilot]) -> Autopilot:
+    """The profile of the autopilot the configuration names (a profile is returned as it
+    is); ``MissionError("flavour")`` for a name no profile has."""
+    if isinstance(flavour, Autopilot):
+        return flavour
+    try:
+        return PROFILES[flavour]
+    except (KeyError, TypeError):
+        raise MissionError("flavour", f"{flavour!r} is not one of {FLAVOURS}") from None
+
+
+__all__ = ["ARDUPILOT", "Autopilot", "FLAVOURS", "Flavour", "PROFILES", "PX4", "autopilot_for"]
