@@ -37,7 +37,7 @@ def test_an_id_the_link_did_not_learn_is_read_back_once_then_known() -> None:
     (rb,) = only(run.tick(seq=2, mission_id=OURS, boot_s=9.0), fx.ReadBack)
     assert "not said" in rb.why
     run.feed(ins.ReadBackDone(up.items, 3))
-    assert run.s.authority.granted and run.s.id_explained == OURS
+    assert run.s.authority.granted and run.s.evidence.id_explained == OURS
     assert not only(run.tick(seq=2, mission_id=OURS, boot_s=10.0), fx.ReadBack)
     assert only(run.tick(seq=2, mission_id=THEIRS, boot_s=11.0), fx.ReadBack), "a new id is news again"
 
@@ -46,7 +46,7 @@ def test_the_read_backs_own_id_names_the_mission_held() -> None:
     run, up = fly_to_first_point(FakeWorld())
     run.tick(seq=2, mission_id=THEIRS, boot_s=9.0)  # stale, say
     run.feed(ins.ReadBackDone(up.items, 3, OURS))  # MISSION_COUNT's opaque_id: ours
-    assert run.s.mission_id == OURS and run.s.authority.granted
+    assert run.s.evidence.mission_id == OURS and run.s.authority.granted
     assert only(run.tick(seq=2, mission_id=THEIRS, boot_s=10.0), fx.ReadBack)
 
 
@@ -102,7 +102,7 @@ def test_a_vehicle_off_the_leg_it_flies_reads_the_mission_back() -> None:
         f = (k + 1) / 5
         assert not only(run.tick(seq=2, xyz=(30.0 + 90.0 * f + 3.0, 50.0 + 150.0 * f, 100.0), boot_s=t), fx.ReadBack)
     run.tick(seq=2, xyz=(120.0, 200.0, 100.0), boot_s=13.0)  # at the point, holding: on the leg's end
-    assert run.s.leg is not None and run.s.off_leg == 0
+    assert run.s.evidence.leg is not None and run.s.evidence.off_leg == 0
     run2, _ = fly_to_first_point(FakeWorld())
     out = []
     for k, t in enumerate((9.0, 10.0, 11.0)):
@@ -118,4 +118,4 @@ def test_the_same_report_seen_by_several_ticks_counts_once_off_the_leg() -> None
     run, _ = fly_to_first_point(FakeWorld())
     for _ in range(5):  # ticks come faster than position reports
         out = run.tick(seq=2, xyz=(150.0, 20.0, 100.0), boot_s=9.0)
-    assert not only(out, fx.ReadBack) and run.s.off_leg == 1
+    assert not only(out, fx.ReadBack) and run.s.evidence.off_leg == 1

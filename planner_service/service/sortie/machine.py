@@ -49,6 +49,7 @@ from .. import events as ev
 from . import effects as fx
 from . import inputs as ins
 from .authority import Authority, next_sortie
+from .evidence import Evidence, Settled, judge
 from .hold import HoldWatch, Sample
 from .mission import HeldMission
 
@@ -60,9 +61,6 @@ it (a tick of the loop and a command's round trip): that much more hovering, in 
 is planned at each point."""
 MAX_DOUBTED = 1200
 """Reports kept while in doubt: a minute of the service's ticks (the oldest are dropped)."""
-LEG_REPORTS = 3
-"""Position reports in a row off the leg that read the mission back (one stray report, a
-gust, is no evidence)."""
 DISARM_LANDING_S = 2.0
 """Wall seconds a disarming on the service's own return waits for the landing's report (it
 may follow the heartbeat showing the disarming) before it is taken as nobody's."""
@@ -94,11 +92,11 @@ class Rules:
     retry_s: float = 1.0
     max_retry_s: float = 30.0
     readback_interval_s: float = 30.0
-    """Wall seconds between read-backs of the mission flown under authority (``_periodic``):
+    """Wall seconds between read-backs of the mission flown under authority (``evidence.judge``):
     what no report shows (ArduPilot names no mission) is found within this; 0: never."""
     leg_tolerance_m: float = 30.0
     """How far (horizontally) the vehicle may be off the leg it flies to a point of ours
-    before the mission is read back (``_leg_check``); 0: not checked."""
+    before the mission is read back (``evidence.judge``); 0: not checked."""
 
     @property
     def autopilot(self) -> Autopilot:
@@ -183,10 +181,6 @@ class Sortie:
     """The authority the next sortie begins with, when the operator gave it."""
     services: int = 0
     """Services recorded in this sortie (the interval count)."""
-    count_at_doubt: int | None = None
-    """The count of items that raised the doubt (``_count_check``)."""
-    count_explained: int | None = None
-    """A count of items a read-back showed to go with the mission held."""
     just_started: bool = False
     """The service has just started (restored from its journal) and has not yet seen whether
     the vehicle is in the air: if it is, the authority ends."""
@@ -200,22 +194,8 @@ class Sortie:
     doubted: tuple[Sample, ...] = ()
     """The vehicle's reports while in doubt or an upload is in flight (``_replay``), at most
     ``MAX_DOUBTED``."""
-    mission_id: int = 0
-    """The autopilot's id of ``held`` (the upload's MISSION_ACK ``opaque_id``); 0: not said."""
-    id_at_doubt: int = 0
-    """The MISSION_CURRENT ``mission_id`` that raised the doubt (``_id_check``)."""
-    id_explained: int = 0
-    """A ``mission_id`` a read-back showed to go with the mission held."""
-    checked_at: float = -math.inf
-    """When the vehicle was last known to hold ``held`` (accepted or read back)."""
-    top_seq: int = -1
-    """The highest item the vehicle was seen flying of ``held`` since it was known to hold it
-    or the service last commanded an item (``_seq_check``)."""
-    leg: tuple[int, float, float, float] | None = None
-    """The leg being flown (``_leg_check``): its item, where the vehicle was (x, y) when it
-    began it, and the vehicle's clock of the last report judged."""
-    off_leg: int = 0
-    """Reports in a row off that leg."""
+    evidence: Evidence = field(default_factory=Evidence)
+    """What the vehicle's reports say of whose mission it flies (``evidence.py``)."""
 
 
 Step = tuple[Sortie, list[fx.Effect]]
@@ -276,7 +256,7 @@ class SortieLogic:
                                              f"trying again"))
                 s = replace(s, busy="", readback_at=now + self.rules.retry_s)
             case ins.CommandDone(command=cmd):
-                s = self._command_done(replace(s, commanding="", top_seq=-1, leg=None, off_leg=0), cmd, now, out)
+                s = self._command_done(replace(s, commanding="", evidence=s.evidence.commanded()), cmd, now, out)
             case ins.CommandNotDone(command=cmd, error=error):
                 s = self._command_failed(replace(s, commanding=""), cmd, error, now, out)
             case ins.RequestIn(user_id=user, tasks=tasks):
@@ -322,13 +302,9 @@ class SortieLogic:
         s = self._maybe_begin(s, v, out)
         s = self._start_lapsed(s, v, now, out)
         s = self._watch(s, v, out)
-        s = self._count_check(s, v, out)
         s = self._homing(s, v)
         s = self._disarm_check(s, v, now, out)
-        s = self._id_check(s, v, out)
-        s = self._seq_check(s, v, out)
-        s = self._leg_check(s, v, out)
-        s = self._periodic(s, v, now, out)
+        s = self._check_mission(s, v, now, out)
         s = self._safety(s, v, out)
         return self._next(s, v, now, out)
 
@@ -382,109 +358,31 @@ class SortieLogic:
                 s = self._feed(s, watch, sample, v, out)
         return s
 
-    def _count_check(self, s: Sortie, v: ins.VehicleSnapshot, out: list[fx.Effect]) -> Sortie:
-        """MISSION_CURRENT's count of items against the mission held: another station's
-        upload shows there first (ArduPilot tells only the uploading station that it took a
-        plan), as does a mission lost. A count a read-back has shown to go with our mission
-        (an autopilot that counts home, or not) doubts nothing again."""
+    def _check_mission(self, s: Sortie, v: ins.VehicleSnapshot, now: float, out: list[fx.Effect]) -> Sortie:
+        """The vehicle's latest report against the mission held (``evidence.judge``), while
+        it is known to hold it and nothing the service does now changes it: a disagreement
+        reads the mission back."""
         held = s.held
-        if (held is None or s.held_gen is None or s.busy or s.doubt is not None or not v.connected
-                or v.mission_total < 0 or v.mission_total == s.count_explained):
+        if held is None or s.held_gen is None or s.busy or s.doubt is not None or not v.connected:
             return s
-        if v.mission_total in (len(held.items), len(held.items) - 1):  # with or without home
+        settled = Settled(over=s.over is not None, commanding=bool(s.commanding), granted=s.authority.granted)
+        evidence, doubt = judge(s.evidence, held, v, now, settled, leg_tolerance_m=self.rules.leg_tolerance_m,
+                                readback_interval_s=self.rules.readback_interval_s)
+        s = replace(s, evidence=evidence)
+        if doubt is None:
             return s
-        return self._doubt(replace(s, count_at_doubt=v.mission_total),
-                           f"the vehicle counts {v.mission_total} mission items, plan {held.plan_id} has "
-                           f"{len(held.items)}", out)
-
-    def _checkable(self, s: Sortie, v: ins.VehicleSnapshot) -> bool:
-        """The vehicle is known to hold ``held`` and nothing the service does now changes it."""
-        return (s.held is not None and s.held_gen is not None and not s.busy and s.doubt is None and v.connected
-                and s.over is None)
-
-    def _id_check(self, s: Sortie, v: ins.VehicleSnapshot, out: list[fx.Effect]) -> Sortie:
-        """MISSION_CURRENT's ``mission_id`` (PX4: a CRC32 of the items) against the id the
-        autopilot gave our upload: another station's mission of the same length shows here,
-        not in the count. An id the link could not learn (0) is read back once, then known."""
-        if not self._checkable(s, v) or v.mission_id == 0 or v.mission_id in (s.mission_id, s.id_explained):
-            return s
-        held = s.held
-        assert held is not None
-        said = f"{s.mission_id:#010x}" if s.mission_id else "not said"
-        return self._doubt(replace(s, id_at_doubt=v.mission_id),
-                           f"the vehicle names its mission {v.mission_id:#010x}, plan {held.plan_id}'s id is {said}",
-                           out)
-
-    def _seq_check(self, s: Sortie, v: ins.VehicleSnapshot, out: list[fx.Effect]) -> Sortie:
-        """The item flown against the mission held: an item it does not have, or a step back
-        that nothing the service commanded explains (ArduPilot keeps its index across an
-        upload; a mission's items are flown forward), is someone else's doing."""
-        if not self._checkable(s, v) or not v.airborne or v.seq < 0 or s.commanding:
-            return s
-        held = s.held
-        assert held is not None
-        if v.seq >= len(held.items):
-            return self._doubt(s, f"the vehicle flies item {v.seq}, plan {held.plan_id} has {len(held.items)}", out)
-        if v.seq < s.top_seq:
-            return self._doubt(replace(s, top_seq=-1), f"the vehicle went back from item {s.top_seq} to {v.seq} "
-                               f"of plan {held.plan_id}, not commanded by the service", out)
-        return replace(s, top_seq=v.seq) if v.seq > s.top_seq else s
-
-    def _leg_check(self, s: Sortie, v: ins.VehicleSnapshot, out: list[fx.Effect]) -> Sortie:
-        """The vehicle's track against the leg it flies: from where it was when it began
-        item ``seq`` to that item's point. Another station's mission of the same length
-        has the same items at other places: the vehicle heads off the leg before any count
-        or id says so. ``LEG_REPORTS`` reports in a row more than ``leg_tolerance_m`` off
-        read the mission back (a false alarm costs one read-back, nothing more)."""
-        tolerance = self.rules.leg_tolerance_m
-        held = s.held
-        point = held.point_at(v.seq) if held is not None else None
-        if (tolerance <= 0 or point is None or not self._checkable(s, v) or not v.airborne or not v.position_ok
-                or v.mode not in MISSION_MODES or s.commanding or math.isnan(v.boot_s)):
-            return replace(s, leg=None, off_leg=0) if s.leg is not None else s
-        x, y = v.xyz[0], v.xyz[1]
-        if s.leg is None or s.leg[0] != v.seq:
-            return replace(s, leg=(v.seq, x, y, v.boot_s), off_leg=0)
-        if v.boot_s == s.leg[3]:
-            return s  # the same report again
-        seq, x0, y0, _ = s.leg
-        s = replace(s, leg=(seq, x0, y0, v.boot_s))
-        off = off_segment_m((x0, y0), (point.x_m, point.y_m), (x, y))
-        if off <= tolerance:
-            return replace(s, off_leg=0) if s.off_leg else s
-        if s.off_leg + 1 < LEG_REPORTS:
-            return replace(s, off_leg=s.off_leg + 1)
-        assert held is not None
-        return self._doubt(replace(s, leg=None, off_leg=0),
-                           f"the vehicle is {off:.0f} m off its leg to point {point.hover_index} (item {seq} of plan "
-                           f"{held.plan_id})", out)
-
-    def _periodic(self, s: Sortie, v: ins.VehicleSnapshot, now: float, out: list[fx.Effect]) -> Sortie:
-        """Read the mission back every ``readback_interval_s`` while the service flies it
-        under authority: ArduPilot names no mission, and a station's mission of the same
-        length leaves every report as it was. Only between a plan and an upload (``busy``
-        empty), so it never delays one in flight; reports meanwhile are judged after."""
-        interval = self.rules.readback_interval_s
-        if (interval <= 0 or not s.authority.granted or not v.airborne or not self._checkable(s, v)
-                or now - s.checked_at < interval):
-            return s
-        held = s.held
-        assert held is not None
-        why = f"the periodic check of plan {held.plan_id} (every {interval:g} s)"
-        out.append(fx.Log("info", f"{why}: reading the mission back"))
-        return replace(s, doubt=why, held_gen=None, readback_at=0.0)
+        if doubt.periodic:  # no disagreement: nothing planned is stale
+            out.append(fx.Log("info", f"{doubt.why}: reading the mission back"))
+            return replace(s, doubt=doubt.why, held_gen=None, readback_at=0.0)
+        return self._doubt(s, doubt.why, out)
 
     def _known(self, s: Sortie, now: float, mission_id: int, *, read_back: bool = False) -> Sortie:
-        """The vehicle was just seen to hold ``held`` (an upload accepted, a read-back): its
-        id, as the autopilot gave it, and the checks start afresh from here."""
-        if s.held is None or s.held_gen is None:
-            return replace(s, mission_id=0, id_explained=0) if s.held is None else s
-        if read_back:
-            explained = s.id_at_doubt if mission_id == 0 else 0
-            return replace(s, mission_id=mission_id or s.mission_id, id_explained=explained, id_at_doubt=0,
-                           checked_at=now, top_seq=-1, leg=None, off_leg=0)
-        return replace(s, mission_id=mission_id, id_explained=0, id_at_doubt=0, checked_at=now, top_seq=-1, leg=None,
-                       off_leg=0)
+        """The vehicle was just seen to hold ``held`` (an upload accepted, a read-back)."""
+        if s.held is None:
+            return replace(s, evidence=s.evidence.no_mission())
+        if s.held_gen is None:
+            return s
+        return replace(s, evidence=s.evidence.known(now, mission_id, read_back=read_back))
 
     def _replay(self, s: Sortie, v: ins.VehicleSnapshot, out: list[fx.Effect]) -> Sortie:
         """The reports kept during a doubt or an upload, judged now that the vehicle is known
@@ -872,7 +770,7 @@ class SortieLogic:
             # (what it flew across its restart is not judged: its holds were cut).
             restarted = s.restarted
             s = replace(s, held_gen=gen, unconfirmed=None, resume_pending=restarted and v.airborne, restarted=False,
-                        count_explained=s.count_at_doubt)
+                        evidence=s.evidence.explained())
             return replace(s, doubted=()) if restarted else self._replay(s, v, out)
         s = replace(s, doubted=())
         if s.watch is not None:
@@ -880,7 +778,7 @@ class SortieLogic:
         lost = s.held
         ours = f"plan {lost.plan_id}" if lost is not None else "a mission of ours"
         gone = replace(s, held=None, held_gen=None, judged=frozenset(), unconfirmed=None, restarted=False,
-                       decided_at=None, count_explained=None)
+                       decided_at=None, evidence=s.evidence.lost())
         if s.unconfirmed is None and len(items) > self.rules.autopilot.home_slots:
             # A mission no upload of ours explains (not one cut short: an upload of ours is
             # then unconfirmed): another station's. Not ours to fly, nor to replace.
@@ -1163,14 +1061,6 @@ class SortieLogic:
         authority = s.next_authority or next_sortie(s.authority)
         out.append(fx.Emit(ev.SortieStarted(f"sortie {number}: authority {authority.state} ({authority.detail})")))
         return Sortie(number=number, authority=authority, plan_id=s.plan_id, version=s.version + 1, warming=s.warming)
-
-
-def off_segment_m(a: tuple[float, float], b: tuple[float, float], p: tuple[float, float]) -> float:
-    """The horizontal distance (m) from ``p`` to the segment from ``a`` to ``b``."""
-    dx, dy = b[0] - a[0], b[1] - a[1]
-    length2 = dx * dx + dy * dy
-    t = 0.0 if length2 == 0.0 else min(1.0, max(0.0, ((p[0] - a[0]) * dx + (p[1] - a[1]) * dy) / length2))
-    return math.hypot(p[0] - (a[0] + t * dx), p[1] - (a[1] + t * dy))
 
 
 def marked_current(items: list[MissionItem], seq: int) -> list[MissionItem]:
