@@ -1,4 +1,5 @@
-"""What every planner offers the sortie runner, and the registry of algorithms by name."""
+"""What every planner offers the sortie runner: the contract the planners import (their
+registry by name is ``registry.py``, which imports them)."""
 
 from __future__ import annotations
 
@@ -45,24 +46,3 @@ class PolicySpec:
 
 
 Factory = Callable[[PolicySpec, np.random.Generator], Policy]
-
-
-def _factories() -> dict[str, Factory]:
-    # Imported here so that `policy` stays importable from every layer without cycles.
-    from .baselines import BASELINES
-    from .mcts import PLANNERS
-
-    return {**BASELINES, **PLANNERS}
-
-
-def algorithms() -> list[str]:
-    """Every algorithm name ``make_policy`` accepts."""
-    return sorted(_factories())
-
-
-def make_policy(name: str, spec: PolicySpec, rng: np.random.Generator) -> Policy:
-    """The planner called ``name`` (see ``algorithms()``)."""
-    factories = _factories()
-    if name not in factories:
-        raise ValueError(f"unknown algorithm {name!r}; choose from {sorted(factories)}")
-    return factories[name](spec, rng)

@@ -10,7 +10,8 @@ import numpy as np
 
 from .model import Scenario, SortieEnv
 from .model.fairness import fairness_violations
-from .policy import Policy, PolicySpec, make_policy
+from .policy import Policy, PolicySpec
+from .registry import make_policy
 
 
 def seed_streams(seed: int) -> tuple[np.random.Generator, np.random.Generator]:

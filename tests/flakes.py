@@ -47,7 +47,7 @@ def outcomes(junit: Path) -> dict[str, str]:
 
 def _run(cmd: list[str]) -> str:
     """One pytest run's output; interrupted, its process group is killed with it (the
-    test processes it started die with it: planner_service.service.processes)."""
+    test processes it started die with it: planner_service.harness.processes)."""
     proc = subprocess.Popen(cmd, cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
                             start_new_session=True)
     try:

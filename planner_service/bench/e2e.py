@@ -23,7 +23,7 @@ from protocol import Event
 from protocol.client import PlannerClient
 
 from ..service.config import build_config, to_toml
-from ..service.processes import Child, free_port, start_vehicle_and_service
+from ..harness.processes import Child, free_port, start_vehicle_and_service
 
 
 def percentile(values: list[float], q: float) -> float:

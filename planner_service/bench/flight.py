@@ -24,8 +24,6 @@ without flying (seconds, not minutes).
 
 from __future__ import annotations
 
-import contextlib
-import io
 import math
 import re
 import statistics
@@ -33,29 +31,17 @@ import tempfile
 from pathlib import Path
 from typing import Any, Callable, Sequence
 
-from ..policy import PolicySpec
-from ..sortie import run_sortie
+from ..harness.demo import run_demo
+from ..harness.offline import USERS_ARRIVAL_PERIOD_S, plan_offline
 
 ALGOS = ("mcts", "greedy", "random")
 FIGURES = ("throughput_tasks_per_interval", "average_reward", "total_tasks")
 WORLDS = ("flown", "offline", "timed")
-USERS_ARRIVAL_PERIOD_S = 55.0
-"""``sim_bridge users``' default ``--interval``: a draw of the model's arrivals every so many
-simulated seconds (the service's process boundary: not imported from it; a test checks)."""
-
-
-def offline_scenario(users: int) -> Any:
-    """The scenario the demo's service flies, as the model plans it offline."""
-    from ..service.config import build_config
-
-    return build_config({}, {}).scenario().replace(num_users=users, task_model="backlog")
 
 
 def fly(algo: str, seed: int, users: int, speedup: float, budget_ms: float,
         echo: Callable[[str], None]) -> dict[str, Any]:
     """One sortie through the service; its summary with the decisions counted."""
-    from ..service.demo import run_demo
-
     with tempfile.TemporaryDirectory(prefix="uav-flight-") as tmp:
         out = Path(tmp)
         summary = run_demo(out, users=users, speedup=speedup, budget_ms=budget_ms, seed=seed, algo=algo,
@@ -66,22 +52,6 @@ def fly(algo: str, seed: int, users: int, speedup: float, budget_ms: float,
     summary["planned_request_share"] = summary["services_of_the_planned_request"] / n if n else float("nan")
     echo(f"  flown   {algo:7s} seed {seed}: {n} services, {summary['throughput_tasks_per_interval']:.1f} "
          f"tasks/interval, reward {summary['average_reward']:.3f}, {decisions} decisions")
-    return summary
-
-
-def plan_offline(algo: str, seed: int, users: int, budget_ms: float, echo: Callable[[str], None],
-                 scenario: Any = None, timed: bool = False, iterations: int | None = None) -> dict[str, Any]:
-    """The sortie planned offline on ``scenario`` (default: the demo's, ``offline_scenario``);
-    ``timed``: in the world whose tasks arrive as the users draw them (the module's
-    ``timed``), not by the scenario's law. MCTS decides
-    on ``budget_ms``, as in flight, or on ``iterations`` (the same decisions every run)."""
-    scenario = offline_scenario(users) if scenario is None else scenario.replace(num_users=users)
-    options = {"arrivals_every_s": USERS_ARRIVAL_PERIOD_S} if timed else None
-    spec = PolicySpec(iterations=None, budget_ms=budget_ms) if iterations is None else PolicySpec(iterations)
-    with contextlib.redirect_stdout(io.StringIO()):
-        summary = run_sortie(scenario, algo, seed, spec, options)
-    echo(f"  {'timed' if timed else 'offline':7s} {algo:7s} seed {seed}: {summary['intervals']} intervals, "
-         f"{summary['throughput_tasks_per_interval']:.1f} tasks/interval, reward {summary['average_reward']:.3f}")
     return summary
 
 

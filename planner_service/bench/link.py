@@ -20,7 +20,7 @@ from protocol import GeoOrigin, HoverPoint, encode_path
 from ..service.config import MavlinkConfig
 from ..service.errors import LinkError
 from ..service.link import LinkSettings
-from ..service.processes import Child, free_port
+from ..harness.processes import Child, free_port
 from .e2e import percentile
 
 RATES = (0.0, 0.05, 0.2)

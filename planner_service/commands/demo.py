@@ -49,7 +49,7 @@ def _mavlink_url(text: str) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..service.demo import DemoError, run_demo
+    from ..harness.demo import DemoError, run_demo
 
     out = Path(args.out)
     try:

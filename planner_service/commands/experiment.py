@@ -97,7 +97,7 @@ def _provenance() -> dict[str, Any]:
         "commit": git("rev-parse", "HEAD"),
         "uncommitted_planner_changes": git("status", "--porcelain", "--", "planner_service/model", "planner_service/mcts",
                                            "planner_service/baselines", "planner_service/policy.py",
-                                           "planner_service/sortie.py").splitlines(),
+                                           "planner_service/registry.py", "planner_service/sortie.py").splitlines(),
         "started": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
         "python": platform.python_version(),
         "numba": HAVE_NUMBA,

@@ -6,7 +6,8 @@ import argparse
 import json
 import sys
 
-from ..policy import PolicySpec, algorithms
+from ..policy import PolicySpec
+from ..registry import algorithms
 from ..sortie import run_sortie
 from .common import add_scenario_arguments, scenario_from_args
 

@@ -10,7 +10,8 @@ from planner_service.baselines import BASELINES, DQNConfig, DQNPolicy, QLearning
 from planner_service.baselines.dqn import Features
 from planner_service.baselines.qlearning import QTable
 from planner_service.model import SortieEnv, paper
-from planner_service.policy import PolicySpec, make_policy
+from planner_service.policy import PolicySpec
+from planner_service.registry import make_policy
 from planner_service.sortie import fly, run_sortie
 
 # A static problem: users never move and the task schedule is known for every interval, so

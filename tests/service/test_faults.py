@@ -14,7 +14,7 @@ import time
 import pytest
 
 from planner_service.model import field
-from planner_service.service.processes import Child
+from planner_service.harness.processes import Child
 from protocol import Event
 from protocol.client import ClientError
 from tests.support.gcs import M, GroundStation

@@ -12,7 +12,7 @@ from typing import Any
 import pytest
 import zenoh
 
-from planner_service.service.processes import free_port
+from planner_service.harness.processes import free_port
 from protocol import ErrorReply, Keys, TaskAck, encode
 from protocol.client import ClientError, PlannerClient
 from tests.support.stack import Stack

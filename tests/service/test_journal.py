@@ -10,9 +10,9 @@ import pytest
 
 from planner_service.service.errors import JournalError
 from planner_service.model import preset
+from planner_service.harness.report import sortie_summary
 from planner_service.service.journal import Journal
 from planner_service.service.rows import SortieRow
-from planner_service.service.report import sortie_summary
 
 
 def test_newer_request_replaces_older(tmp_path: Path) -> None:

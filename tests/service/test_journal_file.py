@@ -31,7 +31,7 @@ import pytest
 
 from planner_service.service.errors import JournalError
 from planner_service.service.journal import APPLICATION_ID, Journal
-from planner_service.service.processes import REPO, free_port
+from planner_service.harness.processes import REPO, free_port
 from tests.support.stack import Stack
 
 ROLLBACK_NOISE = "no transaction is active"

@@ -18,7 +18,7 @@ from typing import Any, Iterator
 import msgspec
 import pytest
 
-from planner_service.service.processes import Child, free_port
+from planner_service.harness.processes import Child, free_port
 from protocol import Status, TaskAck
 
 os.environ.setdefault("MAVLINK20", "1")

@@ -21,7 +21,7 @@ from planner_service.service.link import (Connected, Current, LinkEvent, LinkSet
                                           Restored, VehicleLink, open_link)
 from protocol import GeoOrigin, HoverPoint, encode_path, global_to_local, replacement_items, same_mission
 
-from planner_service.service.processes import free_port
+from planner_service.harness.processes import free_port
 from tests.support.sitl import PtyBridge, Sitl, ports, set_param
 
 pytestmark = [pytest.mark.sitl, pytest.mark.timeout(150)]

@@ -20,7 +20,7 @@ from pymavlink import mavutil  # noqa: E402
 
 from planner_service.service.link import (Current, OnGround, LinkEvent, LinkSettings, ModeChanged, Reached,  # noqa: E402
                                           Restarted, open_link)
-from planner_service.service.processes import free_port  # noqa: E402
+from planner_service.harness.processes import free_port  # noqa: E402
 
 M = mavutil.mavlink
 

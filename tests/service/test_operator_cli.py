@@ -18,7 +18,7 @@ from typing import Any
 import pytest
 import zenoh
 
-from planner_service.service.processes import REPO, free_port
+from planner_service.harness.processes import REPO, free_port
 from protocol import Keys, OperatorReply, PendingRequest, State, Status, encode
 from protocol.client import ClientError, PlannerClient, client_config
 from protocol.zenoh_config import session_config

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pytest
 
-from planner_service.service.processes import REPO
+from planner_service.harness.processes import REPO
 from protocol import ErrorReply, Keys, OperatorCommand, OperatorReply, decode_operator_reply, encode
 from protocol.client import ClientError, PlannerClient
 from protocol.operator_proof import sign

@@ -12,7 +12,7 @@ import pytest
 
 from planner_service.service.config import build_config
 from planner_service.service.errors import ConfigError
-from planner_service.service.processes import free_port
+from planner_service.harness.processes import free_port
 from protocol.signing import read_reservation, write_key
 from tests.support.stack import Stack
 

@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 from pymavlink.dialects.v20 import common as M
 
-from planner_service.service.processes import Child, free_port
+from planner_service.harness.processes import Child, free_port
 from protocol.signing import Signer, load_key, write_key
 from tests.support.stack import Stack
 

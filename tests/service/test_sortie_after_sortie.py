@@ -31,7 +31,7 @@ from planner_service.model.fairness import fairness_violations
 from planner_service.service.app import Service, build_parts
 from planner_service.service.config import build_config
 from planner_service.service.journal import Journal
-from planner_service.service.processes import Child
+from planner_service.harness.processes import Child
 from planner_service.service.sortie import item_dict, item_from_dict
 from protocol import Area, GeoOrigin, HoverPoint, encode_path, validate_mission
 from protocol.client import ClientError

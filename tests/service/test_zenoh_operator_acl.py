@@ -16,7 +16,7 @@ from pathlib import Path
 
 import pytest
 
-from planner_service.service.processes import REPO, free_port
+from planner_service.harness.processes import REPO, free_port
 from protocol import Plan
 from protocol.client import ClientError, PlannerClient
 from tests.support.stack import Stack

@@ -13,7 +13,7 @@ import time
 
 import pytest
 
-from planner_service.service.processes import Child, free_port
+from planner_service.harness.processes import Child, free_port
 from protocol.client import ClientError, PlannerClient
 from tests.support.stack import Stack
 

@@ -24,7 +24,7 @@ from typing import Any
 import pytest
 import zenoh
 
-from planner_service.service.processes import REPO, free_port
+from planner_service.harness.processes import REPO, free_port
 from protocol import ErrorReply, Keys, Status, TaskAck, UserPlace, decode, decode_reply, encode
 from protocol.client import ClientError, PlannerClient, client_config
 from tests.support.stack import Stack

@@ -12,7 +12,7 @@ from typing import Callable, Iterator
 
 import pytest
 
-from planner_service.service.processes import free_port, tied_to_parent
+from planner_service.harness.processes import free_port, tied_to_parent
 from tests.support.gcs import GroundStation
 
 REPO = Path(__file__).resolve().parents[2]

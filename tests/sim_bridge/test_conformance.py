@@ -27,7 +27,7 @@ from typing import Callable, Iterator
 
 import pytest
 
-from planner_service.service.processes import free_port
+from planner_service.harness.processes import free_port
 from protocol.geodesy import GeoOrigin
 from protocol.mission import MissionItem
 from tests.support.gcs import M, GroundStation

@@ -9,7 +9,7 @@ import time
 
 import pytest
 
-from planner_service.service.processes import free_port
+from planner_service.harness.processes import free_port
 from protocol.geodesy import GeoOrigin
 from protocol.mission import HoverPoint, encode_path, same_items
 from sim_bridge.proxy import Impairment, LossyProxy, ProxyError

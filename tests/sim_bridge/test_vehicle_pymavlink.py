@@ -7,7 +7,7 @@ import socket
 
 import pytest
 
-from planner_service.service.processes import free_port
+from planner_service.harness.processes import free_port
 from protocol.geodesy import GeoOrigin
 from protocol.mission import HoverPoint, MissionItem, encode_path, same_items
 from tests.support.gcs import M, as_stored, ten_items

@@ -36,7 +36,7 @@ from typing import Any, Iterator
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavutil  # noqa: E402
 
-from planner_service.service.processes import tied_to_parent  # noqa: E402
+from planner_service.harness.processes import tied_to_parent  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[2]
 ENV = "ARDUPILOT_SITL"

@@ -13,7 +13,7 @@ from pathlib import Path
 from typing import Any, Callable
 
 from planner_service.service.config import OPERATOR_KEY_NAME, build_config, to_toml
-from planner_service.service.processes import Child, free_port
+from planner_service.harness.processes import Child, free_port
 from protocol import Event, OperatorReply, State
 from protocol.client import PlannerClient
 from protocol.signing import load_key

@@ -7,7 +7,7 @@ from __future__ import annotations
 import subprocess
 from pathlib import Path
 
-from planner_service.service.processes import REPO
+from planner_service.harness.processes import REPO
 
 DOCS = REPO / "docs" / "zenoh"
 SHIPPED_DIR = "/etc/uavmec/tls"

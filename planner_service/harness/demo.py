@@ -17,11 +17,12 @@ from typing import Any, Callable
 from protocol import Event, Status, write_plan
 from protocol.client import PlannerClient
 
-from .config import build_config, to_toml
-from .errors import ServiceError
-from .journal import Journal
+from ..service.config import build_config, to_toml
+from ..service.errors import ServiceError
+from ..service.journal import Journal
+from ..service.sortie import item_from_dict
+from .offline import plan_offline
 from .processes import Child, free_port, start_vehicle_and_service
-from .sortie import item_from_dict
 from .report import sortie_summary
 
 
@@ -37,7 +38,7 @@ def run_demo(out: Path, *, users: int = 10, speedup: float = 25.0, budget_ms: fl
     ``mavlink`` (a connection string) no stub is started: the service flies the autopilot there
     (SITL or a real one), and ``speedup`` must be that autopilot's (the users' clock runs at it).
     With ``offline`` the same scenario and seed are also planned offline (the model alone,
-    ``bench --flight``'s other half) and the summary says how the flown sortie compares."""
+    ``offline.py``, ``bench --flight``'s other half) and the summary says how the flown sortie compares."""
     out.mkdir(parents=True, exist_ok=True)
     journal_path = out / "journal.sqlite"
     for stale in (journal_path, out / "journal.sqlite-wal", out / "journal.sqlite-shm"):
@@ -123,8 +124,6 @@ def run_demo(out: Path, *, users: int = 10, speedup: float = 25.0, budget_ms: fl
     finally:
         journal.close()
     if offline:
-        from ..bench.flight import plan_offline
-
         planned = plan_offline(algo, seed, users, budget_ms, lambda _: None, scenario)
         summary["offline"] = {k: planned[k] for k in ("intervals", "throughput_tasks_per_interval", "average_reward",
                                                       "total_tasks")}

@@ -18,7 +18,7 @@ import time
 from pathlib import Path
 from typing import Callable
 
-from .errors import ServiceError
+from ..service.errors import ServiceError
 
 REPO = Path(__file__).resolve().parents[2]
 

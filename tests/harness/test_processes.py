@@ -1,4 +1,4 @@
-"""The harness's child processes (service/processes.py) die with the process that started
+"""The harness's child processes (harness/processes.py) die with the process that started
 them: a test run killed mid-test (a CI time-out, an interrupted flake hunt) must not leave a
 vehicle stub flying and writing its state and track files into the next run's folders."""
 
@@ -12,12 +12,12 @@ import sys
 import time
 from pathlib import Path
 
-from planner_service.service.processes import REPO, free_port
+from planner_service.harness.processes import REPO, free_port
 
 STARTER = """
 import sys, time
 from pathlib import Path
-from planner_service.service.processes import Child
+from planner_service.harness.processes import Child
 child = Child("sim_bridge", ["vehicle", "--mavlink", "udpin:127.0.0.1:{port}"], Path(sys.argv[1]))
 child.wait_ready("listening")
 print(child.proc.pid, flush=True)

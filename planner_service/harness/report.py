@@ -9,7 +9,7 @@ from typing import Any
 
 from ..model import Scenario
 from ..model.fairness import fairness_violations
-from .journal import Journal
+from ..service.journal import Journal
 
 
 def planned_requests(services: list[Any], missions: list[Any]) -> int:
