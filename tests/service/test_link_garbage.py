@@ -157,8 +157,9 @@ def fake() -> Iterator[FakeAutopilot]:
 def connected(stack: Stack, fake: FakeAutopilot) -> tuple[Child, Status]:
     """The service on the fake autopilot, and its status once it sees it."""
     service = stack.service(mavlink__url=f"udpout:127.0.0.1:{fake.port}")
-    before = wait_status(stack, lambda s: s.phase == "idle" and s.battery_fraction == 0.9, 20.0,
-                         "the service never saw the fake autopilot")
+    # (and once its planner is warm: the status says so until then, a change of its own)
+    before = wait_status(stack, lambda s: s.phase == "idle" and s.battery_fraction == 0.9 and "warming" not in
+                         s.waiting_for, 60.0, "the service never saw the fake autopilot (or never warmed up)")
     assert (before.armed, before.mode, before.z_m, before.mission_seq) == (False, "STABILIZE", 0.0, 0)
     return service, before
 
