@@ -277,7 +277,7 @@ def test_a_link_gap_read_back_as_ours_keeps_the_hold() -> None:
     out = run.feed(ins.Planned(searching.basis, path(point(9, 400.0, 300.0, "b", 2))))
     (rb,) = only(out, fx.ReadBack)
     out = run.feed(ins.ReadBackDone(up.items, 3))
-    assert run.s.held_gen == 3 and run.s.watch is not None and run.s.watch.phase == "holding"
+    assert run.s.held_known and run.s.watch is not None and run.s.watch.phase == "holding"
     # The decision dropped during the doubt is made again from the point.
     (plan,) = only(out, fx.MakePlan)
     assert plan.basis.keep_through == 2

@@ -141,8 +141,9 @@ class Sortie:
     started_at: float = -math.inf
     authority: Authority = field(default_factory=Authority)
     held: HeldMission | None = None
-    held_gen: int | None = None
-    """The link generation ``held`` is known to match; None while in doubt."""
+    held_known: bool = False
+    """The vehicle is known to hold ``held`` (an upload accepted, a read-back); False while
+    in doubt or before it is known."""
     unconfirmed: HeldMission | None = None
     """An upload whose outcome is unknown: the vehicle may hold it."""
     doubt: str | None = None
@@ -248,8 +249,8 @@ class SortieLogic:
                 s = self._known(s, now, event.mission_id)
             case ins.NotUploaded(upload=up, error=error, outcome_unknown=unknown):
                 s = self._upload_failed(replace(s, busy=""), up, error, unknown, v, now, out)
-            case ins.ReadBackDone(items=items, generation=gen):
-                s = self._read_back(replace(s, busy=""), items, gen, v, out)
+            case ins.ReadBackDone(items=items):
+                s = self._read_back(replace(s, busy=""), items, v, out)
                 s = self._known(s, now, event.mission_id, read_back=True)
             case ins.ReadBackFailed(error=error):
                 out.append(fx.Log("warning", f"could not read back the vehicle's mission ({s.doubt}): {error}; "
@@ -329,7 +330,7 @@ class SortieLogic:
         if s.held is None or not (v.connected and v.position_ok) or math.isnan(v.boot_s):
             return s
         sample = Sample(v.boot_s, v.xyz, v.seq)
-        if s.held_gen is None or s.busy == "upload":
+        if not s.held_known or s.busy == "upload":
             # In doubt, or an upload in flight (the vehicle may fly the new mission before its
             # ACK reaches us: on a lossy link seconds, minutes of flight at x40): kept, and
             # judged once the mission the vehicle flies is known.
@@ -363,7 +364,7 @@ class SortieLogic:
         it is known to hold it and nothing the service does now changes it: a disagreement
         reads the mission back."""
         held = s.held
-        if held is None or s.held_gen is None or s.busy or s.doubt is not None or not v.connected:
+        if held is None or not s.held_known or s.busy or s.doubt is not None or not v.connected:
             return s
         settled = Settled(over=s.over is not None, commanding=bool(s.commanding), granted=s.authority.granted)
         evidence, doubt = judge(s.evidence, held, v, now, settled, leg_tolerance_m=self.rules.leg_tolerance_m,
@@ -373,14 +374,14 @@ class SortieLogic:
             return s
         if doubt.periodic:  # no disagreement: nothing planned is stale
             out.append(fx.Log("info", f"{doubt.why}: reading the mission back"))
-            return replace(s, doubt=doubt.why, held_gen=None, readback_at=0.0)
+            return replace(s, doubt=doubt.why, held_known=False, readback_at=0.0)
         return self._doubt(s, doubt.why, out)
 
     def _known(self, s: Sortie, now: float, mission_id: int, *, read_back: bool = False) -> Sortie:
         """The vehicle was just seen to hold ``held`` (an upload accepted, a read-back)."""
         if s.held is None:
             return replace(s, evidence=s.evidence.no_mission())
-        if s.held_gen is None:
+        if not s.held_known:
             return s
         return replace(s, evidence=s.evidence.known(now, mission_id, read_back=read_back))
 
@@ -690,14 +691,14 @@ class SortieLogic:
         return held, items
 
     def _uploaded(self, s: Sortie, uploaded: ins.Uploaded, v: ins.VehicleSnapshot, out: list[fx.Effect]) -> Sortie:
-        up, gen, keep = uploaded.upload, uploaded.generation, uploaded.upload.keep_through
+        up, keep = uploaded.upload, uploaded.upload.keep_through
         judged = frozenset(q for q in s.judged if keep is not None and q <= keep)
         watch, binding = s.watch, s.binding
         if watch is not None and (keep is None or watch.seq > keep) and not self._flies_on(s, up, watch.seq):
             # the point watched was replaced: what it held so far is judged now
             s = self._judge(replace(s, watch=watch.abandon(f"replaced by plan {up.plan_id}")), out)
             watch, binding, judged = None, None, frozenset(q for q in s.judged if keep is not None and q <= keep)
-        s = replace(s, held=up.mission, held_gen=gen, unconfirmed=None, must_upload=False, failures=0,
+        s = replace(s, held=up.mission, held_known=True, unconfirmed=None, must_upload=False, failures=0,
                     judged=judged, watch=watch, binding=binding, plan_id=up.plan_id)
         out += [fx.RecordMission(up.plan_id, up.mission, "accepted"),
                 fx.PublishPlan(up.mission, up.path.predicted_energy_j),
@@ -751,12 +752,12 @@ class SortieLogic:
         hold being watched goes on being watched once the read-back shows our mission (a
         radio gap interrupts nothing), unless the vehicle restarted: then it was cut."""
         out.append(fx.Log("warning", f"{why}: the mission held will be read back before planning"))
-        s = replace(s, doubt=why, held_gen=None, version=s.version + 1, retry_at=0.0, readback_at=0.0)
+        s = replace(s, doubt=why, held_known=False, version=s.version + 1, retry_at=0.0, readback_at=0.0)
         if hold_interrupted and s.watch is not None:
             s = self._judge(replace(s, watch=s.watch.abandon(why)), out)
         return s
 
-    def _read_back(self, s: Sortie, items: tuple, gen: int, v: ins.VehicleSnapshot, out: list[fx.Effect]) -> Sortie:
+    def _read_back(self, s: Sortie, items: tuple, v: ins.VehicleSnapshot, out: list[fx.Effect]) -> Sortie:
         why = s.doubt
         s = replace(s, doubt=None)
         for candidate in (s.held, s.unconfirmed):
@@ -769,7 +770,7 @@ class SortieLogic:
             # A restarted vehicle may hold our mission and still hover where it came back
             # (what it flew across its restart is not judged: its holds were cut).
             restarted = s.restarted
-            s = replace(s, held_gen=gen, unconfirmed=None, resume_pending=restarted and v.airborne, restarted=False,
+            s = replace(s, held_known=True, unconfirmed=None, resume_pending=restarted and v.airborne, restarted=False,
                         evidence=s.evidence.explained())
             return replace(s, doubted=()) if restarted else self._replay(s, v, out)
         s = replace(s, doubted=())
@@ -777,7 +778,7 @@ class SortieLogic:
             s = self._judge(replace(s, watch=s.watch.abandon("the vehicle no longer holds our mission")), out)
         lost = s.held
         ours = f"plan {lost.plan_id}" if lost is not None else "a mission of ours"
-        gone = replace(s, held=None, held_gen=None, judged=frozenset(), unconfirmed=None, restarted=False,
+        gone = replace(s, held=None, held_known=False, judged=frozenset(), unconfirmed=None, restarted=False,
                        decided_at=None, evidence=s.evidence.lost())
         if s.unconfirmed is None and len(items) > self.rules.autopilot.home_slots:
             # A mission no upload of ours explains (not one cut short: an upload of ours is
@@ -882,7 +883,7 @@ class SortieLogic:
         if (not v.airborne and not s.started and s.held.points and s.busy == "" and v.position_ok
                 and v.battery_fraction is not None and v.battery_source == "autopilot"):
             return self._command(s, fx.Command("start", why=f"plan {s.held.plan_id}"), out)
-        if s.resume_pending and s.held_gen is not None and s.busy == "" and v.airborne:
+        if s.resume_pending and s.held_known and s.busy == "" and v.airborne:
             if v.mode in MISSION_MODES:  # PX4 flies a new mission's marked item in mission mode by itself
                 out.append(fx.Emit(ev.MissionResumed(f"plan {s.held.plan_id}: the vehicle flies it in {v.mode}")))
                 return replace(s, resume_pending=False)
@@ -898,7 +899,7 @@ class SortieLogic:
         told once (``resume_needed``); ``operator start`` plans from where the vehicle is then
         and resumes."""
         held = s.held
-        if (not s.resume_pending or s.authority.granted or held is None or s.held_gen is None or s.busy != ""
+        if (not s.resume_pending or s.authority.granted or held is None or not s.held_known or s.busy != ""
                 or not v.airborne or v.mode not in HOLDING_MODES):
             return s
         out += [fx.Emit(ev.ResumeNeeded(f"plan {held.plan_id} is on board and the vehicle holds in {v.mode}: the "
