@@ -37,6 +37,7 @@ import re
 import time
 import tomllib
 from collections import Counter
+from dataclasses import replace
 from datetime import datetime
 from pathlib import Path
 from typing import Any, Callable
@@ -78,7 +79,7 @@ autopilot's clock, and recorded whole when it came within 0.5 s of what the requ
 (sortie/machine.py ``_judge``): a stay that short of the need by up to 0.7 s is the
 service's rounding, not a false service."""
 FAILSAFE = re.compile(r"(?i)failsafe|Battery \d is (low|critical)")
-LOITER, LAND = 5, 9
+AUTO, LOITER, LAND = 3, 5, 9
 """ArduCopter's custom modes."""
 LOG_TIME = re.compile(r"^(\d{4}-\d\d-\d\d \d\d:\d\d:\d\d,\d{3}) ")
 
@@ -400,3 +401,43 @@ def test_a_pilots_forced_disarming_in_the_air_ends_the_authority_and_nothing_arm
     states = [a for a, _ in arms]  # (the service's arming may come before the log starts)
     assert 0 in states and states[states.index(0):] == [0], arms  # the pilot's disarming, then nothing
     print(f"\nforced disarming on SITL: authority ended by {revoked.detail!r}; ARM records {arms}")
+
+
+def test_a_second_stations_mission_of_the_same_length_ends_the_authority_and_is_left_to_fly(
+        copter: Sitl, stack: Stack) -> None:
+    """Another ground station on SERIAL2 replaces the service's mission while SITL flies it
+    in AUTO, with one of the same length (ours read back, each point 55 m north): ArduPilot
+    names no mission and tells only the uploading station, so only the vehicle's track (off
+    the leg it should fly) or the periodic read-back can show it. The service's authority
+    ends, it neither replaces their mission nor commands anything: what SITL holds at the
+    end is theirs, and SITL's log shows no mode after the upload but its own."""
+    sitl = copter
+    fly(stack, sitl, "pymavlink")
+    client = stack.client
+    assert client is not None
+    stack.wait_event(lambda e: e.event == "user_served", 150.0, "a first service")
+    gcs = GroundStation(sitl.url(2))
+    try:
+        gcs.wait_vehicle()
+        ours = gcs.download()
+        theirs = [replace(i, x=i.x + 5000) if i.seq > 0 and i.x else i for i in ours]
+        uploaded_at = time.time()
+        assert gcs.upload(theirs) == M.MAV_MISSION_ACCEPTED
+        revoked = stack.wait_event(lambda e: e.event == "authority_revoked" and e.time_s >= uploaded_at, 40.0,
+                                   "the end of the authority")
+        assert "not ours" in revoked.detail, revoked.detail
+        time.sleep(5.0)  # 50 s of SITL's time: the users go on asking, the service goes on
+        held = gcs.download()
+    finally:
+        gcs.close()
+    assert [(i.command, i.x, i.y) for i in held[1:]] == [(i.command, i.x, i.y) for i in theirs[1:]], \
+        "the service replaced their mission"
+    status = client.state().status
+    assert status.authority == "revoked", status
+    for child in reversed(stack.children):
+        assert child.stop() == 0, f"{child.name}: {child.log()[-2000:]}"
+    sitl.stop()  # flushes the dataflash log
+    modes = [m["Mode"] for m in sitl.read_log(("MODE",))]
+    assert modes and modes[-1] == AUTO, modes  # no LOITER, RTL or other mode of the service's after
+    print(f"\nsecond station on SITL: authority ended {revoked.time_s - uploaded_at:.1f} s after their upload "
+          f"({revoked.detail[:100]}); their mission still held; modes {modes}")
