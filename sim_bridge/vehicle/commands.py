@@ -1,6 +1,6 @@
 """COMMAND_LONG / COMMAND_INT on the vehicle: what each command does and its MAV_RESULT.
 
-The result codes and texts are each autopilot's. ArduPilot (checked on ArduCopter SITL
+The result codes and texts are each autopilot's (``behaviour.py`` holds them). ArduPilot (checked on ArduCopter SITL
 V4.7.0-dev; ``ArduCopter/GCS_MAVLink_Copter.cpp``, ``libraries/GCS_MAVLink/GCS_Common.cpp``,
 ``ArduCopter/mode.cpp``): a refused arm is MAV_RESULT_FAILED with one STATUSTEXT
 ``Arm: <check>`` per failing check; a refused mode change is FAILED with
@@ -19,8 +19,9 @@ from typing import Any, Callable, Hashable
 
 from pymavlink.dialects.v20 import common as mavlink
 
+from .behaviour import Behaviour
 from .flight import Flight, Refusal
-from .modes import ARDUPILOT_NAMES, Mode, mode_from_command
+from .modes import Mode, mode_from_command, mode_name, requested_name
 
 log = logging.getLogger(__name__)
 
@@ -56,8 +57,8 @@ class Commands:
         self._peer: Hashable = None
 
     @property
-    def ardupilot(self) -> bool:
-        return self.flight.flavour == "ardupilot"
+    def behaviour(self) -> Behaviour:
+        return self.flight.behaviour
 
     def execute(self, msg: Any, peer: Hashable = None) -> CommandOutcome:
         """Run a COMMAND_LONG or COMMAND_INT; never raises for bad parameters."""
@@ -77,51 +78,59 @@ class Commands:
             return CommandOutcome(M.MAV_RESULT_DENIED, f"bad parameters: {exc}")
 
     # --- refusals as each autopilot words them -------------------------------------------------
-    def _refused(self, refusal: Refusal | None, *, prefix: str = "", px4: int = M.MAV_RESULT_TEMPORARILY_REJECTED,
-                 ardupilot: int = M.MAV_RESULT_FAILED, severity: int = M.MAV_SEVERITY_CRITICAL) -> CommandOutcome:
+    def _refused(self, refusal: Refusal | None, asked: str, *, prefix: str = "", result: int | None = None,
+                 severity: int = M.MAV_SEVERITY_CRITICAL) -> CommandOutcome:
+        """The answer to a command that ``asked`` (a key of ``Behaviour.refusal_results``);
+        ``result`` overrides the autopilot's refusal result."""
         if refusal is None:
             return CommandOutcome(M.MAV_RESULT_ACCEPTED)
         texts = [(M.MAV_SEVERITY_CRITICAL, note) for note in refusal.notes]
         texts += [(severity, prefix + reason) for reason in refusal.reasons]
-        return CommandOutcome(ardupilot if self.ardupilot else px4, refusal.text, texts)
+        refused = self.behaviour.refusal_results[asked] if result is None else result
+        return CommandOutcome(refused, refusal.text, texts)
 
-    def _mode(self, mode: Mode, number: int | None = None) -> CommandOutcome:
+    def _mode(self, mode: Mode, number: tuple[int, int] | None = None) -> CommandOutcome:
         refusal = self.flight.set_mode(mode)
-        if refusal is not None and self.ardupilot:
-            name = ARDUPILOT_NAMES.get(number, mode.value) if number is not None else _ap_name(mode)
-            return self._refused(refusal, prefix=f"Mode change to {name} failed: ", severity=M.MAV_SEVERITY_WARNING)
-        return self._refused(refusal)
+        refused_text = self.behaviour.mode_refused_text
+        if refusal is not None and refused_text is not None:
+            autopilot = self.behaviour.autopilot
+            name = (requested_name(autopilot, number[0], mode, number[1]) if number is not None
+                    else mode_name(autopilot, mode))
+            return self._refused(refusal, "mode", prefix=refused_text.format(name=name),
+                                 severity=M.MAV_SEVERITY_WARNING)
+        return self._refused(refusal, "mode")
 
     # --- commands -------------------------------------------------------------------------
     def _cmd_400(self, p: list[float]) -> CommandOutcome:  # MAV_CMD_COMPONENT_ARM_DISARM
         if p[0] >= 0.5:
-            return self._refused(self.flight.arm(), prefix="Arm: ")
-        return self._refused(self.flight.disarm(force=int(p[1]) == ARM_FORCE_MAGIC), px4=M.MAV_RESULT_DENIED)
+            return self._refused(self.flight.arm(), "arm", prefix="Arm: ")
+        return self._refused(self.flight.disarm(force=int(p[1]) == ARM_FORCE_MAGIC), "disarm")
 
     def _cmd_176(self, p: list[float]) -> CommandOutcome:  # MAV_CMD_DO_SET_MODE
         if not int(p[0]) & M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
             return CommandOutcome(M.MAV_RESULT_UNSUPPORTED, "only custom modes are supported")
         mode = mode_from_command(self.flight.flavour, p[1], p[2])
         if mode is None:
-            return CommandOutcome(M.MAV_RESULT_FAILED if self.ardupilot else M.MAV_RESULT_DENIED,
-                                  f"unknown mode {p[1]:.0f}/{p[2]:.0f}")
-        return self._mode(mode, int(p[1]) if self.ardupilot else None)
+            return CommandOutcome(self.behaviour.unknown_mode_result, f"unknown mode {p[1]:.0f}/{p[2]:.0f}")
+        return self._mode(mode, (int(p[1]), int(p[2])))
 
     def _cmd_300(self, p: list[float]) -> CommandOutcome:  # MAV_CMD_MISSION_START
         refusal = self.flight.mission_start(int(p[0]), int(p[1]))
-        if refusal is not None and self.ardupilot and (int(p[0]) or int(p[1])):
+        b = self.behaviour
+        if refusal is not None and not b.mission_start_range and (int(p[0]) or int(p[1])):
             return CommandOutcome(M.MAV_RESULT_DENIED, refusal.text)
-        if refusal is not None and self.ardupilot:
-            return self._refused(refusal, prefix="Mode change to AUTO failed: ", severity=M.MAV_SEVERITY_WARNING)
-        return self._refused(refusal, px4=M.MAV_RESULT_DENIED)
+        if refusal is not None and b.mode_refused_text is not None:
+            prefix = b.mode_refused_text.format(name=b.autopilot.mission_mode)
+            return self._refused(refusal, "mission_start", prefix=prefix, severity=M.MAV_SEVERITY_WARNING)
+        return self._refused(refusal, "mission_start")
 
     def _cmd_22(self, p: list[float]) -> CommandOutcome:  # MAV_CMD_NAV_TAKEOFF
         alt = p[6]
-        if self.flight.flavour == "px4" and math.isfinite(alt):
-            alt -= self.flight.origin.alt_m  # PX4 takes the altitude above mean sea level
-        elif not math.isfinite(alt):
+        if not math.isfinite(alt):
             alt = 2.5  # PX4's MIS_TAKEOFF_ALT default when no altitude is given
-        return self._refused(self.flight.takeoff(alt), px4=M.MAV_RESULT_DENIED)
+        elif self.behaviour.takeoff_alt_amsl:
+            alt -= self.flight.origin.alt_m
+        return self._refused(self.flight.takeoff(alt), "takeoff")
 
     def _cmd_20(self, p: list[float]) -> CommandOutcome:  # MAV_CMD_NAV_RETURN_TO_LAUNCH
         return self._mode(Mode.RTL)
@@ -135,11 +144,11 @@ class Commands:
     def _cmd_252(self, p: list[float]) -> CommandOutcome:  # MAV_CMD_DO_PAUSE_CONTINUE
         if int(p[0]) not in (0, 1):
             return CommandOutcome(M.MAV_RESULT_DENIED, "param1 must be 0 (pause) or 1 (continue)")
-        return self._refused(self.flight.pause(int(p[0]) == 0), severity=M.MAV_SEVERITY_INFO)
+        return self._refused(self.flight.pause(int(p[0]) == 0), "pause", severity=M.MAV_SEVERITY_INFO)
 
     def _cmd_178(self, p: list[float]) -> CommandOutcome:  # MAV_CMD_DO_CHANGE_SPEED
         refusal = self.flight.set_speed(p[1])
-        return self._refused(refusal, ardupilot=M.MAV_RESULT_DENIED, px4=M.MAV_RESULT_DENIED)
+        return self._refused(refusal, "speed", result=M.MAV_RESULT_DENIED)  # both autopilots
 
     def _cmd_224(self, p: list[float]) -> CommandOutcome:  # MAV_CMD_DO_SET_MISSION_CURRENT
         if self.flight.set_current(int(p[0])):
@@ -149,8 +158,7 @@ class Commands:
     def _cmd_512(self, p: list[float]) -> CommandOutcome:  # MAV_CMD_REQUEST_MESSAGE
         msg_id = int(p[0])
         if not self.knows(msg_id):
-            return CommandOutcome(M.MAV_RESULT_FAILED if self.ardupilot else M.MAV_RESULT_UNSUPPORTED,
-                                  f"message {msg_id} is not available")
+            return CommandOutcome(self.behaviour.unknown_message_result, f"message {msg_id} is not available")
         message = self.message_for(msg_id)
         # A message the vehicle has no data for yet (home before it is set) is accepted and
         # not sent, as ArduPilot does.
@@ -162,7 +170,7 @@ class Commands:
     def _cmd_410(self, p: list[float]) -> CommandOutcome:  # MAV_CMD_GET_HOME_POSITION
         home = self.message_for(M.MAVLINK_MSG_ID_HOME_POSITION)
         before = [home] if home is not None else []
-        if self.ardupilot and home is not None:
+        if self.behaviour.home_request_sends_origin and home is not None:
             # GCS_MAVLINK::handle_command_get_home_position sends home and origin, then the ACK.
             origin = self.message_for(M.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN)
             before += [origin] if origin is not None else []
@@ -172,8 +180,3 @@ class Commands:
         if self.set_interval(self._peer, int(p[0]), p[1]):
             return CommandOutcome(M.MAV_RESULT_ACCEPTED)
         return CommandOutcome(M.MAV_RESULT_DENIED, f"message {int(p[0])} is not streamed")
-
-
-def _ap_name(mode: Mode) -> str:
-    return {Mode.MANUAL: "STABILIZE", Mode.HOLD: "LOITER", Mode.GUIDED: "GUIDED", Mode.TAKEOFF: "GUIDED",
-            Mode.AUTO: "AUTO", Mode.RTL: "RTL", Mode.LAND: "LAND"}[mode]

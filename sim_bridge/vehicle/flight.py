@@ -15,7 +15,8 @@ When the battery reaches ``battery_threshold * battery_j`` in the air the aircra
 to launch, as an autopilot's battery failsafe does.
 
 The mission is executed the way each autopilot does it (docs/VEHICLE.md has what was
-checked on ArduCopter SITL and read in the sources):
+checked on ArduCopter SITL and read in the sources; each choice is a field of
+``behaviour.Behaviour``):
 - **ArduPilot** (``libraries/AP_Mission/AP_Mission.cpp``, ``AP_Mission_ChangeDetector.cpp``,
   ``ArduCopter/mode_auto.cpp``): a mission is STOPPED, RUNNING or COMPLETE at a navigation
   index; entering AUTO starts or resumes it (a completed one starts again at item 1);
@@ -46,13 +47,13 @@ import numpy as np
 from planner_service.model import Scenario, pack
 from planner_service.model.channel import channel_gain, upload_rate_bps
 from planner_service.model.energy import computation_energy_j, flight_energy_j
-from protocol.autopilot import autopilot_for
 from protocol.geodesy import GeoOrigin
 from protocol.mission import (
     DO_CHANGE_SPEED, GLOBAL_FRAMES, NAV_LAND, NAV_RTL, NAV_TAKEOFF, NAV_WAYPOINT, MissionItem,
     item_local,
 )
 
+from .behaviour import Behaviour, behaviour_for
 from .errors import VehicleError
 from .estimator import Stage, stage_at
 from .events import (
@@ -156,13 +157,14 @@ class Flight:
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0):
                 raise VehicleError(name, f"must be a finite number of seconds >= 0, got {value}")
+        self.behaviour: Behaviour = behaviour_for(self.flavour)
         self.p = pack(self.scenario)
         self.home = (float(self.scenario.base_x_m), float(self.scenario.base_y_m), 0.0)
         self.pos = list(self.home)
         self.vel = (0.0, 0.0, 0.0)
         self.armed = False
         self.landed = True
-        self.mode = Mode.MANUAL if self.flavour == "ardupilot" else Mode.HOLD
+        self.mode = self.behaviour.boot_mode
         self.mission: list[MissionItem] = []
         self.current = 0
         """The navigation index (ArduPilot: 0 when none is loaded)."""
@@ -209,10 +211,6 @@ class Flight:
 
     # --- read-outs ----------------------------------------------------------------------
     @property
-    def ardupilot(self) -> bool:
-        return self.flavour == "ardupilot"
-
-    @property
     def energy_floor_j(self) -> float:
         return float(self.scenario.energy_floor_j)
 
@@ -223,7 +221,7 @@ class Flight:
     @property
     def first_item(self) -> int:
         """ArduPilot's item 0 is home and never flown (``Autopilot.home_slots``)."""
-        return autopilot_for(self.flavour).first_item
+        return self.behaviour.autopilot.first_item
 
     @property
     def since_boot_s(self) -> float:
@@ -271,17 +269,14 @@ class Flight:
         reasons: list[str] = []
         if self.energy_j <= self.energy_floor_j:
             reasons.append("Battery below the return threshold")
-        if self.ardupilot:
-            if self.mode in GPS_MODES:
-                if self.stage < Stage.ORIGIN:
-                    reasons.append("AHRS: waiting for home")
-                elif not self.position_ok:
-                    reasons.append("Need Position Estimate")
-            if self.mode is Mode.AUTO:
-                # ArduCopter's ModeAuto::allows_arming (AUTO_OPTIONS 0): not from AUTO.
-                reasons.append("AUTO mode not armable" if self.mission_present else "Mode requires mission")
-        elif not self.position_ok:
-            reasons.append("Navigation error: No valid global position estimate")
+        b = self.behaviour
+        if b.arm_position_in_any_mode or self.mode in GPS_MODES:
+            if b.arm_no_origin_text is not None and self.stage < Stage.ORIGIN:
+                reasons.append(b.arm_no_origin_text)
+            elif not self.position_ok:
+                reasons.append(b.arm_no_position_text)
+        if self.mode is Mode.AUTO and not b.arms_in_mission_mode:
+            reasons.append("AUTO mode not armable" if self.mission_present else "Mode requires mission")
         return reasons
 
     def disarm(self, force: bool = False, why: str = "command") -> Refusal | None:
@@ -292,8 +287,7 @@ class Flight:
         self.armed = False
         self.auto_armed = False
         self.vel = (0.0, 0.0, 0.0)
-        if self.ardupilot:
-            # AP_Arming_Copter::disarm resets the mission: no navigation index (MISSION_CURRENT 0).
+        if self.behaviour.disarm_resets_mission:  # no navigation index (MISSION_CURRENT 0)
             self.current, self.loaded = 0, None
             self.hold_left = self.climb_out = None
         self._events.append(Disarmed(why))
@@ -302,17 +296,14 @@ class Flight:
     def set_mode(self, mode: Mode) -> Refusal | None:
         if mode is self.mode and mode is not Mode.AUTO:
             return None
-        if self.ardupilot:
-            # Copter::set_mode: with the motors disarmed every mode is allowed; checks apply armed.
-            if self.armed and mode in GPS_MODES and not self.position_ok:
-                return Refusal(("requires position",))
-            if mode is Mode.AUTO and self.armed and self.landed and not self._starts_with_takeoff():
-                return Refusal(("init failed",), notes=("Auto: Missing Takeoff Cmd",))
-        else:
-            if mode in GPS_MODES and not self.position_ok:
-                return Refusal(("Navigation error: No valid global position estimate",))
-            if mode is Mode.AUTO and not self.mission_present:
-                return Refusal(("No valid mission available",))
+        b = self.behaviour
+        if (self.armed or b.mode_checks_disarmed) and mode in GPS_MODES and not self.position_ok:
+            return Refusal((b.mode_no_position_text,))
+        if (b.auto_needs_takeoff_on_ground and mode is Mode.AUTO and self.armed and self.landed
+                and not self._starts_with_takeoff()):
+            return Refusal(("init failed",), notes=("Auto: Missing Takeoff Cmd",))
+        if b.auto_needs_mission and mode is Mode.AUTO and not self.mission_present:
+            return Refusal(("No valid mission available",))
         leaving_auto = self.mode is Mode.AUTO and mode is not Mode.AUTO
         if leaving_auto and self.state is MissionState.RUNNING:
             self.state = MissionState.STOPPED  # ModeAuto::exit stops the mission
@@ -326,13 +317,13 @@ class Flight:
 
     def mission_start(self, first: int = 0, last: int = 0) -> Refusal | None:
         """MAV_CMD_MISSION_START."""
-        if self.ardupilot:
+        if not self.behaviour.mission_start_range:
             if first or last:
                 return Refusal(("first and last item are not supported",))  # Copter: DENIED
             refusal = self.set_mode(Mode.AUTO) if self.mode is not Mode.AUTO else None
             if refusal is not None:
                 return refusal
-            self.auto_armed = True
+            self.auto_armed = True  # read only where the behaviour waits for MISSION_START
             if self.state is not MissionState.RUNNING:
                 self._start_or_resume()
             return None
@@ -343,7 +334,7 @@ class Flight:
     def pause(self, pause: bool) -> Refusal | None:
         """MAV_CMD_DO_PAUSE_CONTINUE: ArduPilot pauses inside AUTO; PX4 switches to
         AUTO.LOITER and back."""
-        if not self.ardupilot:
+        if self.behaviour.pause_switches_to_hold:
             return self.set_mode(Mode.HOLD if pause else Mode.AUTO)
         if self.mode is not Mode.AUTO:
             return Refusal(("Failed to pause" if pause else "Failed to resume",))
@@ -355,9 +346,9 @@ class Flight:
             return Refusal(("not armed",))
         if not math.isfinite(alt_m) or alt_m <= 0:
             return Refusal(("takeoff altitude must be positive",))
-        if self.flavour == "px4":
+        if self.behaviour.takeoff_switches_mode:
             if not self.position_ok:
-                return Refusal(("Navigation error: No valid global position estimate",))
+                return Refusal((self.behaviour.mode_no_position_text,))
             self.mode = Mode.TAKEOFF
         elif self.mode is not Mode.GUIDED:
             return Refusal(("takeoff needs GUIDED mode",))
@@ -372,7 +363,7 @@ class Flight:
 
     def set_current(self, seq: int) -> bool:
         """MISSION_SET_CURRENT / MAV_CMD_DO_SET_MISSION_CURRENT; False if refused."""
-        if self.ardupilot:
+        if self.behaviour.set_current_to_nav_command:
             # AP_Mission::set_current_cmd: never item 0 (it becomes 1), not with only home.
             if seq >= len(self.mission) or len(self.mission) <= 1 or seq < 0:
                 return False
@@ -405,7 +396,7 @@ class Flight:
     # --- the mission changes ----------------------------------------------------------------
     def set_mission(self, items: list[MissionItem]) -> None:
         """Replace the whole mission at once (as a finished upload does)."""
-        if self.ardupilot:
+        if self.behaviour.autopilot.writes_items_as_they_arrive:
             self.mission_changed(items, frozenset(range(len(items))))
         else:
             self.replace_mission(items)
@@ -462,7 +453,7 @@ class Flight:
     def _nav_window(self, start: int) -> tuple[tuple[int, MissionItem], ...]:
         out: list[tuple[int, MissionItem]] = []
         for i in range(max(start, 0), len(self.mission)):
-            if self.mission[i].command in NAV_COMMANDS and not (self.ardupilot and i == 0):
+            if self.mission[i].command in NAV_COMMANDS and i >= self.first_item:
                 out.append((i, self.mission[i]))
                 if len(out) == CHANGE_WINDOW:
                     break
@@ -482,7 +473,7 @@ class Flight:
         """Entering AUTO (or MISSION_START): ArduPilot resumes at its index (a completed
         mission starts again at item 1); PX4 continues at its current item."""
         self._window = self._nav_window(self.current)
-        if self.ardupilot:
+        if self.behaviour.resumes_at_nav_index:
             if self.state is MissionState.COMPLETE or not 0 < self.current < len(self.mission):
                 self.state = MissionState.RUNNING
                 self._advance(1)
@@ -504,7 +495,7 @@ class Flight:
         i = start
         while i < len(self.mission):
             item = self.mission[i]
-            if self.ardupilot and i == 0:
+            if i < self.first_item:
                 i += 1
                 continue
             if item.command in NAV_COMMANDS:
@@ -513,7 +504,7 @@ class Flight:
             self._events.append(CommandStarted(i, COMMAND_NAMES.get(item.command, "Cmd")))
             if item.command == DO_CHANGE_SPEED and item.param2 > 0:
                 self.speed_mps = float(item.param2)
-            if not self.ardupilot:
+            if self.behaviour.do_items_reached:
                 self._events.append(ItemComplete(i, item.command))
             i += 1
         self._complete()
@@ -531,7 +522,7 @@ class Flight:
         self.state = MissionState.COMPLETE
         self.loaded = None
         self._events.append(MissionDone(last))
-        if self.landed and self.armed and self.ardupilot:
+        if self.landed and self.armed and self.behaviour.disarms_at_mission_end_landed:
             self.disarm(why="landed")  # ModeAuto::exit_mission on the ground
 
     def _item_done(self, events: list[FlightEvent]) -> None:
@@ -562,14 +553,14 @@ class Flight:
         it is armed and holds position (LOITER / AUTO.LOITER) until told otherwise; on the
         ground it is disarmed. In the air the estimator navigates at once (an aircraft that
         reboots in flight has no time to wait for it); on the ground it starts again."""
-        if snap.flavour != self.flavour:
+        if behaviour_for(snap.flavour) is not self.behaviour:
             raise VehicleError("state_file", f"saved by a {snap.flavour} vehicle, this one is {self.flavour}")
         self.pos = list(snap.pos)
         self.home = snap.home
         self.energy_j = snap.energy_j
         self.landed = snap.landed
         self.armed = snap.armed and not snap.landed
-        self.mode = Mode.HOLD if not self.landed else (Mode.MANUAL if self.ardupilot else Mode.HOLD)
+        self.mode = Mode.HOLD if not self.landed else self.behaviour.boot_mode
         self.time_s = self.boot_s = snap.time_s
         self.speed_mps = snap.speed_mps
         self.flight_j, self.hover_j, self.compute_j = snap.flight_j, snap.hover_j, snap.compute_j
@@ -679,13 +670,13 @@ class Flight:
     def _auto(self, budget: float, events: list[FlightEvent]) -> float:
         if self.state is not MissionState.RUNNING or self.paused:
             return self._hover(budget)  # AUTO with nothing to do: hold where it is
-        if self.ardupilot and self.landed and not self.auto_armed:
+        if self.behaviour.waits_for_mission_start and self.landed and not self.auto_armed:
             return self._hover(budget)  # motors spinning, waiting for MISSION_START
         if self.loaded is None:
             self._advance(self.current if self.current >= self.first_item else self.first_item)
             return 0.0
         item = self.loaded
-        if self.ardupilot and not self.mission:
+        if self.behaviour.empty_mission_keeps_command and not self.mission:
             # AP_Mission::update does nothing with an empty mission: the command in progress
             # is flown but never completes.
             if item.command in NAV_COMMANDS and item.frame in GLOBAL_FRAMES and item.command != NAV_RTL:

@@ -28,6 +28,7 @@ from typing import Any, Callable, Hashable
 
 from pymavlink.dialects.v20 import common as mavlink
 
+from protocol.autopilot import autopilot_for
 from protocol.mission import MissionItem
 
 from .stored_items import Problem
@@ -109,6 +110,7 @@ class MissionStore:
         self._send = send
         self._clock = clock
         self.flavour = flavour
+        self._autopilot = autopilot_for(flavour)
         self.hooks = hooks or StoreHooks()
         self.capacity = capacity
         self.item_timeout_s = item_timeout_s
@@ -122,7 +124,9 @@ class MissionStore:
 
     @property
     def write_through(self) -> bool:
-        return self.flavour == "ardupilot"
+        """Items are stored as they arrive (``Autopilot.writes_items_as_they_arrive``); the
+        store's other ArduPilot conventions (answers, home at item 0) go with it."""
+        return self._autopilot.writes_items_as_they_arrive
 
     @property
     def uploading(self) -> bool:

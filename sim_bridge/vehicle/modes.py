@@ -140,3 +140,10 @@ def mode_from_command(flavour: str | Autopilot, param2: float, param3: float) ->
 def mode_name(flavour: str | Autopilot, mode: Mode) -> str:
     """The name a ground station shows for ``mode`` in this autopilot."""
     return autopilot_for(flavour).mode_name(custom_mode(flavour, mode))
+
+
+def requested_name(flavour: str | Autopilot, main: int, mode: Mode, sub: int = 0) -> str:
+    """The name of the mode a request asked for by number, as the autopilot's refusal spells
+    it (``Mode change to LOITER failed``): ``mode``'s own name if the number has none."""
+    a = autopilot_for(flavour)
+    return a.modes.get((main, sub if a.sub_shift is not None else 0), mode.value)

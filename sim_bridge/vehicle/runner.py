@@ -26,6 +26,7 @@ from protocol.signing import Signer, TimestampStore, default_timestamp_path, loa
 from . import telemetry as tm
 from .commands import Commands
 from .errors import VehicleError
+from .behaviour import BEHAVIOURS, behaviour_for
 from .estimator import DEFAULT_GPS_DELAY_S
 from .events import (
     Armed, BatteryLow, BatterySwapped, CommandStarted, CurrentChanged, Disarmed, FlightEvent, GpsFix, HomeSet,
@@ -34,12 +35,12 @@ from .events import (
 from .flight import Flight, MissionState, Refusal
 from .link import Link, Received
 from .mission_store import MissionStore, StoreHooks
-from .modes import ARDUPILOT_NAMES, mode_from_custom, mode_name
+from .modes import mode_from_custom, mode_name, requested_name
 from .params import ParamTable, vehicle_params
 from .state_file import SAVE_INTERVAL_S, load_state, save_state
 from .track import Track
-from .stored_items import Problem, ardupilot_problem, ardupilot_stored, px4_problem
-from .streams import EKF_STATUS_REPORT_ID, PeerStreams
+from .stored_items import Problem, ardupilot_stored
+from .streams import PeerStreams
 
 log = logging.getLogger(__name__)
 
@@ -47,14 +48,9 @@ M = mavlink
 MAX_STEP_TICKS = 5
 SIGNING_TICK_S = 1.0
 """How often the signing timestamp is brought up to the clock (and its reservation stored)."""
-TIMESYNC_INTERVAL_S = 10.0
-"""ArduPilot sends TIMESYNC (tc1 0) unasked every 10 s (seen on SITL)."""
-REACHED_REPEATS = 10
-"""PX4 sends MISSION_ITEM_REACHED again at 1 Hz, ten times (MavlinkMissionManager::send)."""
-PREARM_REPORT_S = 30.0
-"""ArduPilot reports failing pre-arm checks unasked every 30 s while disarmed (``PreArm: Need
-Position Estimate`` on SITL); wall-clock here, as the telemetry rates, so that a high
-speed-up does not flood the link and the logs."""
+# TIMESYNC, pre-arm reports and MISSION_ITEM_REACHED repeats are timed by the behaviour
+# (behaviour.py) in wall-clock time, as the telemetry rates, so that a high speed-up does
+# not flood the link and the logs.
 
 
 MIN_ITEM_TIMEOUT_S = 0.1
@@ -102,8 +98,8 @@ class VehicleConfig:
     (ArduPilot's DISARM_DELAY, PX4's COM_DISARM_PRFLT); 0: never."""
 
     def __post_init__(self) -> None:
-        if self.flavour not in ("ardupilot", "px4"):
-            raise VehicleError("flavour", f"{self.flavour!r} is not ardupilot or px4")
+        if self.flavour not in BEHAVIOURS:
+            raise VehicleError("flavour", f"{self.flavour!r} is not one of {tuple(BEHAVIOURS)}")
         if not self.speedup > 0:
             raise VehicleError("speedup", f"must be positive, got {self.speedup}")
         if not 1 <= self.system_id <= 255:
@@ -126,7 +122,8 @@ class Vehicle:
     def __init__(self, config: VehicleConfig, clock: Callable[[], float] = time.monotonic) -> None:
         self.config = config
         self.clock = clock
-        self.ardupilot = config.flavour == "ardupilot"
+        self.behaviour = b = behaviour_for(config.flavour)
+        autopilot = b.autopilot
         self.flight = Flight(config.scenario, config.origin, config.flavour, recharge_s=config.recharge_s,
                              gps_delay_s=config.gps_delay_s, disarm_delay_s=config.disarm_delay_s)
         self.signer = self._signer(config)
@@ -137,10 +134,10 @@ class Vehicle:
                 self.signer.close()
             raise
         hooks = StoreHooks(
-            problem=self._item_problem, stored=ardupilot_stored if self.ardupilot else (lambda item: item),
+            problem=self._item_problem, stored=ardupilot_stored if autopilot.compacts_items else (lambda item: item),
             on_change=self.flight.mission_changed, on_commit=self.flight.replace_mission,
             on_accepted=self._on_accepted, on_set_current=self._on_set_current, current_flag=self._current_flag,
-            home_item=self._home_item if self.ardupilot else (lambda: None), can_clear=self._can_clear,
+            home_item=self._home_item if autopilot.home_slots else (lambda: None), can_clear=self._can_clear,
             text=lambda text, peer: self._send_to(tm.statustext(M.MAV_SEVERITY_INFO, text), peer),
         )
         self.store = MissionStore(
@@ -171,10 +168,10 @@ class Vehicle:
         self._last_mode = self.flight.mode
         self._last_armed = self.flight.armed
         self._signing_due = clock() + SIGNING_TICK_S
-        self._timesync_due = clock() + TIMESYNC_INTERVAL_S
+        self._timesync_due = clock() + (b.timesync_interval_s or 0.0)
         self._reached_repeat: tuple[int, int, float] | None = None
-        self._prearm_due = clock() + PREARM_REPORT_S
         """PX4: (seq, repeats left, next wall time) of MISSION_ITEM_REACHED."""
+        self._prearm_due = clock() + (b.prearm_report_s or 0.0)
 
     @staticmethod
     def _signer(config: VehicleConfig) -> Signer | None:
@@ -284,12 +281,13 @@ class Vehicle:
                 self._send_to(message, peer)
 
     def _periodic(self, now: float) -> None:
-        if self.ardupilot and now >= self._timesync_due:
-            self._timesync_due = now + TIMESYNC_INTERVAL_S
+        b = self.behaviour
+        if b.timesync_interval_s is not None and now >= self._timesync_due:
+            self._timesync_due = now + b.timesync_interval_s
             self._send_to(M.MAVLink_timesync_message(0, time.monotonic_ns()), None)
         f = self.flight
-        if self.ardupilot and now >= self._prearm_due:
-            self._prearm_due = now + PREARM_REPORT_S
+        if b.prearm_report_s is not None and now >= self._prearm_due:
+            self._prearm_due = now + b.prearm_report_s
             if not f.armed:
                 for reason in f.arm_checks():
                     self._text(M.MAV_SEVERITY_CRITICAL, f"PreArm: {reason}")
@@ -319,28 +317,29 @@ class Vehicle:
 
     def _report(self, event: FlightEvent) -> None:
         f = self.flight
+        b = self.behaviour
         match event:
             case ItemComplete(seq=seq, command=command):
                 log.info("mission item %d reached", seq)
                 self._send_to(M.MAVLink_mission_item_reached_message(seq), None)
-                if self.ardupilot and command == M.MAV_CMD_NAV_WAYPOINT:  # verify_nav_wp's text
-                    self._text(M.MAV_SEVERITY_INFO, f"Reached command #{seq}")
-                if not self.ardupilot:
-                    self._reached_repeat = (seq, REACHED_REPEATS, self.clock() + 1.0)
+                if b.waypoint_reached_text is not None and command == M.MAV_CMD_NAV_WAYPOINT:
+                    self._text(M.MAV_SEVERITY_INFO, b.waypoint_reached_text.format(seq=seq))
+                if b.reached_repeats:
+                    self._reached_repeat = (seq, b.reached_repeats, self.clock() + 1.0)
             case CurrentChanged(seq=seq):
                 self._mission_current(tm.mission_current(f, seq))
             case MissionDone(seq=seq):
                 log.info("mission complete at item %d", seq)
                 self._mission_current(tm.mission_current(f, seq, M.MISSION_STATE_COMPLETE))
-                if not self.ardupilot:
-                    self._text(M.MAV_SEVERITY_INFO, "Mission finished, loitering")
+                if b.mission_done_text is not None:
+                    self._text(M.MAV_SEVERITY_INFO, b.mission_done_text)
             case CommandStarted(seq=seq, name=name):
-                if self.ardupilot:
-                    self._text(M.MAV_SEVERITY_INFO, f"Mission: {seq} {name}")
+                if b.command_started_text is not None:
+                    self._text(M.MAV_SEVERITY_INFO, b.command_started_text.format(seq=seq, name=name))
             case MissionRestarted(seq=seq):
                 log.info("mission changed in flight: command %d restarted", seq)
-                if self.ardupilot:
-                    self._text(M.MAV_SEVERITY_CRITICAL, "Auto mission changed, restarted command")
+                if b.restarted_text is not None:
+                    self._text(M.MAV_SEVERITY_CRITICAL, b.restarted_text)
             case MissionRestartFailed(seq=seq):
                 log.info("mission changed in flight: item %d is gone, the command in progress goes on", seq)
                 self._text(M.MAV_SEVERITY_CRITICAL, "Auto mission changed but failed to restart command")
@@ -351,13 +350,13 @@ class Vehicle:
                 self._send_streamed(M.MAVLINK_MSG_ID_EXTENDED_SYS_STATE, tm.extended_sys_state(f))
             case Armed():
                 log.info("armed at t=%.1f s (sim)", f.time_s)
-                if self.ardupilot:
-                    self._text(M.MAV_SEVERITY_INFO, "Arming motors")
+                if b.arming_text is not None:
+                    self._text(M.MAV_SEVERITY_INFO, b.arming_text)
             case Disarmed(why=why):
                 log.info("disarmed (%s) at t=%.1f s (sim), battery %.1f%%", why, f.time_s, 100 * f.battery_fraction)
                 self._send_streamed(M.MAVLINK_MSG_ID_EXTENDED_SYS_STATE, tm.extended_sys_state(f))
-                if self.ardupilot:
-                    self._text(M.MAV_SEVERITY_INFO, "Disarming motors")
+                if b.disarming_text is not None:
+                    self._text(M.MAV_SEVERITY_INFO, b.disarming_text)
             case BatteryLow(text=text):
                 log.warning("%s", text)
                 self._text(M.MAV_SEVERITY_CRITICAL, text)
@@ -366,36 +365,32 @@ class Vehicle:
                 self._text(M.MAV_SEVERITY_INFO, "Battery swapped: full")
                 self._send_to(tm.battery_status(f, 0.0), None)
             case GpsFix():
-                if self.ardupilot:
-                    self._text(M.MAV_SEVERITY_INFO, "GPS 1: detected u-blox")
+                for text in b.gps_fix_texts:
+                    self._text(M.MAV_SEVERITY_INFO, text)
             case OriginSet():
                 log.info("estimator origin set at t=%.1f s since boot", f.since_boot_s)
-                if self.ardupilot:
-                    self._text(M.MAV_SEVERITY_INFO, "EKF3 IMU0 origin set")
-                    self._text(M.MAV_SEVERITY_INFO, f"Field Elevation Set: {self.config.origin.alt_m:.0f}m")
+                for text in b.origin_texts:
+                    self._text(M.MAV_SEVERITY_INFO, text.format(alt_m=self.config.origin.alt_m))
             case UsingGps():
                 log.info("position valid at t=%.1f s since boot", f.since_boot_s)
-                if self.ardupilot:
-                    self._text(M.MAV_SEVERITY_INFO, "EKF3 IMU0 is using GPS")
-                    self._text(M.MAV_SEVERITY_INFO, "EKF3 IMU1 is using GPS")
+                for text in b.using_gps_texts:
+                    self._text(M.MAV_SEVERITY_INFO, text)
             case HomeSet():
                 self.store.home_known()
-                if self.ardupilot:
-                    # Sent once, unasked, to every link (seen on SITL at origin and at arming).
-                    for msg_id in (M.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN, M.MAVLINK_MSG_ID_HOME_POSITION):
-                        message = self._message_for(msg_id)
-                        if message is not None:
-                            self._send_to(message, None)
+                for msg_id in b.home_set_messages:  # once, unasked, to every link
+                    message = self._message_for(msg_id)
+                    if message is not None:
+                        self._send_to(message, None)
             case _:
                 assert_never(event)
 
     def _mission_current(self, message: Any) -> None:
         """MISSION_CURRENT at an event: PX4 sends it to every link; for ArduPilot an extra
         report to the peers that stream it (rates here are wall-clock, see tick)."""
-        if self.ardupilot:
-            self._send_streamed(M.MAVLINK_MSG_ID_MISSION_CURRENT, message)
-        else:
+        if self.behaviour.mission_current_to_all:
             self._send_to(message, None)
+        else:
+            self._send_streamed(M.MAVLINK_MSG_ID_MISSION_CURRENT, message)
 
     # --- input -----------------------------------------------------------------------------
     def handle(self, received: Received) -> None:
@@ -420,9 +415,12 @@ class Vehicle:
             mode = mode_from_custom(self.config.flavour, msg.custom_mode)
             if mode is not None:
                 refusal = self.flight.set_mode(mode)
-                if refusal is not None and self.ardupilot:
-                    name = ARDUPILOT_NAMES.get(int(msg.custom_mode), mode.value)
-                    self._refusal_texts(refusal, f"Mode change to {name} failed: ", M.MAV_SEVERITY_WARNING)
+                refused_text = self.behaviour.mode_refused_text
+                if refusal is not None and refused_text is not None:
+                    ap, number = self.behaviour.autopilot, int(msg.custom_mode)
+                    sub = (number >> ap.sub_shift) & 0xFF if ap.sub_shift is not None else 0
+                    name = requested_name(ap, (number >> ap.main_shift) & ap.main_mask, mode, sub)
+                    self._refusal_texts(refusal, refused_text.format(name=name), M.MAV_SEVERITY_WARNING)
         elif kind == "TIMESYNC" and msg.tc1 == 0:
             self._send_to(M.MAVLink_timesync_message(time.monotonic_ns(), msg.ts1), peer)
         elif kind == "REQUEST_DATA_STREAM":
@@ -486,8 +484,8 @@ class Vehicle:
             M.MAVLINK_MSG_ID_VFR_HUD: lambda: tm.vfr_hud(f, 0 if f.landed else 50),
             M.MAVLINK_MSG_ID_SYSTEM_TIME: lambda: tm.system_time(f, time.time()),
         }
-        if self.ardupilot:
-            builders[EKF_STATUS_REPORT_ID] = lambda: tm.ekf_status_report(f)
+        if self.behaviour.estimator_report_streamed:
+            builders[self.behaviour.autopilot.estimator_msg_id] = lambda: tm.ekf_status_report(f)
         builder = builders.get(msg_id)
         return builder() if builder else None
 
@@ -503,7 +501,7 @@ class Vehicle:
                            x=int(round(lat * 1e7)), y=int(round(lon * 1e7)), z=f32(alt))
 
     def _current_flag(self, seq: int) -> int:
-        if self.ardupilot:
+        if self.behaviour.current_flag_is_command:
             # MissionItemProtocol_Waypoints::get_item compares the item's command id with
             # the current index (sic), so the flag is 1 only by coincidence; kept as is.
             items = self.store.items
@@ -517,17 +515,17 @@ class Vehicle:
         ok = self.flight.set_current(seq)
         log.info("MISSION_SET_CURRENT %d %s: current %d, mission %s", seq, "accepted" if ok else "refused",
                  self.flight.current, self.flight.state.value)
-        if ok and self.ardupilot:
+        if ok and self.behaviour.echoes_set_current:
             # GCS_MAVLINK::handle_mission_set_current echoes the requested seq to the sender.
             self._send_to(tm.mission_current(self.flight, seq), peer)
         return ok
 
     def _item_problem(self, item: MissionItem) -> Problem | None:
-        problem = ardupilot_problem(item) if self.ardupilot else px4_problem(item)
+        problem = self.behaviour.item_problem(item)
         if problem is not None:
             return problem
-        if self.ardupilot and item.seq == 0:
-            return None  # item 0 is home: never flown
+        if item.seq < self.behaviour.autopilot.home_slots:
+            return None  # home: never flown
         return self._fence_problem(item)
 
     def _fence_problem(self, item: MissionItem) -> Problem | None:

@@ -15,6 +15,8 @@ from dataclasses import MISSING, asdict, fields
 from pathlib import Path
 from typing import Any
 
+from protocol.autopilot import PROFILES
+
 from .errors import VehicleError
 from .flight import FlightSnapshot
 from .modes import Mode
@@ -79,8 +81,8 @@ def _field(name: str, value: Any, where: str) -> Any:
             raise bad("true or false")
         return value
     if name == "flavour":
-        if value not in ("ardupilot", "px4"):
-            raise bad("ardupilot or px4")
+        if value not in PROFILES:
+            raise bad(f"one of {tuple(PROFILES)}")
         return value
     if name == "mode":
         if value not in {m.value for m in Mode}:

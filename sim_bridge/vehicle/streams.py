@@ -21,8 +21,12 @@ send 160 times as many messages; docs/VEHICLE.md says what that changes.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from types import MappingProxyType
+from typing import Mapping, Union
 
 from pymavlink.dialects.v20 import common as mavlink
+
+from protocol.autopilot import ARDUPILOT, PX4, Autopilot, autopilot_for
 
 M = mavlink
 MIN_INTERVAL_S = 0.02
@@ -69,33 +73,57 @@ ARDUPILOT_STREAMABLE = frozenset(GROUP_OF) | {
 PX4_STREAMABLE = frozenset(PX4_DEFAULT_HZ) | {M.MAVLINK_MSG_ID_SYSTEM_TIME, M.MAVLINK_MSG_ID_AUTOPILOT_VERSION}
 
 
+@dataclass(frozen=True)
+class StreamRules:
+    """How one autopilot streams telemetry (the module's docstring has the sources)."""
+
+    streamable: frozenset[int]
+    """The messages it can send: SET_MESSAGE_INTERVAL and REQUEST_MESSAGE for others are refused."""
+    default_hz: Mapping[int, float] | None
+    """A new link's streams and what interval 0 means, message by message (PX4's
+    MAVLINK_MODE_NORMAL); None: HEARTBEAT only, interval 0 the rate of the message's
+    REQUEST_DATA_STREAM group (ArduPilot)."""
+    fixed_heartbeat: bool
+    """SET_MESSAGE_INTERVAL of HEARTBEAT is accepted and changes nothing (PX4's 1 Hz)."""
+    data_streams: bool
+    """REQUEST_DATA_STREAM is honoured (ArduPilot); PX4 has no handler for it."""
+
+
+STREAM_RULES: Mapping[str, StreamRules] = MappingProxyType({
+    ARDUPILOT.name: StreamRules(ARDUPILOT_STREAMABLE, None, fixed_heartbeat=False, data_streams=True),
+    PX4.name: StreamRules(PX4_STREAMABLE, MappingProxyType(PX4_DEFAULT_HZ), fixed_heartbeat=True, data_streams=False),
+})
+"""The stream rules by the autopilot profile's name."""
+
+
 @dataclass
 class PeerStreams:
     """One peer's message intervals (wall seconds; absent or 0: not sent) and the times
     each is next due."""
 
-    flavour: str
+    flavour: Union[str, Autopilot]
     intervals: dict[int, float] = field(default_factory=dict)
     group_hz: dict[int, float] = field(default_factory=dict)
     due: dict[int, float] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
+        self.rules = STREAM_RULES[autopilot_for(self.flavour).name]
         if not self.intervals:
-            if self.flavour == "px4":
-                self.intervals = {m: 1.0 / hz for m, hz in PX4_DEFAULT_HZ.items()}
+            if self.rules.default_hz is not None:
+                self.intervals = {m: 1.0 / hz for m, hz in self.rules.default_hz.items()}
             else:
                 self.intervals = {M.MAVLINK_MSG_ID_HEARTBEAT: 1.0}
 
     @property
     def streamable(self) -> frozenset[int]:
-        return PX4_STREAMABLE if self.flavour == "px4" else ARDUPILOT_STREAMABLE
+        return self.rules.streamable
 
     def default_interval(self, msg_id: int) -> float:
         """What interval 0 ("the default rate") means for ``msg_id``."""
         if msg_id == M.MAVLINK_MSG_ID_HEARTBEAT:
             return 1.0
-        if self.flavour == "px4":
-            hz = PX4_DEFAULT_HZ.get(msg_id, 0.0)
+        if self.rules.default_hz is not None:
+            hz = self.rules.default_hz.get(msg_id, 0.0)
         else:
             hz = self.group_hz.get(GROUP_OF.get(msg_id, -1), 0.0)
         return 1.0 / hz if hz > 0 else 0.0
@@ -104,8 +132,8 @@ class PeerStreams:
         """MAV_CMD_SET_MESSAGE_INTERVAL; False for a message the vehicle cannot send."""
         if msg_id not in self.streamable:
             return False
-        if self.flavour == "px4" and msg_id == M.MAVLINK_MSG_ID_HEARTBEAT:
-            return True  # PX4's heartbeat is fixed at 1 Hz
+        if self.rules.fixed_heartbeat and msg_id == M.MAVLINK_MSG_ID_HEARTBEAT:
+            return True
         if interval_us == 0:
             interval = self.default_interval(msg_id)
         elif interval_us < 0:
@@ -118,8 +146,8 @@ class PeerStreams:
     def request_data_stream(self, group: int, rate_hz: float, start: bool) -> None:
         """REQUEST_DATA_STREAM (ArduPilot): every message of ``group`` (all groups for
         MAV_DATA_STREAM_ALL) at ``rate_hz``, or off."""
-        if self.flavour == "px4":
-            return  # PX4 has no handler for it
+        if not self.rules.data_streams:
+            return
         hz = rate_hz if start and rate_hz > 0 else 0.0
         groups = list(GROUPS) if group == M.MAV_DATA_STREAM_ALL else [group]
         for g in groups:

@@ -1,13 +1,14 @@
-"""Telemetry messages built from the simulated aircraft's state (pure functions)."""
+"""Telemetry messages built from the simulated aircraft's state (pure functions); where
+the autopilots differ, a field of ``behaviour.Behaviour`` or a table keyed by the profile."""
 
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import Any, Callable
 
 from pymavlink.dialects.v20 import common as mavlink
 
-from protocol.autopilot import autopilot_for
+from protocol.autopilot import ARDUPILOT, PX4
 from protocol.geodesy import local_to_global
 
 from .estimator import EKF_FLAGS_GPS, EKF_FLAGS_NO_GPS, Stage
@@ -41,7 +42,10 @@ _BASE_BITS = {
     Mode.MANUAL: mavlink.MAV_MODE_FLAG_MANUAL_INPUT_ENABLED | mavlink.MAV_MODE_FLAG_STABILIZE_ENABLED,
     Mode.GUIDED: mavlink.MAV_MODE_FLAG_GUIDED_ENABLED | mavlink.MAV_MODE_FLAG_STABILIZE_ENABLED,
 }
-FIRMWARE_VERSION = {"ardupilot": (4, 6, 0), "px4": (1, 15, 0)}
+SENSORS: dict[str, tuple[int, int, int]] = {
+    ARDUPILOT.name: (AP_PRESENT, AP_ENABLED, AP_HEALTH), PX4.name: (_SENSORS, _SENSORS, _SENSORS),
+}
+"""SYS_STATUS's present, enabled and healthy sensors, by autopilot (on the ground, with a fix)."""
 FIRMWARE_TYPE_OFFICIAL = 255
 
 
@@ -54,21 +58,20 @@ def heartbeat(flight: Flight) -> Any:
     base = mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | _BASE_BITS.get(flight.mode, _AUTO_BITS)
     if flight.armed:
         base |= mavlink.MAV_MODE_FLAG_SAFETY_ARMED
-    if flight.ardupilot:
-        # GCS_MAVLINK_Copter::vehicle_system_status: STANDBY while landed, armed or not.
+    if flight.behaviour.standby_while_landed:
         state = mavlink.MAV_STATE_STANDBY if flight.landed else mavlink.MAV_STATE_ACTIVE
     else:
         state = mavlink.MAV_STATE_ACTIVE if flight.armed else mavlink.MAV_STATE_STANDBY
     if flight.failsafe and not flight.landed:
         state = mavlink.MAV_STATE_CRITICAL
     return mavlink.MAVLink_heartbeat_message(
-        mavlink.MAV_TYPE_QUADROTOR, autopilot_for(flight.flavour).mav_autopilot, base,
+        mavlink.MAV_TYPE_QUADROTOR, flight.behaviour.autopilot.mav_autopilot, base,
         custom_mode(flight.flavour, flight.mode), state, 3,
     )
 
 
 def autopilot_version(flight: Flight, system_id: int) -> Any:
-    major, minor, patch = FIRMWARE_VERSION[flight.flavour]
+    major, minor, patch = flight.behaviour.firmware_version
     capabilities = (
         mavlink.MAV_PROTOCOL_CAPABILITY_MISSION_FLOAT | mavlink.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT
         | mavlink.MAV_PROTOCOL_CAPABILITY_MISSION_INT | mavlink.MAV_PROTOCOL_CAPABILITY_COMMAND_INT
@@ -97,9 +100,9 @@ def heading_cdeg(flight: Flight) -> int:
 def global_position_int(flight: Flight) -> Any | None:
     """ArduPilot: lat/lon/alt 0 until the GPS has a fix, then the GPS position (SITL reports
     it before the EKF has an origin); PX4 publishes no global position until it is valid."""
-    if flight.stage < Stage.GPS or (not flight.ardupilot and not flight.position_ok):
-        if not flight.ardupilot:
-            return None
+    if not flight.behaviour.gps_position_before_estimate and not flight.position_ok:
+        return None
+    if flight.stage < Stage.GPS:
         return mavlink.MAVLink_global_position_int_message(time_boot_ms(flight), 0, 0, 0, 0, 0, 0, 0, 65535)
     lat, lon, alt = _global(flight)
     vx, vy, vz = flight.vel
@@ -112,7 +115,7 @@ def global_position_int(flight: Flight) -> Any | None:
 
 def local_position_ned(flight: Flight) -> Any | None:
     """Relative to the estimator's origin: none before it has one."""
-    if flight.stage < (Stage.ORIGIN if flight.ardupilot else Stage.NAVIGATING):
+    if flight.stage < flight.behaviour.local_position_from:
         return None
     x, y, z = flight.pos
     vx, vy, vz = flight.vel
@@ -179,11 +182,9 @@ def _current_a(flight: Flight, power_w: float) -> float:
 
 def sys_status(flight: Flight, power_w: float) -> Any:
     volts = _voltage_v(flight)
-    if flight.ardupilot:
-        present, enabled, health = AP_PRESENT, AP_ENABLED, AP_HEALTH
+    present, enabled, health = SENSORS[flight.behaviour.autopilot.name]
+    if flight.behaviour.prearm_in_sys_status:
         health = (health | _PREARM) if flight.position_ok and not flight.failsafe else (health & ~_PREARM)
-    else:
-        present = enabled = health = _SENSORS
     if flight.stage < Stage.GPS:
         health &= ~_GPS
     return mavlink.MAVLink_sys_status_message(
@@ -224,7 +225,7 @@ def mission_state(flight: Flight) -> int:
         if flight.paused:
             return mavlink.MISSION_STATE_PAUSED
         return mavlink.MISSION_STATE_ACTIVE if flight.mode is Mode.AUTO else mavlink.MISSION_STATE_PAUSED
-    if flight.ardupilot or not flight.started:
+    if not flight.behaviour.stopped_mission_paused or not flight.started:
         return mavlink.MISSION_STATE_NOT_STARTED
     return mavlink.MISSION_STATE_PAUSED
 
@@ -238,16 +239,29 @@ def mission_current(flight: Flight, seq: int | None = None, state: int | None = 
     ``seq`` is the navigation index (0 when none is loaded, e.g. after disarming);
     ``mission_mode`` 1 in AUTO. PX4: ``total`` is the item count, UINT16_MAX with none."""
     seq = flight.current if seq is None else seq
-    mode = 1 if flight.mode is Mode.AUTO else (0 if flight.ardupilot else 2)
     state = mission_state(flight) if state is None else state
-    if flight.ardupilot:
-        total = max(len(flight.mission) - 1, 0)
-    else:
-        total = len(flight.mission) if flight.mission else 0xFFFF  # UINT16_MAX: no mission (MAVLink)
-        seq = min(seq, max(len(flight.mission) - 1, 0))
-        # PX4 names its mission (MavlinkMissionManager::send_mission_current): mission_id
-        return MissionCurrent(seq, total, state, mode, px4_mission_id(flight.mission))
+    return MISSION_CURRENT[flight.behaviour.autopilot.name](flight, seq, state)
+
+
+def _ardupilot_mission_current(flight: Flight, seq: int, state: int) -> Any:
+    mode = 1 if flight.mode is Mode.AUTO else 0
+    total = max(len(flight.mission) - 1, 0)
     return mavlink.MAVLink_mission_current_message(seq, total, state, mode)
+
+
+def _px4_mission_current(flight: Flight, seq: int, state: int) -> Any:
+    mode = 1 if flight.mode is Mode.AUTO else 2
+    total = len(flight.mission) if flight.mission else 0xFFFF  # UINT16_MAX: no mission (MAVLink)
+    seq = min(seq, max(len(flight.mission) - 1, 0))
+    # PX4 names its mission (MavlinkMissionManager::send_mission_current): mission_id
+    return MissionCurrent(seq, total, state, mode, px4_mission_id(flight.mission))
+
+
+MISSION_CURRENT: dict[str, Callable[[Flight, int, int], Any]] = {
+    ARDUPILOT.name: _ardupilot_mission_current, PX4.name: _px4_mission_current,
+}
+"""MISSION_CURRENT of (flight, seq, state), by autopilot: their fields differ (docstring of
+``mission_current``)."""
 
 
 def home_position(flight: Flight) -> Any | None:
