@@ -846,3 +846,17 @@ def test_a_refused_command_and_a_failed_part_are_announced() -> None:
     out = run.feed(ins.PartFailed("journal: disk full"))
     assert [(e.event.kind, e.event.detail) for e in only(out, fx.Emit)] == [("degraded", "journal: disk full")]
     assert run.s.degraded == "journal: disk full" and not only(run.tick(), fx.Command)
+
+
+def test_a_landing_away_from_the_missions_return_ends_the_authority() -> None:
+    # No mode change, no disarming seen: the vehicle came down in AUTO at a point of ours
+    # (a motor failure, ArduCopter's land detector after a forced disarming).
+    run, _ = fly_to_first_point(FakeWorld())
+    out = run.feed(ins.OnGround("EXTENDED_SYS_STATE"), airborne=False, seq=2, xyz=(60.0, 100.0, 0.0))
+    assert run.s.authority.state == "revoked" and "landed away from its mission's return" in run.s.authority.detail
+    assert "authority_revoked" in [e.event.kind for e in only(out, fx.Emit)] and run.s.over is not None
+    # ... and at the return item it is the service's own landing
+    run2, _ = fly_to_first_point(FakeWorld())
+    run2.tick(seq=run2.s.held.rtl_seq, xyz=(5.0, 5.0, 20.0), boot_s=30.0)
+    run2.feed(ins.OnGround("EXTENDED_SYS_STATE"), airborne=False, seq=0, xyz=(0.0, 0.0, 0.0))
+    assert run2.s.authority.granted and run2.s.over is not None

@@ -237,6 +237,9 @@ class SortieLogic:
             case ins.ArmedChanged(armed=armed, commanded=commanded):
                 s = self._arming(s, v, armed, commanded, now, out)
             case ins.OnGround():
+                if s.flown and not (s.homing or self._on_return(s, v)):
+                    s = self._revoke(s, f"the vehicle landed away from its mission's return (item {v.seq}, "
+                                        f"{v.mode or 'mode unknown'}): not the service's landing", out)
                 if s.flown:
                     s = self._end(s, "the vehicle landed", v, out)
             case ins.Planned():
