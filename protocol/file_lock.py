@@ -1,10 +1,27 @@
-"""Two facts about a file held with an exclusive ``flock``, shared by the journal and the
-signing timestamp file (each takes the lock on the file itself, never on a file beside
+"""An exclusive ``flock`` on a file and what can be known of it, shared by the journal and
+the signing timestamp file (each takes the lock on the file itself, never on a file beside
 it: nothing can be deleted to get round it, and the kernel drops it with its process)."""
 
 from __future__ import annotations
 
+import errno
+import fcntl
 import os
+
+
+def lock_or_holder(fd: int) -> str | None:
+    """Lock the file open as ``fd`` exclusively, without waiting: None once locked; if
+    another process holds it, who (``pid N`` where ``/proc/locks`` shows it), and ``fd`` is
+    closed. Any other failure closes ``fd`` and raises its ``OSError``."""
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError as err:
+        holder = flock_holder(fd)
+        os.close(fd)
+        if err.errno not in (errno.EWOULDBLOCK, errno.EAGAIN):
+            raise
+        return f"pid {holder}" if holder else "another process"
+    return None
 
 
 def names(path: str, fd: int) -> bool:

@@ -20,8 +20,6 @@ lock the real sender out. Here the signature is checked first, as the C library 
 
 from __future__ import annotations
 
-import errno
-import fcntl
 import hashlib
 import hmac
 import math
@@ -37,7 +35,7 @@ from typing import Any, Callable
 from pymavlink.dialects.v20 import common as mavlink
 
 from .errors import SigningError
-from .file_lock import flock_holder, names
+from .file_lock import lock_or_holder, names
 
 KEY_BYTES = 32
 MAVLINK_EPOCH_UNIX_S = 1420070400
@@ -207,15 +205,12 @@ class TimestampStore:
             except OSError as err:
                 raise SigningError(name, f"cannot open the timestamp file: {err.strerror or err}") from None
             try:
-                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                who = lock_or_holder(fd)
             except OSError as err:
-                holder = flock_holder(fd)
-                os.close(fd)
-                if err.errno not in (errno.EWOULDBLOCK, errno.EAGAIN):
-                    raise SigningError(name, f"cannot lock the timestamp file: {err.strerror or err}") from None
-                who = f"pid {holder}" if holder else "another process"
+                raise SigningError(name, f"cannot lock the timestamp file: {err.strerror or err}") from None
+            if who is not None:
                 raise SigningError(name, f"is in use by {who}: each process signing with a key needs its own "
-                                         "timestamp file") from None
+                                         "timestamp file")
             if names(name, fd):
                 self._lock_fd = fd
                 return

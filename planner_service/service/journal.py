@@ -74,8 +74,6 @@ The file (this module's own guarantees, apart from what the rows mean):
 
 from __future__ import annotations
 
-import errno
-import fcntl
 import json
 import math
 import os
@@ -86,7 +84,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, Iterable, Iterator
 
-from protocol.file_lock import flock_holder, names
+from protocol.file_lock import lock_or_holder, names
 
 from .errors import JournalError
 from .rows import MissionRow, RequestRow, ServiceRow, SortieRow, UserBacklog, UserRow
@@ -796,16 +794,13 @@ def _lock(path: str, shown: str, create: bool = False) -> int | None:
         verb = "create" if create else "open"
         raise JournalError(f"cannot {verb} the journal {shown}: {path}: {err.strerror or err}") from None
     try:
-        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        who = lock_or_holder(fd)
     except OSError as err:
-        holder = flock_holder(fd)
-        os.close(fd)
-        if err.errno not in (errno.EWOULDBLOCK, errno.EAGAIN):
-            raise JournalError(f"cannot lock the journal {shown}: {err.strerror or err}") from None
-        who = f"pid {holder}" if holder else "another process"
+        raise JournalError(f"cannot lock the journal {shown}: {err.strerror or err}") from None
+    if who is not None:
         doing = "creating" if create else "using"
         raise JournalError(f"the journal {shown} is in use by another service ({who} is {doing} it): "
-                           "one service per journal; stop it or give this one another journal.path") from None
+                           "one service per journal; stop it or give this one another journal.path")
     if not names(path, fd):
         os.close(fd)  # replaced, removed or (ours to build) moved into place since we opened it
         return None

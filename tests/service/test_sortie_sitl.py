@@ -37,10 +37,11 @@ import re
 import time
 import tomllib
 from collections import Counter
+from contextlib import contextmanager
 from dataclasses import replace
 from datetime import datetime
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any, Callable, Iterator
 
 import numpy as np
 import pytest
@@ -115,6 +116,22 @@ def fly(stack: Stack, sitl: Sitl, backend: str, **settings: str) -> ServiceConfi
     config = load_config(stack.tmp / "planner.toml")
     stack.users("--count", str(USERS), "--speedup", str(SPEEDUP), "--seed", str(SEED), *config.scenario_arguments())
     return config
+
+
+@contextmanager
+def in_flight_beside_a_second_station(stack: Stack, sitl: Sitl) -> Iterator[tuple[ServiceConfig, GroundStation]]:
+    """The service flying its first sortie on SITL under its authority (a first service
+    recorded), and a second ground station on SERIAL2 (a pilot's, another operator's)."""
+    config = fly(stack, sitl, "pymavlink")
+    assert stack.client is not None
+    stack.wait_event(lambda e: e.event == "user_served", 150.0, "a first service")
+    assert stack.client.state().status.authority == "operator"
+    gcs = GroundStation(sitl.url(2))
+    try:
+        gcs.wait_vehicle()
+        yield config, gcs
+    finally:
+        gcs.close()
 
 
 def service_log(stack: Stack) -> str:
@@ -329,22 +346,15 @@ def test_a_pilots_loiter_ends_the_authority_and_after_the_pilots_landing_nothing
     pilot's LOITER its modes are the pilot's LOITER and LAND alone, it is armed no more,
     and every service recorded was flown."""
     sitl = copter
-    config = fly(stack, sitl, "pymavlink")
-    client = stack.client
-    assert client is not None
-    stack.wait_event(lambda e: e.event == "user_served", 150.0, "a first service")
-    assert client.state().status.authority == "operator"
-    gcs = GroundStation(sitl.url(2))
-    try:
-        gcs.wait_vehicle()
+    with in_flight_beside_a_second_station(stack, sitl) as (config, gcs):
+        client = stack.client
+        assert client is not None
         assert gcs.set_mode(LOITER) == M.MAV_RESULT_ACCEPTED
         revoked = stack.wait_event(lambda e: e.event == "authority_revoked", 15.0, "the end of the authority")
         assert "LOITER" in revoked.detail and "not commanded by the service" in revoked.detail, revoked.detail
         assert client.state().status.authority == "revoked"
         time.sleep(3.0)  # 30 s of SITL's time: the users go on asking, the service goes on planning
         assert gcs.set_mode(LAND) == M.MAV_RESULT_ACCEPTED
-    finally:
-        gcs.close()
     landed = stack.wait_event(lambda e: e.event == "landed", 120.0, "the pilot's landing")
     assert "sortie 1" in landed.detail, landed.detail
     time.sleep(3.0)  # the users go on asking: no arming, no command
@@ -372,20 +382,15 @@ def test_a_pilots_forced_disarming_in_the_air_ends_the_authority_and_nothing_arm
     """The pilot's emergency stop on the real autopilot: a forced disarming (param2 21196)
     from SERIAL2 while SITL flies the service's mission in AUTO. No mode changes, and
     ArduCopter calls a vehicle disarmed in the air landed at once: the disarming, or that
-    landing away from the mission's return, must end the authority. SITL's copter falls; the service commands nothing after it and never
-    arms again (SITL's own log: no ARM record after the pilot's disarming)."""
+    landing away from the mission's return, must end the authority. SITL's copter falls;
+    the service commands nothing after it and never arms again (SITL's own log: no ARM
+    record after the pilot's disarming)."""
     sitl = copter
-    fly(stack, sitl, "pymavlink")
-    client = stack.client
-    assert client is not None
-    stack.wait_event(lambda e: e.event == "user_served", 150.0, "a first service")
-    gcs = GroundStation(sitl.url(2))
-    try:
-        gcs.wait_vehicle()
+    with in_flight_beside_a_second_station(stack, sitl) as (_, gcs):
         stopped_at = time.time()
         assert gcs.command(M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 21196) == M.MAV_RESULT_ACCEPTED
-    finally:
-        gcs.close()
+    client = stack.client
+    assert client is not None
     revoked = stack.wait_event(lambda e: e.event == "authority_revoked" and e.time_s >= stopped_at, 15.0,
                                "the end of the authority")
     # whichever SITL reports first: the disarming, or the landing its land detector calls at once
@@ -414,13 +419,7 @@ def test_a_second_stations_mission_of_the_same_length_ends_the_authority_and_is_
     ends, it neither replaces their mission nor commands anything: what SITL holds at the
     end is theirs, and SITL's log shows no mode after the upload but its own."""
     sitl = copter
-    fly(stack, sitl, "pymavlink")
-    client = stack.client
-    assert client is not None
-    stack.wait_event(lambda e: e.event == "user_served", 150.0, "a first service")
-    gcs = GroundStation(sitl.url(2))
-    try:
-        gcs.wait_vehicle()
+    with in_flight_beside_a_second_station(stack, sitl) as (_, gcs):
         ours = gcs.download()
         theirs = [replace(i, x=i.x + 5000) if i.seq > 0 and i.x else i for i in ours]
         uploaded_at = time.time()
@@ -430,11 +429,10 @@ def test_a_second_stations_mission_of_the_same_length_ends_the_authority_and_is_
         assert "not ours" in revoked.detail, revoked.detail
         time.sleep(5.0)  # 50 s of SITL's time: the users go on asking, the service goes on
         held = gcs.download()
-    finally:
-        gcs.close()
     assert [(i.command, i.x, i.y) for i in held[1:]] == [(i.command, i.x, i.y) for i in theirs[1:]], \
         "the service replaced their mission"
-    status = client.state().status
+    assert stack.client is not None
+    status = stack.client.state().status
     assert status.authority == "revoked", status
     for child in reversed(stack.children):
         assert child.stop() == 0, f"{child.name}: {child.log()[-2000:]}"
