@@ -36,6 +36,16 @@ def flight_commands(text: str) -> list[str]:
     return [c for c in COMMAND.findall(text) if c not in ("511", "512")]
 
 
+def the_next_sortie_waits(stack: Stack) -> None:
+    """Wait for the next sortie (once the battery is swapped), then three seconds in which
+    the users go on asking: the vehicle's log after that shows any arming or command."""
+    deadline = time.monotonic() + 20.0
+    while not stack.rows("SELECT number FROM sorties WHERE number = 2"):
+        assert time.monotonic() < deadline, "the next sortie never began"
+        time.sleep(0.1)
+    time.sleep(3.0)
+
+
 @pytest.mark.timeout(180)
 @pytest.mark.parametrize("backend", ["pymavlink", "mavsdk"])
 def test_a_pilots_loiter_ends_the_authority_and_after_the_pilots_landing_nothing_arms(stack: Stack,
@@ -61,11 +71,7 @@ def test_a_pilots_loiter_ends_the_authority_and_after_the_pilots_landing_nothing
         gcs.close()
     landed = stack.wait_event(lambda e: e.event == "landed", 60.0, "the pilot's landing")
     assert "sortie 1" in landed.detail, landed.detail
-    deadline = time.monotonic() + 20.0
-    while not stack.rows("SELECT number FROM sorties WHERE number = 2"):  # once the battery is swapped
-        assert time.monotonic() < deadline, "the next sortie never began"
-        time.sleep(0.1)
-    time.sleep(3.0)  # the users go on asking: no arming, no command
+    the_next_sortie_waits(stack)
 
     log = vehicle.log()
     after = log[log.rindex("command 176 accepted; mode LOITER"):]  # the pilot's
@@ -113,11 +119,7 @@ def test_a_second_stations_mission_ends_the_authority_and_is_left_to_fly(stack: 
     assert "not ours" in revoked.detail, revoked.detail
     landed = stack.wait_event(lambda e: e.event == "landed", 90.0, "the landing at the end of their mission")
     assert "sortie 1" in landed.detail, landed.detail
-    deadline = time.monotonic() + 20.0
-    while not stack.rows("SELECT number FROM sorties WHERE number = 2"):
-        assert time.monotonic() < deadline, "the next sortie never began"
-        time.sleep(0.1)
-    time.sleep(3.0)  # the users go on asking: no arming, no command
+    the_next_sortie_waits(stack)
 
     log = vehicle.log()
     after = log[log.rindex(f"mission of {len(theirs)} items accepted"):]  # theirs, the last the vehicle took
@@ -151,11 +153,7 @@ def test_a_pilots_disarming_in_the_air_ends_the_authority_and_nothing_arms_again
     revoked = stack.wait_event(lambda e: e.event == "authority_revoked", 10.0, "the end of the authority")
     assert "disarmed (not commanded by the service)" in revoked.detail, revoked.detail
     stack.wait_event(lambda e: e.event == "landed", 30.0, "the fall's landing")
-    deadline = time.monotonic() + 20.0
-    while not stack.rows("SELECT number FROM sorties WHERE number = 2"):  # once the battery is swapped
-        assert time.monotonic() < deadline, "the next sortie never began"
-        time.sleep(0.1)
-    time.sleep(3.0)  # the users go on asking: no arming, no command
+    the_next_sortie_waits(stack)
 
     log = vehicle.log()
     after = log[log.rindex("disarmed (command)"):]
