@@ -14,6 +14,7 @@ from dataclasses import replace
 
 import pytest
 
+from planner_service.harness.processes import Child
 from planner_service.service.config import load_config
 from protocol import GeoOrigin, HoverPoint, encode_path
 from tests.support.gcs import M, GroundStation
@@ -36,6 +37,16 @@ def flight_commands(text: str) -> list[str]:
     return [c for c in COMMAND.findall(text) if c not in ("511", "512")]
 
 
+def flying(stack: Stack, *vehicle: str, **service: str) -> tuple[Child, Child]:
+    """The stub (a fresh battery 30 s after landing), the service under the configuration's
+    authority and ten users, until a first service: the vehicle and the service."""
+    stub = stack.vehicle("--speedup", SPEEDUP, "--recharge-s", "30", *vehicle)
+    child = stack.service(**{"mavlink__start_mission": "true", "planner__min_requests": "5", **service})
+    stack.users("--count", "10", "--speedup", SPEEDUP, "--seed", "1")
+    stack.wait_event(lambda e: e.event == "user_served", 90.0, "a first service")
+    return stub, child
+
+
 def the_next_sortie_waits(stack: Stack) -> None:
     """Wait for the next sortie (once the battery is swapped), then three seconds in which
     the users go on asking: the vehicle's log after that shows any arming or command."""
@@ -50,12 +61,9 @@ def the_next_sortie_waits(stack: Stack) -> None:
 @pytest.mark.parametrize("backend", ["pymavlink", "mavsdk"])
 def test_a_pilots_loiter_ends_the_authority_and_after_the_pilots_landing_nothing_arms(stack: Stack,
                                                                                        backend: str) -> None:
-    vehicle = stack.vehicle("--speedup", SPEEDUP, "--recharge-s", "30")  # a fresh battery 30 s after landing
-    stack.service(mavlink__start_mission="true", mavlink__backend=backend, planner__min_requests="5")
-    stack.users("--count", "10", "--speedup", SPEEDUP, "--seed", "1")
+    vehicle, _ = flying(stack, mavlink__backend=backend)
     client = stack.client
     assert client is not None
-    stack.wait_event(lambda e: e.event == "user_served", 90.0, "a first service")
     assert client.state().status.authority == "operator"
 
     gcs = GroundStation(f"udpout:127.0.0.1:{stack.mav_port}")
@@ -99,12 +107,9 @@ def test_a_second_stations_mission_ends_the_authority_and_is_left_to_fly(stack: 
     MISSION_CURRENT's count changes; the service reads the mission back, finds it is not
     its own, ends its authority and neither replaces that mission nor commands anything;
     the vehicle flies it home, and the next sortie begins without authority."""
-    vehicle = stack.vehicle("--speedup", SPEEDUP, "--recharge-s", "30")
-    stack.service(mavlink__start_mission="true", planner__min_requests="5")
-    stack.users("--count", "10", "--speedup", SPEEDUP, "--seed", "1")
+    vehicle, _ = flying(stack)
     client = stack.client
     assert client is not None
-    stack.wait_event(lambda e: e.event == "user_served", 90.0, "a first service")
     theirs = encode_path([HoverPoint(400.0, 100.0, 60.0, 2.0), HoverPoint(450.0, 50.0, 60.0, 2.0)], GeoOrigin(),
                          "ardupilot")
     gcs = GroundStation(f"udpout:127.0.0.1:{stack.mav_port}")
@@ -138,12 +143,9 @@ def test_a_pilots_disarming_in_the_air_ends_the_authority_and_nothing_arms_again
     the mode stays AUTO, so before only the mode was judged and the fall's landing counted
     as the service's own. Now the disarming ends the authority, the vehicle comes down, and
     the next sortie waits for the operator: the vehicle is never armed again."""
-    vehicle = stack.vehicle("--speedup", SPEEDUP, "--recharge-s", "30")
-    stack.service(mavlink__start_mission="true", planner__min_requests="5")
-    stack.users("--count", "10", "--speedup", SPEEDUP, "--seed", "1")
+    vehicle, _ = flying(stack)
     client = stack.client
     assert client is not None
-    stack.wait_event(lambda e: e.event == "user_served", 90.0, "a first service")
     gcs = GroundStation(f"udpout:127.0.0.1:{stack.mav_port}")
     try:
         gcs.wait_vehicle()
@@ -176,11 +178,7 @@ def test_a_second_stations_mission_of_the_same_length_ends_the_authority(
     moved 55 m north): MISSION_CURRENT's count says nothing, so before the periodic
     read-back (here every 2 s), the check of the vehicle's track against the leg it flies
     and PX4's ``mission_id`` (each alone here) the service flew it as its own."""
-    stack.vehicle("--speedup", SPEEDUP, "--recharge-s", "30", "--flavour", flavour)
-    service = stack.service(mavlink__start_mission="true", planner__min_requests="5", mavlink__backend=backend,
-                            mavlink__flavour=flavour, **settings)
-    stack.users("--count", "10", "--speedup", SPEEDUP, "--seed", "1")
-    stack.wait_event(lambda e: e.event == "user_served", 90.0, "a first service")
+    _, service = flying(stack, "--flavour", flavour, mavlink__backend=backend, mavlink__flavour=flavour, **settings)
     gcs = GroundStation(f"udpout:127.0.0.1:{stack.mav_port}")
     try:
         gcs.wait_vehicle()
