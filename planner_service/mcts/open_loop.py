@@ -24,7 +24,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ..model._jit import jit, jit_borrow, jit_inline
+from ..model._jit import jit, jit_borrow
 from ..model import params as P
 from ..model.interval import NO_USER, interval_duration_s, remaining_intervals
 from ..model.mobility import arrival_mean, draw_int, poisson_quantile
@@ -188,195 +188,118 @@ def search(scene: Scene, tree: TreeArrays, num_nodes: int, root: World, settings
     return _iterate(scene, tree, num_nodes, root, settings, index, iterations, rng, scratch)
 
 
-class Step(NamedTuple):
-    """A step chosen: the hovering point (-1: none is allowed, the sortie ends here), the
-    user served there, and the step's energy and q when the futures' index priced it
-    (``priced``: 0.0 otherwise, and ``serve`` prices the step)."""
-
-    action: int
-    user: int
-    energy_j: float
-    q: float
-
-
-
 @jit_borrow
 def _iterate(scene: Scene, tree: TreeArrays, num_nodes: int, root: World, settings: SearchSettings,
              index: FutureIndex, iterations: int, rng: np.random.Generator, scratch: Scratch) -> int:
     """``search``'s iterations, in the arrays of ``scratch`` (allocated by ``search``: in
-    here nothing is reference-counted, see ``model._jit.jit_borrow``). Each iteration goes
-    down from the root's state (``_descend``: selection, expansion, playout) and backs its
-    returns up the nodes it entered (``_backup``). Those two are calls, once an iteration; the
-    parts of a step (``_select``, ``_playout``, ``_play``), many an iteration, are compiled
-    into ``_descend`` (``jit_inline``). Inlined into this loop too, they measured slower."""
+    here nothing is reference-counted, see ``model._jit.jit_borrow``)."""
+    p = scene.p
+    parent, action, children, visits, value_sum = tree
+    w, qvals, users_at, rewards, suffix, path, touched, flag, moves, news, skip, origin = scratch
+    limit = int(p[P.MAX_INTERVALS])
+    num_futures = index.moves.shape[0]
     steps = 0
     for _ in range(iterations):
+        future = -1
         for j in range(steps):  # forget the last iteration's served users
-            scratch.flag[scratch.touched[j]] = False
-        copy_into(scratch.w, root)
-        num_nodes, depth, steps = _descend(scene, tree, num_nodes, root, settings, index, rng, scratch)
-        _backup(tree, settings, scratch, depth, steps)
+            flag[touched[j]] = False
+        copy_into(w, root)
+        node = ROOT_INDEX
+        path[0] = ROOT_INDEX
+        depth = 1
+        steps = 0
+        in_tree = True
+        energy, q = 0.0, 0.0
+        while limit <= 0 or w.interval[0] < limit:
+            if future >= 0 and steps > 0:  # the users are where the future's row has them
+                fill_rows(scene, index, root, future, steps)
+                ws = World(w.uav_xyz, w.hover, index.row_users[future, steps], w.tasks, w.served, w.battery_j,
+                           w.interval, w.energy_used_j, w.reward_sum)
+            else:
+                ws = w
+            if in_tree and depth > settings.max_depth:
+                in_tree = False
+            priced = future >= 0 and steps > 0  # the index gives the step's energy and q
+            if priced and in_tree:  # the tree's step, asking as few points as it can
+                for b in range(skip.shape[0]):
+                    skip[b] = not _untried(children, visits, node, b)
+                a, user, energy, q = greedy_future(scene, index, root, future, steps, ws, touched, flag, skip)
+                if a >= 0:  # the untried allowed point of largest q (``_untried_best``)
+                    child = _expand(tree, num_nodes, node, a)
+                    num_nodes += child == num_nodes
+                    in_tree = False
+                else:  # every allowed point tried: UCT needs to know only which are allowed
+                    allowed = allowed_future(scene, index, root, future, steps, ws, touched, flag, qvals)
+                    if allowed == 0:
+                        break
+                    child = _uct_child(children, node, qvals, visits, value_sum, settings.c)
+                    a = action[child]
+                    user, energy, q = point_user(scene, index, future, steps, a, ws, touched, flag)
+                node = child
+                path[depth] = node
+                depth += 1
+            elif priced and settings.rollout == ROLLOUT_EPSILON_GREEDY:
+                # the greedy step needs only the best point (``greedy_future``), the
+                # uniform one (drawn as ``rollout_action`` draws it) which points are allowed
+                for b in range(skip.shape[0]):
+                    skip[b] = False
+                a, user, energy, q = greedy_future(scene, index, root, future, steps, ws, touched, flag, skip)
+                if a < 0:
+                    break
+                if rng.random() < settings.epsilon:
+                    allowed = allowed_future(scene, index, root, future, steps, ws, touched, flag, qvals)
+                    a = random_allowed(qvals, allowed, rng)
+                    user, energy, q = point_user(scene, index, future, steps, a, ws, touched, flag)
+            else:
+                priced = False
+                allowed = evaluate_step(scene, index, root, ws, future, steps, touched, flag, qvals, users_at)
+                if allowed == 0:
+                    break
+                if in_tree:
+                    a = _untried_best(children, visits, node, qvals)
+                    if a >= 0:
+                        child = _expand(tree, num_nodes, node, a)
+                        num_nodes += child == num_nodes
+                        in_tree = False
+                    else:
+                        child = _uct_child(children, node, qvals, visits, value_sum, settings.c)
+                        a = action[child]
+                    if depth == 1 and num_futures > 0:
+                        future = int(visits[child] + 0.5) % num_futures
+                    node = child
+                    path[depth] = node
+                    depth += 1
+                else:
+                    a = rollout_action(qvals, allowed, settings.rollout, settings.epsilon, rng)
+                user = users_at[a]
+            if priced:
+                settle(scene, ws, a, user, energy, q)
+                duration = 0.0  # unused: the shared futures hold the arrivals
+            else:
+                for c in range(3):
+                    origin[c] = ws.uav_xyz[c]
+                out = serve(scene, ws, a, user)
+                user, q = out.user, out.reward
+                duration = _duration(p, origin, scene.hover_points[a], ws.users, user, out.bits)
+            touched[steps] = user
+            flag[user] = True
+            rewards[steps] = q
+            if future >= 0:  # only the tasks: the next row has the users' moves
+                advance(scene, ws, index.moves[future, steps, :0], index.news[future, steps])
+            else:
+                draw_chance_after(p, moves, news, duration, rng)
+                advance(scene, w, moves, news)
+            steps += 1
+        suffix[steps] = 0.0
+        for k in range(steps - 1, -1, -1):
+            suffix[k] = suffix[k + 1] + rewards[k]
+        for j in range(depth):
+            first = j - 1 if j > 0 else 0  # node path[j] is entered by step j - 1
+            ret = node_return(settings.return_kind, suffix[first], steps - first, suffix[0], steps,
+                              settings.past_sum, settings.past_count)
+            visits[path[j]] += 1.0
+            value_sum[path[j]] += ret
     return num_nodes
-
-
-@jit_borrow
-def _descend(scene: Scene, tree: TreeArrays, num_nodes: int, root: World, settings: SearchSettings,
-             index: FutureIndex, rng: np.random.Generator, scratch: Scratch) -> tuple[int, int, int]:
-    """One iteration from the root's state in ``scratch.w``: down the tree (``_select``,
-    which grows it by one node at most), then the playout (``_playout``) to the sortie's
-    end, each step played by ``_play``. Returns the node count, the nodes entered (in
-    ``scratch.path``) and the steps played (their rewards in ``scratch.rewards``).
-
-    The first step picks the future: the n-th visit of a root child plays future n mod S;
-    from the second step on with a future, the index prices the step (``priced``)."""
-    w, path = scratch.w, scratch.path
-    limit = int(scene.p[P.MAX_INTERVALS])
-    num_futures = index.moves.shape[0]
-    future = -1
-    node = ROOT_INDEX
-    path[0] = ROOT_INDEX
-    depth = 1
-    steps = 0
-    in_tree = True
-    while limit <= 0 or w.interval[0] < limit:
-        if future >= 0 and steps > 0:  # the users are where the future's row has them
-            fill_rows(scene, index, root, future, steps)
-            ws = World(w.uav_xyz, w.hover, index.row_users[future, steps], w.tasks, w.served, w.battery_j,
-                       w.interval, w.energy_used_j, w.reward_sum)
-        else:
-            ws = w
-        if in_tree and depth > settings.max_depth:
-            in_tree = False
-        priced = future >= 0 and steps > 0  # the index gives the step's energy and q
-        if in_tree:
-            step, child, num_nodes, expanded = _select(scene, tree, num_nodes, node, root, settings, index, future,
-                                                       steps, ws, priced, scratch)
-            if step.action < 0:
-                break
-            in_tree = not expanded
-            if not priced and depth == 1 and num_futures > 0:
-                future = int(tree.visits[child] + 0.5) % num_futures
-            node = child
-            path[depth] = node
-            depth += 1
-        else:
-            step, priced = _playout(scene, settings, index, root, future, steps, ws, priced, rng, scratch)
-            if step.action < 0:
-                break
-        _play(scene, index, ws, step, priced, future, steps, rng, scratch)
-        steps += 1
-    return num_nodes, depth, steps
-
-
-@jit_inline
-def _select(scene: Scene, tree: TreeArrays, num_nodes: int, node: int, root: World, settings: SearchSettings,
-            index: FutureIndex, future: int, steps: int, ws: World, priced: bool,
-            scratch: Scratch) -> tuple[Step, int, int, bool]:
-    """The tree's step at ``node`` in the step's world ``ws``: the untried allowed point of
-    largest q, expanded (selection ends there), or with every allowed point tried the UCT
-    child (10). Returns the step (action -1: none allowed), the child entered, the node
-    count and whether the child was expanded. ``priced``: the index is asked for as few
-    points as it can (the best untried one, then which are allowed); otherwise every
-    point's q is evaluated (``evaluate_step``)."""
-    children, visits = tree.children, tree.visits
-    touched, flag, qvals = scratch.touched, scratch.flag, scratch.qvals
-    if priced:
-        skip = scratch.skip
-        for b in range(skip.shape[0]):
-            skip[b] = not _untried(children, visits, node, b)
-        a, user, energy, q = greedy_future(scene, index, root, future, steps, ws, touched, flag, skip)
-        if a >= 0:  # the untried allowed point of largest q (``_untried_best``)
-            child = _expand(tree, num_nodes, node, a)
-            return Step(int(a), int(user), energy, q), child, num_nodes + (child == num_nodes), True
-        # every allowed point tried: UCT needs to know only which are allowed
-        if allowed_future(scene, index, root, future, steps, ws, touched, flag, qvals) == 0:
-            return Step(-1, -1, 0.0, 0.0), node, num_nodes, False
-        child = _uct_child(children, node, qvals, visits, tree.value_sum, settings.c)
-        a = tree.action[child]
-        user, energy, q = point_user(scene, index, future, steps, a, ws, touched, flag)
-        return Step(int(a), int(user), energy, q), child, num_nodes, False
-    if evaluate_step(scene, index, root, ws, future, steps, touched, flag, qvals, scratch.users_at) == 0:
-        return Step(-1, -1, 0.0, 0.0), node, num_nodes, False
-    a = _untried_best(children, visits, node, qvals)
-    expanded = a >= 0
-    if expanded:
-        child = _expand(tree, num_nodes, node, a)
-        num_nodes += child == num_nodes
-    else:
-        child = _uct_child(children, node, qvals, visits, tree.value_sum, settings.c)
-        a = tree.action[child]
-    return Step(int(a), int(scratch.users_at[a]), 0.0, 0.0), child, num_nodes, expanded
-
-
-@jit_inline
-def _playout(scene: Scene, settings: SearchSettings, index: FutureIndex, root: World, future: int, steps: int,
-             ws: World, priced: bool, rng: np.random.Generator, scratch: Scratch) -> tuple[Step, bool]:
-    """A playout step in ``ws`` by the playout policy (``rollout_action``); returns the step
-    (action -1: none allowed) and whether the index priced it. A priced epsilon-greedy step
-    asks the index only for the best point (``greedy_future``), and which points are allowed
-    only for a uniform one (drawn as ``rollout_action`` draws it)."""
-    touched, flag, qvals = scratch.touched, scratch.flag, scratch.qvals
-    if priced and settings.rollout == ROLLOUT_EPSILON_GREEDY:
-        skip = scratch.skip
-        for b in range(skip.shape[0]):
-            skip[b] = False
-        a, user, energy, q = greedy_future(scene, index, root, future, steps, ws, touched, flag, skip)
-        if a < 0:
-            return Step(-1, -1, 0.0, 0.0), True
-        if rng.random() < settings.epsilon:
-            allowed = allowed_future(scene, index, root, future, steps, ws, touched, flag, qvals)
-            a = random_allowed(qvals, allowed, rng)
-            user, energy, q = point_user(scene, index, future, steps, a, ws, touched, flag)
-        return Step(int(a), int(user), energy, q), True
-    allowed = evaluate_step(scene, index, root, ws, future, steps, touched, flag, qvals, scratch.users_at)
-    if allowed == 0:
-        return Step(-1, -1, 0.0, 0.0), False
-    a = rollout_action(qvals, allowed, settings.rollout, settings.epsilon, rng)
-    return Step(int(a), int(scratch.users_at[a]), 0.0, 0.0), False
-
-
-@jit_inline
-def _play(scene: Scene, index: FutureIndex, ws: World, step: Step, priced: bool, future: int, steps: int,
-          rng: np.random.Generator, scratch: Scratch) -> None:
-    """Play ``step`` in ``ws`` (the iteration's world, or its view on the future's row of
-    users): served (``settle`` when the index priced it, else ``serve``), its user and
-    reward recorded as step ``steps``, then the world advanced by the future's chance, or
-    by a fresh draw for the interval's duration."""
-    user, q = step.user, step.q
-    if priced:
-        settle(scene, ws, step.action, user, step.energy_j, q)
-        duration = 0.0  # unused: the shared futures hold the arrivals
-    else:
-        origin = scratch.origin
-        for c in range(3):
-            origin[c] = ws.uav_xyz[c]
-        out = serve(scene, ws, step.action, user)
-        user, q = out.user, out.reward
-        duration = _duration(scene.p, origin, scene.hover_points[step.action], ws.users, user, out.bits)
-    scratch.touched[steps] = user
-    scratch.flag[user] = True
-    scratch.rewards[steps] = q
-    if future >= 0:  # only the tasks: the next row has the users' moves
-        advance(scene, ws, index.moves[future, steps, :0], index.news[future, steps])
-    else:  # ``ws`` is the iteration's world itself
-        draw_chance_after(scene.p, scratch.moves, scratch.news, duration, rng)
-        advance(scene, ws, scratch.moves, scratch.news)
-
-
-@jit_borrow
-def _backup(tree: TreeArrays, settings: SearchSettings, scratch: Scratch, depth: int, steps: int) -> None:
-    """Back the iteration's returns up the ``depth`` nodes of ``scratch.path``: node
-    ``path[j]`` is entered by step j - 1 and gets the objective from that step on."""
-    rewards, suffix, path = scratch.rewards, scratch.suffix, scratch.path
-    suffix[steps] = 0.0
-    for k in range(steps - 1, -1, -1):
-        suffix[k] = suffix[k + 1] + rewards[k]
-    for j in range(depth):
-        first = j - 1 if j > 0 else 0
-        ret = node_return(settings.return_kind, suffix[first], steps - first, suffix[0], steps,
-                          settings.past_sum, settings.past_count)
-        tree.visits[path[j]] += 1.0
-        tree.value_sum[path[j]] += ret
 
 
 @jit_borrow
@@ -446,26 +369,6 @@ def _paired(scene: Scene, root: World, first: int, second: int, settings: Search
                                     settings.past_count)
 
 
-class FreshFutures(NamedTuple):
-    """``paired_fresh``'s S futures: the users' moves ``moves`` (S, H, I, 3) and the
-    arrivals' uniforms ``uniforms`` (S, H, I)."""
-
-    moves: np.ndarray
-    uniforms: np.ndarray
-
-
-class FreshScratch(NamedTuple):
-    """``paired_fresh``'s working world and arrays: the playout's world ``w``, every
-    action's q and user at a step (``qvals``, ``users_at`` (K,)), a step's arrivals
-    (``news`` (I,)) and where its flight began (``origin`` (3,))."""
-
-    w: World
-    qvals: np.ndarray
-    users_at: np.ndarray
-    news: np.ndarray
-    origin: np.ndarray
-
-
 @jit
 def paired_fresh(scene: Scene, root: World, first: int, second: int, settings: SearchSettings, index: FutureIndex,
                  moves: np.ndarray, uniforms: np.ndarray, out: np.ndarray) -> None:
@@ -476,18 +379,17 @@ def paired_fresh(scene: Scene, root: World, first: int, second: int, settings: S
     duration's mean (``poisson_quantile``), common random numbers whatever the timings.
     ``index`` gives the root's values and a tree to refit (its futures are not read)."""
     num_actions = scene.hover_points.shape[0]
-    scratch = FreshScratch(clone(root), np.empty(num_actions), np.empty(num_actions, dtype=np.int64),
-                           np.empty(root.users.shape[0], dtype=np.int64), np.empty(3))
-    _paired_fresh(scene, root, (first, second), settings, index, FreshFutures(moves, uniforms), out, scratch)
+    _paired_fresh(scene, root, first, second, settings, index, moves, uniforms, out, clone(root),
+                  np.empty(num_actions), np.empty(num_actions, dtype=np.int64),
+                  np.empty(root.users.shape[0], dtype=np.int64), np.empty(3))
 
 
 @jit_borrow
-def _paired_fresh(scene: Scene, root: World, pair: tuple[int, int], settings: SearchSettings, index: FutureIndex,
-                  futures: FreshFutures, out: np.ndarray, scratch: FreshScratch) -> None:
-    """``paired_fresh`` for the actions ``pair`` in the world and arrays of ``scratch``."""
+def _paired_fresh(scene: Scene, root: World, first: int, second: int, settings: SearchSettings, index: FutureIndex,
+                  moves: np.ndarray, uniforms: np.ndarray, out: np.ndarray, w: World, qvals: np.ndarray,
+                  users_at: np.ndarray, news: np.ndarray, origin: np.ndarray) -> None:
+    """``paired_fresh`` in the world and arrays it is given."""
     p = scene.p
-    moves, uniforms = futures
-    w, qvals, users_at, news, origin = scratch
     limit = int(p[P.MAX_INTERVALS])
     horizon = moves.shape[1]
     for s in range(moves.shape[0]):
@@ -499,7 +401,7 @@ def _paired_fresh(scene: Scene, root: World, pair: tuple[int, int], settings: Se
                 if steps == 0:  # the root's step: the action paired
                     if index.root_allowed[0] == 0:
                         break
-                    a = pair[0] if k == 0 else pair[1]
+                    a = first if k == 0 else second
                     user = index.root_user[a]
                 else:  # greedy: the largest q, the first of equals
                     refit_tree(w.users, index.tree)
