@@ -306,7 +306,7 @@ def plot_three_d(exp: "Experiment", r: Results, out: Path) -> list[Path]:
 def plot_timesaving(exp: "Experiment", r: Results, out: Path) -> list[Path]:
     """Search wall time per sortie, TS-MCTS's saving over Algorithm 1 (paired by seed) with
     the schedule's iteration saving, and the throughput."""
-    from .registry import iterations_saved
+    from .timesaving import iterations_saved
 
     setting = r.settings[0]
     label = setting.label

@@ -19,6 +19,7 @@ from .claims import Check, Claim, near, positive, within
 from .errors import ExperimentError
 from .jobs import ALGOS, STATIC, TRAINED, Job, Record, Setting
 from .results import Results
+from .timesaving import iterations_saved
 
 FULL_EPISODES = (10, 30, 100, 300, 1000)
 QUICK_EPISODES = (10, 30, 100)
@@ -300,17 +301,6 @@ def _three_d_claims(r: Results) -> list[Claim]:
                         "MCTS obtains the largest average reward in 3-D (against DQN and QL)", ("dqn", "ql"))
 
 
-def iterations_saved(scenario: Scenario, n: int, intervals: int) -> float:
-    """1 - (TS-MCTS iterations) / (Algorithm 1 iterations) over a sortie of ``intervals``
-    decisions, from the planner's own schedule (Section III-C)."""
-    from ..mcts import PaperMctsPlanner
-    from ..model import hover_points
-
-    planner = PaperMctsPlanner(scenario, hover_points(scenario), n, np.random.default_rng(0), schedule="timesaving")
-    ts = sum(planner.iterations_at(t) for t in range(intervals))
-    return 1.0 - ts / (n * intervals)
-
-
 def _timesaving_claims(r: Results) -> list[Claim]:
     label = r.labels[0]
     scenario = r.settings[0].scenario
@@ -434,4 +424,4 @@ def experiment(name: str) -> Experiment:
 
 
 __all__ = ["EXPERIMENTS", "Experiment", "FULL_EPISODES", "FULL_SEEDS", "QUICK_EPISODES", "QUICK_SEEDS",
-           "RunConfig", "experiment", "iterations_saved", "paired_summary", "three_d"]
+           "RunConfig", "experiment", "paired_summary", "three_d"]
