@@ -89,3 +89,72 @@ def test_the_reading_sees_a_forbidden_import() -> None:
     found = {layer(t) for t in imports(source, "planner_service.model.probe")} - {None}
     assert found == {"planner_service.service", "protocol", MODEL}
     assert {"planner_service.service", "protocol"}.isdisjoint(ALLOWED[MODEL] or set())
+
+
+def runtime_imports(source: str, module: str, is_package: bool, modules: set[str]) -> set[str]:
+    """The project's modules ``module`` imports when it runs: ``from pkg import name`` is
+    pkg.name where that is a module, else pkg; imports for type checkers alone
+    (``if TYPE_CHECKING:``) do not run."""
+    tree = ast.parse(source, module)
+    typing_only = {id(n) for block in ast.walk(tree) if isinstance(block, ast.If)
+                   and ast.unparse(block.test) in ("TYPE_CHECKING", "typing.TYPE_CHECKING")
+                   for stmt in block.body for n in ast.walk(stmt)}
+    package = module if is_package else module.rsplit(".", 1)[0]
+    out: set[str] = set()
+    for node in ast.walk(tree):
+        if id(node) in typing_only:
+            continue
+        if isinstance(node, ast.Import):
+            out.update(alias.name for alias in node.names)
+        elif isinstance(node, ast.ImportFrom):
+            target = node.module or ""
+            if node.level:
+                base = package.split(".")[: len(package.split(".")) - node.level + 1]
+                target = ".".join(base + ([node.module] if node.module else []))
+            out.update(f"{target}.{a.name}" if f"{target}.{a.name}" in modules else target for a in node.names)
+    ancestors = {".".join(module.split(".")[:i]) for i in range(1, module.count(".") + 1)}
+    return {t for t in out if t in modules and t != module and t not in ancestors}
+
+
+def cycles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """The strongly connected parts of more than one module (Tarjan's algorithm)."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    found: list[list[str]] = []
+
+    def visit(v: str) -> None:
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        for w in graph[v]:
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            part = stack[stack.index(v):]
+            del stack[stack.index(v):]
+            if len(part) > 1:
+                found.append(sorted(part))
+
+    for v in graph:
+        if v not in index:
+            visit(v)
+    return found
+
+
+def test_no_module_imports_itself_round_a_circle() -> None:
+    # The harness and the service, the planners and their registry, the plots and the
+    # experiments' registry once imported each other (issue 24).
+    paths = {".".join(p.relative_to(REPO).with_suffix("").parts).removesuffix(".__init__"): p
+             for package in PACKAGES for p in sorted((REPO / package).rglob("*.py"))}
+    graph = {m: runtime_imports(p.read_text(), m, p.name == "__init__.py", set(paths)) for m, p in paths.items()}
+    assert sum(len(v) for v in graph.values()) > 300
+    assert not cycles(graph), cycles(graph)
+    # the reading sees one
+    probe = {"a.x": runtime_imports("from . import y", "a.x", False, {"a.x", "a.y"}),
+             "a.y": runtime_imports("def f():\n    from .x import g", "a.y", False, {"a.x", "a.y"})}
+    assert cycles(probe) == [["a.x", "a.y"]]
+    assert not runtime_imports("from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    from .y import T",
+                               "a.x", False, {"a.x", "a.y"})
