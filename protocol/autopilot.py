@@ -66,6 +66,12 @@ class Autopilot:
     estimator_msg_id: int
     estimator_stream: int | None
     """The legacy REQUEST_DATA_STREAM group carrying it (None: no group)."""
+    estimator_unaided_flags: int
+    """Estimator flags that mean "no GPS" even beside an absolute position: ArduPilot's
+    EKF sets CONST_POS_MODE (128) until it uses the GPS (``NavEKF3_core::getFilterStatus``);
+    PX4's EKF2 sets the same bit whenever the vehicle is at rest (``Ekf::get_ekf_soln_status``:
+    ``const_pos_mode = fake_pos || valid_fake_pos || vehicle_at_rest``), so PX4 SITL on the
+    ground, ready to fly, reports 0x3ff: for PX4 the bit says nothing of the GPS (0)."""
 
     @property
     def first_item(self) -> int:
@@ -104,7 +110,7 @@ ARDUPILOT = Autopilot(
     arm_mode="GUIDED",
     home_slots=1, whole_second_holds=True, compacts_items=True, writes_items_as_they_arrive=True,
     mav_autopilot=M.MAV_AUTOPILOT_ARDUPILOTMEGA, estimator_message="EKF_STATUS_REPORT", estimator_msg_id=M.MAVLINK_MSG_ID_EKF_STATUS_REPORT,
-    estimator_stream=M.MAV_DATA_STREAM_EXTRA3,
+    estimator_stream=M.MAV_DATA_STREAM_EXTRA3, estimator_unaided_flags=M.EKF_CONST_POS_MODE,
 )
 PX4 = Autopilot(
     name="px4",
@@ -117,6 +123,7 @@ PX4 = Autopilot(
     mission_mode="AUTO.MISSION", return_mode="AUTO.RTL", hold_mode="AUTO.LOITER", arm_mode=None,
     home_slots=0, whole_second_holds=False, compacts_items=False, writes_items_as_they_arrive=False,
     mav_autopilot=M.MAV_AUTOPILOT_PX4, estimator_message="ESTIMATOR_STATUS", estimator_msg_id=M.MAVLINK_MSG_ID_ESTIMATOR_STATUS, estimator_stream=None,
+    estimator_unaided_flags=0,
 )
 
 PROFILES: Mapping[str, Autopilot] = MappingProxyType({p.name: p for p in (ARDUPILOT, PX4)})

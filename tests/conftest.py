@@ -9,6 +9,8 @@ from typing import Any, Callable, Iterator
 
 import pytest
 
+from tests.support import px4 as px4_support
+from tests.support.px4 import Px4
 from tests.support.sitl import Sitl, free_instance, sitl_binary, skip_reason
 
 REPO = Path(__file__).resolve().parent.parent
@@ -63,3 +65,41 @@ def sitl_ready(sitl: Sitl) -> Sitl:
     """``sitl`` once its EKF uses the GPS (it can arm and fly AUTO)."""
     sitl.wait_ready()
     return sitl
+
+
+@pytest.fixture
+def make_px4(tmp_path: Path) -> Iterator[Callable[..., Px4]]:
+    """A factory of PX4 SITLs (tests/support/px4.py; keyword arguments go to ``Px4``, e.g.
+    ``params``), each started in its own folder and instance and stopped at the end;
+    skipped where PX4 SITL is missing."""
+    root = px4_support.px4_root()
+    if root is None:
+        pytest.skip(px4_support.skip_reason())
+    started: list[Px4] = []
+
+    def make(**options: Any) -> Px4:
+        folder = tmp_path / f"px4-{len(started)}"
+        folder.mkdir()
+        p = Px4(root, folder, options.pop("instance", None) or px4_support.free_instance(), **options)
+        started.append(p)
+        p.start()
+        return p
+
+    try:
+        yield make
+    finally:
+        for p in started:
+            p.stop()
+
+
+@pytest.fixture
+def px4(make_px4: Callable[..., Px4]) -> Px4:
+    """A fresh PX4 SITL, running but not yet ready to arm."""
+    return make_px4()
+
+
+@pytest.fixture
+def px4_ready(px4: Px4) -> Px4:
+    """``px4`` once its pre-arm checks pass (it can arm and fly a mission)."""
+    px4.wait_ready()
+    return px4

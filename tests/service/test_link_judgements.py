@@ -11,6 +11,7 @@ from typing import Any
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as M
 
+from protocol.autopilot import ARDUPILOT, PX4
 from protocol.text import printable
 from planner_service.service.link import (ArmedChanged, Connected, OnGround, LinkEvent, ModeChanged, PositionChanged, Restarted,
                                           StatusText, TelemetryMissing)
@@ -344,3 +345,12 @@ def test_statustext_is_escaped_before_it_is_told() -> None:
     state, events = vehicle(clock)
     feed(state, M.MAVLink_statustext_message(M.MAV_SEVERITY_WARNING, b"Arm: \x1b[2Jcleared\nscreen"))
     assert StatusText("Arm: \\x1b[2Jcleared\\x0ascreen", M.MAV_SEVERITY_WARNING) in events
+
+
+def test_px4_at_rest_reports_constant_position_mode_with_its_gps_position() -> None:
+    # PX4 SITL on the ground, ready to fly: ESTIMATOR_STATUS flags 0x3ff (EKF2 sets
+    # CONST_POS_MODE whenever the vehicle is at rest); the same bit on ArduPilot means no GPS.
+    at_rest = with_(READY, estimator_flags=0x3FF, estimator_name="ESTIMATOR_STATUS")
+    assert assess_position(with_(at_rest, estimator_unaided_flags=PX4.estimator_unaided_flags)) == ""
+    assert "no GPS position yet (flags 0x03ff)" in assess_position(
+        with_(at_rest, estimator_unaided_flags=ARDUPILOT.estimator_unaided_flags))

@@ -70,7 +70,7 @@ def ports(instance: int) -> tuple[int, int, int]:
     return base, base + 2, base + 3
 
 
-def _free(port: int) -> bool:
+def port_is_free(port: int) -> bool:
     """Nothing is bound to ``port`` (TCP or UDP). A TCP port in TIME_WAIT after the last SITL
     counts as free: SITL binds with SO_REUSEADDR."""
     for kind in (socket.SOCK_STREAM, socket.SOCK_DGRAM):
@@ -83,7 +83,7 @@ def _free(port: int) -> bool:
     return True
 
 
-_RESERVED: dict[int, Any] = {}
+_RESERVED: dict[str, Any] = {}
 """Instances this process holds (an open, locked file each): a test run split over
 processes (pytest-xdist) never hands one instance to two SITLs started at the same time."""
 
@@ -92,22 +92,26 @@ def free_instance(instances: range = INSTANCES) -> int:
     """An instance number in ``instances`` whose ports 5760..5763 + 10 N are all free and
     that no other process of the test run holds (it stays this process's until it exits)."""
     for instance in instances:
-        if instance not in _RESERVED and not _reserve(instance):
+        if not reserve(f"sitl-{instance}"):
             continue
         base = ports(instance)[0]
-        if all(_free(p) for p in range(base, base + 4)):
+        if all(port_is_free(p) for p in range(base, base + 4)):
             return instance
     raise RuntimeError(f"no free SITL instance in {instances.start}..{instances.stop - 1}")
 
 
-def _reserve(instance: int) -> bool:
-    handle = open(Path(tempfile.gettempdir()) / f"uav-planner-sitl-{instance}.lock", "w")
+def reserve(name: str) -> bool:
+    """``name`` (e.g. ``sitl-12``) is this process's now or was already; False: another
+    process of the test run holds it."""
+    if name in _RESERVED:
+        return True
+    handle = open(Path(tempfile.gettempdir()) / f"uav-planner-{name}.lock", "w")
     try:
         fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
     except OSError:
         handle.close()
         return False
-    _RESERVED[instance] = handle
+    _RESERVED[name] = handle
     return True
 
 

@@ -69,7 +69,8 @@ class VehicleState:
         """Messages dropped because they did not come from the autopilot."""
         self._clock_watch = ClockWatch()
         self._clock_rate = ClockRate()
-        self._pos = PositionInputs(estimator_name=self.estimator)
+        self._pos = PositionInputs(estimator_name=self.estimator,
+                                   estimator_unaided_flags=self.profile.estimator_unaided_flags)
         self._expected_mode: tuple[str, float] | None = None
         self._expected_armed: tuple[bool, float] | None = None
         self._last_heard = 0.0
@@ -307,7 +308,8 @@ class VehicleState:
 
     def _restarted(self, detail: str) -> None:
         """The vehicle rebooted: what it reported before (home, estimator, mission) is stale."""
-        self._pos = PositionInputs(estimator_name=self.estimator)
+        self._pos = PositionInputs(estimator_name=self.estimator,
+                                   estimator_unaided_flags=self.profile.estimator_unaided_flags)
         self._clock_rate = ClockRate()
         self._set(home_set=False, gps_fix=-1, mission_seq=0, mission_total=-1, mission_id=0)
         log.warning("the autopilot restarted: %s", detail)

@@ -20,8 +20,6 @@ GPS_FIX_3D = 3
 """GPS_FIX_TYPE_3D_FIX: 3-D fix or better (DGPS 4, RTK 5-6)."""
 EST_POS_HORIZ_ABS = 16
 """EKF_POS_HORIZ_ABS (ArduPilot's EKF_STATUS_REPORT) = ESTIMATOR_POS_HORIZ_ABS (PX4)."""
-EST_CONST_POS_MODE = 128
-"""The estimator holds a constant position: it has no GPS yet (same bit in both)."""
 EST_BAD = 1024
 """EKF_UNINITIALIZED (ArduPilot) / ESTIMATOR_GPS_GLITCH (PX4): no usable position either way."""
 AIRBORNE_ALT_M = 1.0
@@ -104,6 +102,9 @@ class PositionInputs:
     estimator_flags: int | None = None
     estimator_available: bool = True
     estimator_name: str = "EKF_STATUS_REPORT"
+    estimator_unaided_flags: int = 0
+    """Flags that say the estimator has no GPS even with an absolute position (the profile's
+    ``estimator_unaided_flags``)."""
     home_set: bool = False
     home_available: bool = True
 
@@ -125,7 +126,7 @@ def assess_position(p: PositionInputs) -> str:
             return f"position estimate: no {p.estimator_name} yet"
         if flags & EST_BAD:
             return f"position estimate: estimator uninitialised or GPS glitching (flags 0x{flags:04x})"
-        if not flags & EST_POS_HORIZ_ABS or flags & EST_CONST_POS_MODE:
+        if not flags & EST_POS_HORIZ_ABS or flags & p.estimator_unaided_flags:
             return f"position estimate: EKF has no GPS position yet (flags 0x{flags:04x})"
     if p.home_available and not p.home_set:
         return "home position: not set yet"
