@@ -59,6 +59,20 @@ class Autopilot:
     storage on receipt (``GCS_MAVLINK::handle_mission_item`` -> ``AP_Mission::replace_cmd``),
     so a failed upload may leave part of itself; PX4 switches over only when the upload is
     complete (``MavlinkMissionManager``'s dataman swap)."""
+    return_item_mode: str | None
+    """The mode a mission's RETURN_TO_LAUNCH item hands the vehicle to; None: flown in the
+    mission mode. PX4 switches to AUTO.RTL as the item begins ("Mission finished, loitering",
+    "Returning to launch", seen on PX4 SITL 1.18), so an upload can no longer turn the way
+    home back; after the landing's disarming it goes back to the mode chosen before
+    (AUTO.MISSION). ArduPilot flies the item in AUTO."""
+    set_current_by_command: bool
+    """The flown item is set with MAV_CMD_DO_SET_MISSION_CURRENT (ArduPilot); False: with the
+    MISSION_SET_CURRENT message, PX4 SITL 1.18 answering the command MAV_RESULT_UNSUPPORTED."""
+    flies_changed_current_item: bool
+    """After an upload that changes the item at the index the vehicle keeps, it flies the new
+    item by itself: PX4 (seen on PX4 SITL: the new item 3 flown, no item marked current).
+    ArduPilot restarts no return-to-launch, takeoff or land item on an upload: the command
+    restarts it."""
     mav_autopilot: int
     """MAV_AUTOPILOT: its HEARTBEAT's ``autopilot``, a .plan's ``firmwareType``."""
     estimator_message: str
@@ -109,6 +123,7 @@ ARDUPILOT = Autopilot(
     # ground station and checks the position as AUTO will.
     arm_mode="GUIDED",
     home_slots=1, whole_second_holds=True, compacts_items=True, writes_items_as_they_arrive=True,
+    return_item_mode=None, set_current_by_command=True, flies_changed_current_item=False,
     mav_autopilot=M.MAV_AUTOPILOT_ARDUPILOTMEGA, estimator_message="EKF_STATUS_REPORT", estimator_msg_id=M.MAVLINK_MSG_ID_EKF_STATUS_REPORT,
     estimator_stream=M.MAV_DATA_STREAM_EXTRA3, estimator_unaided_flags=M.EKF_CONST_POS_MODE,
 )
@@ -122,6 +137,7 @@ PX4 = Autopilot(
     main_shift=16, main_mask=0xFF, sub_shift=24, unknown_mode="PX4 {0}/{1}",
     mission_mode="AUTO.MISSION", return_mode="AUTO.RTL", hold_mode="AUTO.LOITER", arm_mode=None,
     home_slots=0, whole_second_holds=False, compacts_items=False, writes_items_as_they_arrive=False,
+    return_item_mode="AUTO.RTL", set_current_by_command=False, flies_changed_current_item=True,
     mav_autopilot=M.MAV_AUTOPILOT_PX4, estimator_message="ESTIMATOR_STATUS", estimator_msg_id=M.MAVLINK_MSG_ID_ESTIMATOR_STATUS, estimator_stream=None,
     estimator_unaided_flags=0,
 )

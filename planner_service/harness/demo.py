@@ -110,8 +110,12 @@ def run_demo(out: Path, *, users: int = 10, speedup: float = 25.0, budget_ms: fl
     journal = Journal(journal_path)
     try:
         known = [st.battery_fraction for st in statuses if st.battery_fraction is not None]  # None: unknown
-        final_battery = known[-1] * scenario.battery_j if known else None
-        summary = sortie_summary(journal, scenario, final_battery)
+        # the lowest, not the last: PX4 SITL's battery is full again as soon as it disarms
+        final_battery = min(known) * scenario.battery_j if known else None
+        # The sortie that landed: an autopilot whose battery is full again at disarming (PX4
+        # SITL) lets the next sortie begin before the demo stops.
+        flown = [row.number for row in journal.sorties() if row.over]
+        summary = sortie_summary(journal, scenario, final_battery, flown[-1] if flown else None)
         summary.update(preset=scenario.name, algo=algo, backend=backend, flavour=flavour, users=users,
                        speedup=speedup, budget_ms=budget_ms, seed=seed, wall_s=wall, scenario=scenario.as_dict(),
                        config=str(config_path), autopilot=mavlink or "stub")

@@ -860,3 +860,42 @@ def test_a_landing_away_from_the_missions_return_ends_the_authority() -> None:
     run2.tick(seq=run2.s.held.rtl_seq, xyz=(5.0, 5.0, 20.0), boot_s=30.0)
     run2.feed(ins.OnGround("EXTENDED_SYS_STATE"), airborne=False, seq=0, xyz=(0.0, 0.0, 0.0))
     assert run2.s.authority.granted and run2.s.over is not None
+
+
+def fly_px4_home() -> Run:
+    """A PX4 sortie flown to its mission's return item, where PX4 hands over to AUTO.RTL."""
+    world = FakeWorld()
+    world.ask("a", 120.0, 200.0, 10, 1)
+    run = Run(world, rules(flavour="px4"))
+    (plan,) = only(run.tick(mode="AUTO.LOITER"), fx.MakePlan)
+    (up,) = only(run.feed(ins.Planned(plan.basis, path(point(3, 120.0, 200.0, "a", 1)))), fx.Upload)
+    assert up.items[0].command != NAV_RTL and up.items[-1].command == NAV_RTL
+    run.feed(ins.Uploaded(up, 1))
+    run.feed(ins.CommandDone(fx.Command("start")), armed=True, mode="AUTO.MISSION")
+    run.tick(airborne=True, seq=0, xyz=(0.0, 0.0, 50.0), boot_s=5.0)
+    rtl = run.s.held.rtl_seq
+    run.tick(seq=rtl, xyz=(120.0, 200.0, 100.0), boot_s=60.0)
+    world.ask("b", 320.0, 200.0, 12, 2)
+    run.now += 5.0
+    out = run.feed(ins.RequestIn("b", 12)) + run.tick(xyz=(110.0, 190.0, 100.0), boot_s=61.0)
+    assert not only(out, fx.MakePlan), "PX4's RTL mode, next, cannot be turned back by an upload"
+    run.feed(ins.ModeChanged("AUTO.RTL", commanded=False), mode="AUTO.RTL")
+    assert run.s.authority.granted, "the mission's own return item"
+    return run
+
+
+def test_px4s_way_back_to_its_mission_mode_after_the_returns_landing_is_its_own() -> None:
+    run = fly_px4_home()
+    run.feed(ins.OnGround("EXTENDED_SYS_STATE"), airborne=False, xyz=(0.0, 0.0, 0.1))
+    run.feed(ins.ArmedChanged(False, commanded=False), armed=False)
+    run.feed(ins.ModeChanged("AUTO.MISSION", commanded=False), mode="AUTO.MISSION")
+    assert run.s.authority.granted
+    # Any other change on the ground after that landing is somebody's.
+    run.feed(ins.ModeChanged("POSCTL", commanded=False), mode="POSCTL")
+    assert run.s.authority.state == "revoked"
+
+
+def test_px4s_mission_mode_while_still_armed_after_the_return_is_not_explained() -> None:
+    run = fly_px4_home()
+    run.feed(ins.ModeChanged("AUTO.MISSION", commanded=False), mode="AUTO.MISSION")
+    assert run.s.authority.state == "revoked", "in the air, a switch back to the mission is a station's"

@@ -526,17 +526,18 @@ class PymavlinkLink(VehicleLink):
     async def _ensure_current(self, seq: int, *, wait_for_report: bool, restart: bool = False) -> None:
         """Make the vehicle fly ``seq``: nothing when its MISSION_CURRENT already says so (a
         command would restart the item), else MAV_CMD_DO_SET_MISSION_CURRENT, or the older
-        MISSION_SET_CURRENT message where the command is refused; confirmed from
-        MISSION_CURRENT."""
+        MISSION_SET_CURRENT message where the command is refused or the autopilot's profile
+        says it takes only the message (PX4); confirmed from MISSION_CURRENT. ``restart``:
+        start the item again where the autopilot would not fly its new content by itself."""
         wait_s = CURRENT_WAIT_S if wait_for_report else 0.0
         seen = await self._wait_current(wait_s)
-        if seen == seq and restart:
+        if seen == seq and restart and not self.profile.flies_changed_current_item:
             await self._restart_current(seq)
             return
         if seen == seq:
             return
         sent_at = time.monotonic()
-        use_message = False
+        use_message = not self.profile.set_current_by_command
         for _ in range(max(self.settings.retries // 3, 2)):
             if not use_message:
                 result = await self._command_result(M.MAV_CMD_DO_SET_MISSION_CURRENT, seq, 0,

@@ -359,7 +359,7 @@ class MavsdkLink(VehicleLink):
         """As the pymavlink backend: nothing when MISSION_CURRENT already says ``seq``, else
         MAV_CMD_DO_SET_MISSION_CURRENT, or MAVSDK's MISSION_SET_CURRENT where refused."""
         seen = await self._wait_current(CURRENT_WAIT_S if wait_for_report else 0.0)
-        if seen == seq and restart:
+        if seen == seq and restart and not self.profile.flies_changed_current_item:
             # the index stays: the command's ACK confirms the restart (see the pymavlink backend)
             result = await self._command_result(M.MAV_CMD_DO_SET_MISSION_CURRENT, seq, 0)
             if result != "MAV_RESULT_ACCEPTED":
@@ -369,7 +369,8 @@ class MavsdkLink(VehicleLink):
             return
         sent_at = time.monotonic()
         for attempt in range(3):
-            result = await self._command_result(M.MAV_CMD_DO_SET_MISSION_CURRENT, seq, 0)
+            result = ("not tried" if not self.profile.set_current_by_command
+                      else await self._command_result(M.MAV_CMD_DO_SET_MISSION_CURRENT, seq, 0))
             if result != "MAV_RESULT_ACCEPTED":
                 try:
                     await self._raw.set_current_mission_item(seq)

@@ -26,6 +26,7 @@ from .events import (MAX_TEXT, ArmedChanged, Connected, OnGround, LinkEvent, Los
 from protocol.autopilot import Autopilot, autopilot_for
 
 from .modes import mode_name
+from .statustext import StatusTexts
 from .streams import Request, Streams, stream_plan
 from .telemetry import (ClockRate, ClockWatch, PositionInputs, Telemetry, assess_position, battery_fraction,
                         derived_airborne, energy_used_j)
@@ -65,6 +66,7 @@ class VehicleState:
         self.on_restart: Callable[[], None] = lambda: None
         """Set by the backend: the vehicle restarted (a new mission generation)."""
         self.texts: deque[tuple[float, int, str]] = deque(maxlen=32)
+        self._texts = StatusTexts()
         self.untrusted = 0
         """Messages dropped because they did not come from the autopilot."""
         self._clock_watch = ClockWatch()
@@ -129,6 +131,7 @@ class VehicleState:
         """Once a second: the silence watchdog, what is missing, the judgements that change
         with time; returns the stream requests to repeat."""
         now = self.clock()
+        self._said(self._texts.flush(now))
         if self.autopilot is not None and not self._lost and now - self._last_heard > self.link_timeout_s:
             self.lose(f"nothing heard from the autopilot for {now - self._last_heard:.1f} s")
         if self.autopilot is None or self._lost:
@@ -257,12 +260,17 @@ class VehicleState:
         return True
 
     def _statustext(self, msg: Any) -> bool:
-        text = printable(str(msg.text).rstrip("\x00"), MAX_TEXT)
-        severity = int(msg.severity)
-        self.texts.append((self.clock(), severity, text))
-        log.log(logging.WARNING if severity <= M.MAV_SEVERITY_WARNING else logging.INFO, "autopilot: %s", text)
-        self.emit(StatusText(text, severity))
+        joined = self._texts.feed(str(msg.text).rstrip("\x00"), int(msg.severity), int(getattr(msg, "id", 0) or 0),
+                                  int(getattr(msg, "chunk_seq", 0) or 0), self.clock())
+        self._said(joined)
         return True
+
+    def _said(self, texts: list[tuple[str, int]]) -> None:
+        for raw, severity in texts:
+            text = printable(raw, MAX_TEXT)
+            self.texts.append((self.clock(), severity, text))
+            log.log(logging.WARNING if severity <= M.MAV_SEVERITY_WARNING else logging.INFO, "autopilot: %s", text)
+            self.emit(StatusText(text, severity))
 
     # --- judgements ---------------------------------------------------------------------------
     def texts_since(self, since: float) -> list[str]:

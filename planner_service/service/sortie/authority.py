@@ -56,16 +56,21 @@ class Authority:
         """The service commands ``mode`` now: that change is its own."""
         return replace(self, expected_mode=mode, unused=False)
 
-    def on_mode(self, mode: str, *, armed: bool, mission_return: bool, commanded: bool = False) -> "Authority":
+    def on_mode(self, mode: str, *, armed: bool, mission_return: bool, commanded: bool = False,
+                autopilots_own: bool = False) -> "Authority":
         """The vehicle reports a change to ``mode``. A mode the link asked for (a step of the
-        service's own command) and, in flight, the mission's own return (its last item,
-        from a mode the service commanded) are the service's. Anything else ends the
+        service's own command), in flight the mission's own return (its last item, from a
+        mode the service commanded), and a change the autopilot makes by itself at a known
+        step of the service's sortie (``autopilots_own``: PX4's return to its mission mode
+        after the landing of the mission's return) are the service's. Anything else ends the
         authority: a change while disarmed too (the ground crew's hand on the vehicle), and
         any change at all while the mode expected is unknown."""
         if not self.granted:
             return self
         if commanded:
             return replace(self, expected_mode=mode, unused=False)
+        if autopilots_own:
+            return replace(self, expected_mode=mode)
         if self.expected_mode is not None and mode == self.expected_mode:
             return self
         if mission_return and armed and self.expected_mode is not None:

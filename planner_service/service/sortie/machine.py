@@ -560,7 +560,8 @@ class SortieLogic:
             reward = self._service_reward(point, b.tasks) if serving and b else 0.0
             return fx.PlanBasis(f"arrived at point {point.hover_index}", s.version, w.seq, at_point=bound,
                                 serving=serving, serving_reward=reward)
-        if (s.dirty and v.seq == s.held.rtl_seq and now - s.last_plan_at >= r.replan_min_interval_s
+        if (s.dirty and v.seq == s.held.rtl_seq and r.autopilot.return_item_mode is None
+                and now - s.last_plan_at >= r.replan_min_interval_s
                 and self.world.pending_count() > 0 and v.xyz[2] >= r.area.min_flight_altitude_m
                 and self._could_turn_back(s, v)):
             return fx.PlanBasis("new requests on the way home", s.version, s.held.rtl_seq - 1)
@@ -810,8 +811,12 @@ class SortieLogic:
               out: list[fx.Effect]) -> Sortie:
         held = s.held
         mission_return = (held is not None and v.seq == held.rtl_seq and mode in RETURNING_MODES)
+        a = self.rules.autopilot
+        # PX4 goes back to the mission mode once the landing of its mission's return disarms it
+        after_return = (s.homing and not v.armed and not v.airborne and a.return_item_mode is not None
+                        and s.authority.expected_mode == a.return_item_mode and mode == a.mission_mode)
         authority = s.authority.on_mode(mode, armed=v.armed or v.airborne, mission_return=mission_return,
-                                        commanded=commanded)
+                                        commanded=commanded, autopilots_own=after_return)
         if authority.state == "revoked" and s.authority.granted:
             out += self._revoked_effects(authority)
         if mode in RETURNING_MODES:
