@@ -162,8 +162,9 @@ class Service:
         if last is not None:
             held = HeldMission.from_journal(last.plan_id, last.items, last.points, self.flavour)
             judged = held.served_since(last.time_s, [(s.user_id, s.time_s) for s in services])
-        life = replace(state.life, just_started=True, warming=True, over=(sortie.why or "ended") if sortie.over else None,
-                       flown=j.get_meta(FLOWN_KEY) == str(sortie.number), services=len(services))
+        life = replace(state.life, just_started=True, warming=True, services=len(services),
+                       over=(sortie.why or "ended") if sortie.over else None,
+                       flown=j.get_meta(FLOWN_KEY) == str(sortie.number))
         return replace(state, life=life, onboard=replace(state.onboard, held=held),
                        holds=replace(state.holds, judged=judged),
                        schedule=replace(state.schedule, last_hover_index=services[-1].hover_index if services else -1))

@@ -171,7 +171,8 @@ def test_restore_between_and_during_sorties(tmp_path: Path) -> None:
 
     between = Service(config, build_parts(config))  # between sorties: the intake refuses, waiting for the battery
     try:
-        assert between.state.life.over == "the vehicle landed" and between.state.life.number == between.journal.sortie == 1
+        assert between.state.life.over == "the vehicle landed"
+        assert between.state.life.number == between.journal.sortie == 1
         assert between.intake.closed_reason == (
             "sortie over: waiting for the battery (at least 90%) with the vehicle on the ground and disarmed "
             "before sortie 2")

@@ -312,7 +312,8 @@ def test_reports_in_doubt_are_judged_against_the_upload_that_went_through() -> N
     out = run.feed(ins.ReadBackDone(up.items, 3))  # the upload went through
     (svc,) = only(out, fx.RecordService)
     assert (svc.hover_index, svc.held_s) == (3, 69.0)
-    assert run.s.holds.watch.seq == 3 and run.s.holds.watch.xyz == (400.0, 300.0, 100.0) and run.s.holds.watch.phase == "approaching", \
+    watch = run.s.holds.watch
+    assert watch.seq == 3 and watch.xyz == (400.0, 300.0, 100.0) and watch.phase == "approaching", \
         "item 3 is the new plan's point, not yet reached"
 
 
@@ -472,7 +473,8 @@ def test_the_services_own_arming_and_its_landings_disarming_keep_the_authority()
 def test_a_disarming_on_the_way_home_not_followed_by_a_landing_is_nobodys() -> None:
     world = FakeWorld()
     run, _ = fly_to_first_point(world)
-    run.feed(ins.ArmedChanged(False, commanded=False), armed=False, seq=run.s.onboard.held.rtl_seq, xyz=(50.0, 50.0, 60.0))
+    run.feed(ins.ArmedChanged(False, commanded=False), armed=False, seq=run.s.onboard.held.rtl_seq,
+             xyz=(50.0, 50.0, 60.0))
     run.now += 1.0
     run.tick()
     assert run.s.authority.granted, "its landing's report may still come"

@@ -90,7 +90,8 @@ def test_no_periodic_read_back_during_an_upload_or_without_authority() -> None:
     run.s = replace(run.s, schedule=replace(run.s.schedule, busy="upload"))
     run.now += 10 * run.logic.rules.readback_interval_s
     assert not only(run.tick(seq=2, boot_s=9.0), fx.ReadBack), "an upload in flight is not disturbed"
-    run.s = replace(run.s, authority=run.s.authority.release("the operator's hold"), schedule=replace(run.s.schedule, busy=""))
+    run.s = replace(run.s, authority=run.s.authority.release("the operator's hold"),
+                    schedule=replace(run.s.schedule, busy=""))
     assert not only(run.tick(seq=2, boot_s=10.0), fx.ReadBack)
 
 

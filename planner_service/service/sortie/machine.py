@@ -55,21 +55,15 @@ from .holds import Binding, Holds
 from .life import Life
 from .mission import HeldMission
 from .onboard import OnBoard
-from .schedule import Schedule
+from .schedule import Backoff, Schedule
 
 CONTROL_LATENCY_S = 0.1
 """Wall seconds from a hold's position report to the vehicle obeying the command that ends
 it (a tick of the loop and a command's round trip): that much more hovering, in vehicle time,
 is planned at each point."""
-MAX_DOUBTED = 1200
-"""Reports kept while in doubt: a minute of the service's ticks (the oldest are dropped)."""
 DISARM_LANDING_S = 2.0
 """Wall seconds a disarming on the service's own return waits for the landing's report (it
 may follow the heartbeat showing the disarming) before it is taken as nobody's."""
-START_LAPSE_S = 5.0
-"""Wall seconds after an accepted start before a vehicle still on the ground, disarmed, is
-taken as not started."""
-
 
 
 @dataclass(frozen=True)
@@ -99,6 +93,11 @@ class Rules:
     leg_tolerance_m: float = 30.0
     """How far (horizontally) the vehicle may be off the leg it flies to a point of ours
     before the mission is read back (``evidence.judge``); 0: not checked."""
+
+    @property
+    def backoff(self) -> Backoff:
+        """How failed plans, uploads and commands are retried (``schedule.Backoff``)."""
+        return Backoff(self.max_failures, self.retry_s, self.max_retry_s)
 
     @property
     def autopilot(self) -> Autopilot:
@@ -156,11 +155,12 @@ class SortieLogic:
                 out += [fx.Emit(ev.LinkRestored(mode)), fx.Log("info", f"link restored ({mode})")]
                 if s.onboard.held is not None or s.life.flown:
                     s = self._doubt(s, "the link was lost", out)
-                s = replace(s, schedule=replace(s.schedule, retry_at=min(s.schedule.retry_at, now), failures=0))
+                s = replace(s, schedule=s.schedule.link_restored(now))
             case ins.Restarted(detail=why):
                 # A restart only ever ends the authority: nothing the service commanded holds
                 # across it, and a restart is what an unsigned link can forge.
-                s = self._revoke(replace(s, onboard=replace(s.onboard, restarted=True)), f"the autopilot restarted ({why})", out)
+                s = self._revoke(replace(s, onboard=replace(s.onboard, restarted=True)),
+                                 f"the autopilot restarted ({why})", out)
                 out.append(fx.Emit(ev.VehicleRestarted(why[:256])))
                 s = self._doubt(s, f"the vehicle restarted: {why}", out, hold_interrupted=True)
             case ins.ModeChanged(mode=mode, commanded=commanded):
@@ -174,26 +174,27 @@ class SortieLogic:
                 if s.life.flown:
                     s = self._end(s, "the vehicle landed", v, out)
             case ins.Planned():
-                s = self._planned(replace(s, schedule=replace(s.schedule, busy="", last_plan_at=now)), event, v, now, out)
+                s = self._planned(replace(s, schedule=s.schedule.plan_returned(now)), event, v, now, out)
             case ins.PlanFailed(error=error):
-                s = self._failed(replace(s, schedule=replace(s.schedule, busy="", last_plan_at=now)), f"plan {s.schedule.plan_id + 1} not flown: {error}",
-                                 now, out)
+                s = self._failed(replace(s, schedule=s.schedule.plan_returned(now)),
+                                 f"plan {s.schedule.plan_id + 1} not flown: {error}", now, out)
             case ins.Uploaded():
-                s = self._uploaded(replace(s, schedule=replace(s.schedule, busy="")), event, v, out)
+                s = self._uploaded(replace(s, schedule=s.schedule.answered()), event, v, out)
                 s = self._known(s, now, event.mission_id)
             case ins.NotUploaded(upload=up, error=error, outcome_unknown=unknown):
-                s = self._upload_failed(replace(s, schedule=replace(s.schedule, busy="")), up, error, unknown, v, now, out)
+                s = self._upload_failed(replace(s, schedule=s.schedule.answered()), up, error, unknown, v, now, out)
             case ins.ReadBackDone(items=items):
-                s = self._read_back(replace(s, schedule=replace(s.schedule, busy="")), items, v, out)
+                s = self._read_back(replace(s, schedule=s.schedule.answered()), items, v, out)
                 s = self._known(s, now, event.mission_id, read_back=True)
             case ins.ReadBackFailed(error=error):
                 out.append(fx.Log("warning", f"could not read back the vehicle's mission ({s.onboard.doubt}): {error}; "
                                              f"trying again"))
-                s = replace(s, schedule=replace(s.schedule, busy="", readback_at=now + self.rules.retry_s))
+                s = replace(s, schedule=s.schedule.read_back_failed(now, self.rules.retry_s))
             case ins.CommandDone(command=cmd):
-                s = self._command_done(replace(s, evidence=s.evidence.commanded(), schedule=replace(s.schedule, commanding="")), cmd, now, out)
+                s = self._command_done(replace(s, evidence=s.evidence.commanded(),
+                                               schedule=s.schedule.command_answered()), cmd, now, out)
             case ins.CommandNotDone(command=cmd, error=error):
-                s = self._command_failed(replace(s, schedule=replace(s.schedule, commanding="")), cmd, error, now, out)
+                s = self._command_failed(replace(s, schedule=s.schedule.command_answered()), cmd, error, now, out)
             case ins.RequestIn(user_id=user, tasks=tasks):
                 s = self._request(s, user, tasks, out)
             case ins.OperatorAsked():
@@ -201,9 +202,10 @@ class SortieLogic:
             case ins.SortieBegun(number=number):
                 s = self._begun(s, number, out)
             case ins.PartFailed(why=why):
-                if s.life.degraded is None:
-                    s = replace(s, life=replace(s.life, degraded=why), schedule=replace(s.schedule, version=s.schedule.version + 1))
-                    out += [fx.Emit(ev.Degraded(why[:256])), fx.Log("error", f"degraded: {why}")]
+                life, said = s.life.degrade(why)
+                if said:  # the first reason stays; plans in search are stale
+                    s = replace(s, life=life, schedule=s.schedule.stale())
+                    out += said
             case ins.WarmedUp():
                 s = replace(s, life=replace(s.life, warming=False))
             case ins.Reached() | ins.Current() | ins.PositionChanged():
@@ -229,13 +231,17 @@ class SortieLogic:
                 where = "in the air" if v.airborne else "armed on the ground"
                 s = self._revoke(s, f"the service started with the vehicle {where} (in {v.mode}): what "
                                     f"happened to it meanwhile is not known", out)
-        if v.airborne and not s.life.flown and s.life.over is None:
-            s = replace(s, life=replace(s.life, flown=True))
-            out.append(fx.MarkFlown())
+        if v.airborne:
+            life, said = s.life.airborne()
+            s = replace(s, life=life)
+            out += said
         if (s.life.flown and s.life.over is None and v.connected and v.landed_known and not v.airborne and not v.armed):
             s = self._end(s, "the vehicle was found landed", v, out)
-        s = self._maybe_begin(s, v, out)
-        s = self._start_lapsed(s, v, now, out)
+        life, begin = s.life.next_wanted(v, repeat=self.rules.repeat,
+                                         next_battery_fraction=self.rules.next_battery_fraction)
+        life, lapsed = life.start_lapsed(v, now, s.authority.granted)
+        s = replace(s, life=life)
+        out += begin + lapsed
         s = self._watch(s, v, out)
         s = self._homing(s, v)
         s = self._disarm_check(s, v, now, out)
@@ -249,12 +255,12 @@ class SortieLogic:
             return s
         if s.schedule.busy == "" and s.onboard.doubt is not None and v.connected and now >= s.schedule.readback_at:
             out.append(fx.ReadBack(s.onboard.doubt))
-            return replace(s, schedule=replace(s.schedule, busy="readback"))
+            return replace(s, schedule=s.schedule.reading_back())
         if s.schedule.busy == "" and s.onboard.doubt is None and now >= s.schedule.retry_at:
             basis = self._plan_wanted(s, v, now)
             if basis is not None:
                 out.append(fx.MakePlan(basis))
-                s = replace(s, schedule=replace(s.schedule, busy="plan", dirty=False))
+                s = replace(s, schedule=s.schedule.planning())
         if s.schedule.commanding == "" and now >= s.schedule.retry_at:
             s = self._command_due(s, v, out)
         return self._resume_needed(s, v, out)
@@ -268,9 +274,7 @@ class SortieLogic:
             # In doubt, or an upload in flight (the vehicle may fly the new mission before its
             # ACK reaches us: on a lossy link seconds, minutes of flight at x40): kept, and
             # judged once the mission the vehicle flies is known.
-            if (s.onboard.doubt is not None or s.schedule.busy == "upload") and (not s.onboard.doubted or s.onboard.doubted[-1].boot_s < sample.boot_s):
-                s = replace(s, onboard=replace(s.onboard, doubted=(*s.onboard.doubted, sample)[-MAX_DOUBTED:]))
-            return s
+            return replace(s, onboard=s.onboard.keep(sample, uploading=s.schedule.busy == "upload"))
         return self._maybe_end_hold(self._seen(s, sample, v, out), out)
 
     def _seen(self, s: Sortie, sample: Sample, v: ins.VehicleSnapshot, out: list[fx.Effect]) -> Sortie:
@@ -280,13 +284,9 @@ class SortieLogic:
         if s.holds.watch is not None:
             s = self._feed(s, s.holds.watch, sample, v, out)
         if s.holds.watch is None:
-            # Points before the one flown that no watch ever saw (reports lost, or the
-            # service was away): flown unseen, so no service is recorded for them.
-            for seq, point in held.points:
-                if seq < sample.seq and seq not in s.holds.judged:
-                    out.append(fx.Emit(ev.WaypointSkipped(f"point {point.hover_index}: not seen held (the vehicle "
-                                                           f"flies item {sample.seq})", user_id=point.user_id)))
-                    s = replace(s, holds=replace(s.holds, judged=s.holds.judged | {seq}))
+            holds, said = s.holds.skipped_unseen(held, sample.seq)
+            s = replace(s, holds=holds)
+            out += said
             point = held.point_at(sample.seq)
             if point is not None and sample.seq not in s.holds.judged:
                 watch = HoldWatch(sample.seq, (point.x_m, point.y_m, point.z_m), self.rules.hold_radius_m)
@@ -300,7 +300,8 @@ class SortieLogic:
         held = s.onboard.held
         if held is None or not s.onboard.known or s.schedule.busy or s.onboard.doubt is not None or not v.connected:
             return s
-        settled = Settled(over=s.life.over is not None, commanding=bool(s.schedule.commanding), granted=s.authority.granted)
+        settled = Settled(over=s.life.over is not None, commanding=bool(s.schedule.commanding),
+                          granted=s.authority.granted)
         evidence, doubt = judge(s.evidence, held, v, now, settled, leg_tolerance_m=self.rules.leg_tolerance_m,
                                 readback_interval_s=self.rules.readback_interval_s)
         s = replace(s, evidence=evidence)
@@ -308,7 +309,7 @@ class SortieLogic:
             return s
         if doubt.periodic:  # no disagreement: nothing planned is stale
             out.append(fx.Log("info", f"{doubt.why}: reading the mission back"))
-            return replace(s, onboard=replace(s.onboard, doubt=doubt.why, known=False), schedule=replace(s.schedule, readback_at=0.0))
+            return replace(s, onboard=s.onboard.rechecking(doubt.why), schedule=replace(s.schedule, readback_at=0.0))
         return self._doubt(s, doubt.why, out)
 
     def _known(self, s: Sortie, now: float, mission_id: int, *, read_back: bool = False) -> Sortie:
@@ -328,7 +329,8 @@ class SortieLogic:
         position decides, so at worst a hold there goes unrecorded, never a hold recorded
         where the vehicle was not. A hold that arrived meanwhile is bound to the request in
         force now, as its arrival is seen now."""
-        kept, s = s.onboard.doubted, replace(s, onboard=replace(s.onboard, doubted=()))
+        onboard, kept = s.onboard.replayed()
+        s = replace(s, onboard=onboard)
         if s.onboard.held is None:
             return s
         for sample in kept:
@@ -372,7 +374,8 @@ class SortieLogic:
             out.append(fx.Emit(ev.WaypointReached(f"point {point.hover_index}: serving {backlog} tasks, "
                                                    f"{needed:.1f} s", user_id=request.user_id,
                                request_id=request.request_id)))
-        return replace(s, holds=replace(s.holds, binding=binding), schedule=replace(s.schedule, last_hover_index=point.hover_index))
+        return replace(s, holds=replace(s.holds, binding=binding),
+                       schedule=replace(s.schedule, last_hover_index=point.hover_index))
 
     def _served_here(self, point: PlannedPoint) -> RequestRow | None:
         """The request the model's rule serves from ``point`` now (``model.served_user``)."""
@@ -393,8 +396,9 @@ class SortieLogic:
         not the timer, ends it, as soon as the next item is the decision made from this
         point (uploaded) and the reports show the hold the request needs. Only under its
         authority, not degraded: without, it commands nothing and the timer ends the hold."""
-        w, b, held = s.holds.watch, s.holds.binding, s.onboard.held
-        if w is None or b is None or held is None or w.phase != "holding" or s.holds.early_end == w.seq:
+        w, held = s.holds.watch, s.onboard.held
+        why = s.holds.served_why()
+        if why is None or w is None or held is None:
             return s
         if not s.authority.granted or s.life.degraded is not None:
             return s
@@ -402,23 +406,21 @@ class SortieLogic:
             return s
         point = held.point_at(w.seq)
         assert point is not None
-        if b.request_id is None:
-            why = f"nothing to serve ({b.why_not})"
-        elif b.done:
-            why = "the user's upload is done"
-        elif w.covered_s >= b.needed_s:
-            why = f"held {w.covered_s:.1f} s, the {b.needed_s:.1f} s the bound request needs"
-        else:
-            return s
         out.append(fx.Command("set_current", w.seq + 1, f"hold at point {point.hover_index} ended: {why}"))
-        return replace(s, holds=replace(s.holds, early_end=w.seq), schedule=replace(s.schedule, commanding="set_current"))
+        return replace(s, holds=replace(s.holds, early_end=w.seq), schedule=s.schedule.command_sent("set_current"))
+
+    def _abandon(self, s: Sortie, why: str, out: list[fx.Effect]) -> Sortie:
+        """The hold watched, if any, ended from outside (``why``) and judged as it stands."""
+        if s.holds.watch is None:
+            return s
+        return self._judge(replace(s, holds=s.holds.abandoned(why)), out)
 
     def _judge(self, s: Sortie, out: list[fx.Effect]) -> Sortie:
         """The vehicle left the point (or passed it): record what the hold carried."""
         w, b, held = s.holds.watch, s.holds.binding, s.onboard.held
         assert w is not None and held is not None
         point = held.point_at(w.seq)
-        s = replace(s, holds=replace(s.holds, watch=None, binding=None, judged=s.holds.judged | {w.seq}))
+        s = replace(s, holds=s.holds.closed(w.seq))
         if point is None:
             return s
         if not w.arrived:
@@ -445,7 +447,7 @@ class SortieLogic:
         detail = f"{tasks} tasks at point {point.hover_index}" + ("" if tasks == b.tasks else f" of {b.tasks}")
         out.append(fx.Emit(ev.UserServed(f"{detail}; held {w.held_s:.1f} s", user_id=b.user_id,
                            request_id=b.request_id)))
-        return replace(s, life=replace(s.life, services=s.life.services + 1))
+        return replace(s, life=s.life.served())
 
     def _service_reward(self, point: PlannedPoint, tasks: int) -> float:
         """q of ``tasks`` served at ``point``, as the journal records it: the plan's own
@@ -491,7 +493,8 @@ class SortieLogic:
             reward = self._service_reward(point, b.tasks) if serving and b else 0.0
             return fx.PlanBasis(f"arrived at point {point.hover_index}", s.schedule.version, w.seq, at_point=bound,
                                 serving=serving, serving_reward=reward)
-        if (s.schedule.dirty and v.seq == s.onboard.held.rtl_seq and now - s.schedule.last_plan_at >= r.replan_min_interval_s
+        if (s.schedule.dirty and v.seq == s.onboard.held.rtl_seq
+                and now - s.schedule.last_plan_at >= r.replan_min_interval_s
                 and self.world.pending_count() > 0 and v.xyz[2] >= r.area.min_flight_altitude_m
                 and self._could_turn_back(s, v)):
             return fx.PlanBasis("new requests on the way home", s.schedule.version, s.onboard.held.rtl_seq - 1)
@@ -511,9 +514,11 @@ class SortieLogic:
 
     def _planned(self, s: Sortie, planned: ins.Planned, v: ins.VehicleSnapshot, now: float, out: list[fx.Effect]) -> Sortie:
         basis, path = planned.basis, planned.path
-        if (basis.version != s.schedule.version or s.life.over is not None or s.onboard.doubt is not None or s.life.degraded is not None
+        if (basis.version != s.schedule.version or s.life.over is not None or s.onboard.doubt is not None
+                or s.life.degraded is not None
                 or v.time_rate is None):
-            return replace(s, schedule=replace(s.schedule, dirty=True))  # stale: the state it was made on is gone (or its clock)
+            # stale: the state it was made on is gone (or its clock)
+            return replace(s, schedule=replace(s.schedule, dirty=True))
         if basis.at_point is not None:
             s = replace(s, schedule=replace(s.schedule, decided_at=basis.keep_through))
         held = s.onboard.held
@@ -554,11 +559,12 @@ class SortieLogic:
             validate_mission(items, self.rules.origin, self.rules.area, self.rules.flavour,  # type: ignore[arg-type]
                              max_items=self.rules.max_mission_items)
         except (PlanningError, MissionError) as err:
-            return self._failed(replace(s, schedule=replace(s.schedule, plan_id=s.schedule.plan_id + 1)), f"plan {s.schedule.plan_id + 1} not flown: {err}", now, out)
+            return self._failed(replace(s, schedule=replace(s.schedule, plan_id=s.schedule.plan_id + 1)),
+                                f"plan {s.schedule.plan_id + 1} not flown: {err}", now, out)
         out.append(fx.Upload(plan_id, tuple(items), mission, path, current, basis.keep_through,
                              restart_current=current is not None and basis.keep_through is not None,
                              planner_ms=planned.planner_ms, newest_request=planned.newest_request))
-        return replace(s, schedule=replace(s.schedule, busy="upload", plan_id=plan_id))
+        return replace(s, schedule=s.schedule.uploading(plan_id))
 
     def _with_margins(self, path: PlannedPath, margin_s: float) -> PlannedPath:
         """The path as it will be flown: each hold ``margin_s`` longer than its upload needs
@@ -626,13 +632,12 @@ class SortieLogic:
 
     def _uploaded(self, s: Sortie, uploaded: ins.Uploaded, v: ins.VehicleSnapshot, out: list[fx.Effect]) -> Sortie:
         up, keep = uploaded.upload, uploaded.upload.keep_through
-        judged = frozenset(q for q in s.holds.judged if keep is not None and q <= keep)
-        watch, binding = s.holds.watch, s.holds.binding
+        watch = s.holds.watch
         if watch is not None and (keep is None or watch.seq > keep) and not self._flies_on(s, up, watch.seq):
             # the point watched was replaced: what it held so far is judged now
-            s = self._judge(replace(s, holds=replace(s.holds, watch=watch.abandon(f"replaced by plan {up.plan_id}"))), out)
-            watch, binding, judged = None, None, frozenset(q for q in s.holds.judged if keep is not None and q <= keep)
-        s = replace(s, onboard=replace(s.onboard, held=up.mission, known=True, unconfirmed=None, must_upload=False), schedule=replace(s.schedule, failures=0, plan_id=up.plan_id), holds=replace(s.holds, judged=judged, watch=watch, binding=binding))
+            s = self._abandon(s, f"replaced by plan {up.plan_id}", out)
+        s = replace(s, onboard=s.onboard.accepted(up.mission), schedule=s.schedule.uploaded(up.plan_id),
+                    holds=s.holds.kept_through(keep))
         out += [fx.RecordMission(up.plan_id, up.mission, "accepted"),
                 fx.PublishPlan(up.mission, up.path.predicted_energy_j),
                 fx.Emit(ev.MissionUploaded(f"plan {up.plan_id}: {len(up.path.points)} points"
@@ -657,73 +662,55 @@ class SortieLogic:
                        out: list[fx.Effect]) -> Sortie:
         out.append(fx.RecordMission(up.plan_id, up.mission, f"{'unknown' if unknown else 'failed'}: {error}"))
         if unknown:  # the vehicle may hold it: find out before anything else
-            s = self._doubt(replace(s, onboard=replace(s.onboard, unconfirmed=up.mission)), f"the outcome of plan {up.plan_id}'s upload is unknown",
-                            out)
+            s = self._doubt(replace(s, onboard=s.onboard.maybe(up.mission)),
+                            f"the outcome of plan {up.plan_id}'s upload is unknown", out)
         elif self.rules.autopilot.writes_items_as_they_arrive and s.onboard.held is not None:
             # ArduPilot writes an upload's items as they arrive: a failed one may leave part of
             # it in the mission held, or all of it if only its ACK was lost (PX4 switches over
             # only when the upload is complete). The read-back tells which.
-            s = self._doubt(replace(s, onboard=replace(s.onboard, unconfirmed=up.mission)), f"plan {up.plan_id}'s upload failed part-way", out)
+            s = self._doubt(replace(s, onboard=s.onboard.maybe(up.mission)),
+                            f"plan {up.plan_id}'s upload failed part-way", out)
         if s.onboard.doubt is None:  # not taken: the reports kept during it were of the mission held
             s = self._replay(s, v, out)
         return self._failed(s, f"plan {up.plan_id} not flown: {error}", now, out)
 
     def _failed(self, s: Sortie, why: str, now: float, out: list[fx.Effect]) -> Sortie:
         """A plan or upload failed: try again after a growing wait, give up after a bound."""
-        n = s.schedule.failures + 1
-        out += [fx.Emit(ev.UploadFailed(why[:256])), fx.Log("error", why)]
-        if n >= self.rules.max_failures:
-            out.append(fx.Emit(ev.UploadAbandoned(f"{n} failures in a row; no more plans until the link, a "
-                                                   f"request or the operator changes something"[:256])))
-            return replace(s, schedule=replace(s.schedule, failures=n, retry_at=math.inf, dirty=True))
-        wait = min(self.rules.retry_s * 2 ** (n - 1), self.rules.max_retry_s)
-        return replace(s, schedule=replace(s.schedule, failures=n, retry_at=now + wait, dirty=True))
+        schedule, said = s.schedule.failed(why, now, self.rules.backoff)
+        out += said
+        return replace(s, schedule=schedule)
 
     # --- doubt ---------------------------------------------------------------------------------
     def _doubt(self, s: Sortie, why: str, out: list[fx.Effect], *, hold_interrupted: bool = False) -> Sortie:
         """The vehicle may hold another mission: no reports count until it is read back. A
         hold being watched goes on being watched once the read-back shows our mission (a
         radio gap interrupts nothing), unless the vehicle restarted: then it was cut."""
-        out.append(fx.Log("warning", f"{why}: the mission held will be read back before planning"))
-        s = replace(s, onboard=replace(s.onboard, doubt=why, known=False), schedule=replace(s.schedule, version=s.schedule.version + 1, retry_at=0.0, readback_at=0.0))
-        if hold_interrupted and s.holds.watch is not None:
-            s = self._judge(replace(s, holds=replace(s.holds, watch=s.holds.watch.abandon(why))), out)
-        return s
+        onboard, said = s.onboard.doubting(why)
+        out += said
+        s = replace(s, onboard=onboard, schedule=s.schedule.in_doubt())
+        return self._abandon(s, why, out) if hold_interrupted else s
 
     def _read_back(self, s: Sortie, items: tuple, v: ins.VehicleSnapshot, out: list[fx.Effect]) -> Sortie:
-        why = s.onboard.doubt
-        s = replace(s, onboard=replace(s.onboard, doubt=None))
-        for candidate in (s.onboard.held, s.onboard.unconfirmed):
-            if candidate is None or not same_mission(items, candidate.items, self.rules.flavour):  # type: ignore[arg-type]
-                continue
-            if candidate is not s.onboard.held:  # the upload whose ACK was lost went through
-                s = replace(s, onboard=replace(s.onboard, held=candidate), holds=replace(s.holds, judged=frozenset()))
-                out += [fx.RecordMission(candidate.plan_id, candidate, "accepted"), fx.PublishPlan(candidate)]
-            out.append(fx.Log("info", f"{why}: the vehicle holds plan {candidate.plan_id} (read back)"))
-            # A restarted vehicle may hold our mission and still hover where it came back
-            # (what it flew across its restart is not judged: its holds were cut).
-            restarted = s.onboard.restarted
-            s = replace(s, evidence=s.evidence.explained(), onboard=replace(s.onboard, known=True, unconfirmed=None, resume_pending=restarted and v.airborne, restarted=False))
-            return replace(s, onboard=replace(s.onboard, doubted=())) if restarted else self._replay(s, v, out)
-        s = replace(s, onboard=replace(s.onboard, doubted=()))
-        if s.holds.watch is not None:
-            s = self._judge(replace(s, holds=replace(s.holds, watch=s.holds.watch.abandon("the vehicle no longer holds our mission"))), out)
-        lost = s.onboard.held
-        ours = f"plan {lost.plan_id}" if lost is not None else "a mission of ours"
-        gone = replace(s, evidence=s.evidence.lost(), onboard=replace(s.onboard, held=None, known=False, unconfirmed=None, restarted=False), holds=replace(s.holds, judged=frozenset()), schedule=replace(s.schedule, decided_at=None))
-        if s.onboard.unconfirmed is None and len(items) > self.rules.autopilot.home_slots:
-            # A mission no upload of ours explains (not one cut short: an upload of ours is
-            # then unconfirmed): another station's. Not ours to fly, nor to replace.
-            detail = f"{why}: the vehicle holds a mission of {len(items)} items that is not ours ({ours}): " \
-                     f"another station's; left to the operator"
-            out.append(fx.Log("warning", detail))
-            return self._revoke(replace(gone, onboard=replace(gone.onboard, must_upload=False, resume_pending=False)), "the vehicle holds a "
-                                f"mission that is not ours ({len(items)} items, another station's)", out)
-        detail = f"{why}: the vehicle holds {len(items)} items, not {ours}; re-planning from where it is"
-        out.append(fx.Log("warning", detail))
-        if not why or "restarted" not in why:
-            out.append(fx.Emit(ev.VehicleRestarted(detail[:256])))
-        return replace(gone, onboard=replace(gone.onboard, must_upload=v.airborne, resume_pending=v.airborne))
+        candidate = s.onboard.matching(items, self.rules.flavour)  # type: ignore[arg-type]
+        if candidate is not None:
+            restarted, fresh = s.onboard.restarted, candidate is not s.onboard.held
+            onboard, said = s.onboard.confirmed(candidate, v.airborne)
+            out += said
+            s = replace(s, onboard=onboard, evidence=s.evidence.explained(),
+                        holds=replace(s.holds, judged=frozenset()) if fresh else s.holds)
+            # a restarted vehicle's reports were dropped (its holds were cut); else judged now
+            return s if restarted else self._replay(s, v, out)
+        s = self._abandon(replace(s, onboard=replace(s.onboard, doubted=())),
+                          "the vehicle no longer holds our mission", out)
+        foreign = s.onboard.foreign(len(items), self.rules.autopilot.home_slots)
+        onboard, said = s.onboard.lost(len(items), v.airborne, foreign)
+        out += said
+        s = replace(s, onboard=onboard, holds=replace(s.holds, judged=frozenset()), evidence=s.evidence.lost(),
+                    schedule=replace(s.schedule, decided_at=None))
+        if foreign:  # another station's: not ours to fly, nor to replace
+            return self._revoke(s, f"the vehicle holds a mission that is not ours ({len(items)} items, another "
+                                   f"station's)", out)
+        return s
 
     # --- link events -------------------------------------------------------------------------------
     def _connected(self, s: Sortie, v: ins.VehicleSnapshot, mode: str, out: list[fx.Effect]) -> Sortie:
@@ -816,10 +803,12 @@ class SortieLogic:
             return self._command(s, fx.Command("start", why=f"plan {s.onboard.held.plan_id}"), out)
         if s.onboard.resume_pending and s.onboard.known and s.schedule.busy == "" and v.airborne:
             if v.mode in MISSION_MODES:  # PX4 flies a new mission's marked item in mission mode by itself
-                out.append(fx.Emit(ev.MissionResumed(f"plan {s.onboard.held.plan_id}: the vehicle flies it in {v.mode}")))
+                out.append(fx.Emit(ev.MissionResumed(f"plan {s.onboard.held.plan_id}: the vehicle flies it in "
+                                                     f"{v.mode}")))
                 return replace(s, onboard=replace(s.onboard, resume_pending=False))
             if v.mode not in HOLDING_MODES:
-                return replace(s, onboard=replace(s.onboard, resume_pending=False))  # going home, or in the operator's hands
+                # going home, or in the operator's hands
+                return replace(s, onboard=replace(s.onboard, resume_pending=False))
             first = s.onboard.held.points[0][0] if s.onboard.held.points else s.onboard.held.rtl_seq
             return self._command(s, fx.Command("resume", first, f"plan {s.onboard.held.plan_id} (was {v.mode})"), out)
         return s
@@ -830,7 +819,8 @@ class SortieLogic:
         told once (``resume_needed``); ``operator start`` plans from where the vehicle is then
         and resumes."""
         held = s.onboard.held
-        if (not s.onboard.resume_pending or s.authority.granted or held is None or not s.onboard.known or s.schedule.busy != ""
+        if (not s.onboard.resume_pending or s.authority.granted or held is None or not s.onboard.known
+                or s.schedule.busy != ""
                 or not v.airborne or v.mode not in HOLDING_MODES):
             return s
         out += [fx.Emit(ev.ResumeNeeded(f"plan {held.plan_id} is on board and the vehicle holds in {v.mode}: the "
@@ -839,27 +829,17 @@ class SortieLogic:
                                   f"must resume it (operator start)")]
         return replace(s, onboard=replace(s.onboard, resume_pending=False))
 
-    def _start_lapsed(self, s: Sortie, v: ins.VehicleSnapshot, now: float, out: list[fx.Effect]) -> Sortie:
-        """A start the autopilot accepted but that never took off (it disarmed on the ground
-        again: its own auto-disarm, a refused takeoff, the ground crew) is not started: the
-        disarming ended the authority (``_arming``), and the operator's start starts it again."""
-        if not s.life.started or s.life.flown or v.airborne or v.armed or not v.landed_known or now - s.life.started_at < START_LAPSE_S:
-            return s
-        then = "starting it again" if s.authority.granted else "the operator's start starts it again"
-        out.append(fx.Log("warning", f"the vehicle is on the ground and disarmed after the mission was started: {then}"))
-        return replace(s, life=replace(s.life, started=False))
-
     def _command(self, s: Sortie, cmd: fx.Command, out: list[fx.Effect]) -> Sortie:
         mode = self.rules.mode_names.get(cmd.kind)
         authority = s.authority.commanding(mode) if mode else s.authority
         out.append(cmd)
-        return replace(s, authority=authority, schedule=replace(s.schedule, commanding=cmd.kind))
+        return replace(s, authority=authority, schedule=s.schedule.command_sent(cmd.kind))
 
     def _command_done(self, s: Sortie, cmd: fx.Command, now: float, out: list[fx.Effect]) -> Sortie:
         match cmd.kind:
             case "start":
                 out.append(fx.Log("info", "mission started"))
-                return replace(s, life=replace(s.life, started=True, started_at=now), schedule=replace(s.schedule, failures=0))
+                return replace(s, life=s.life.started_now(now), schedule=replace(s.schedule, failures=0))
             case "resume":
                 out.append(fx.Emit(ev.MissionResumed(f"{cmd.why}; from item {cmd.seq}")))
                 return replace(s, onboard=replace(s.onboard, resume_pending=False))
@@ -876,11 +856,9 @@ class SortieLogic:
     def _command_failed(self, s: Sortie, cmd: fx.Command, error: str, now: float, out: list[fx.Effect]) -> Sortie:
         out += [fx.Emit(ev.CommandFailed(f"{cmd.kind}: {error}"[:256])),
                 fx.Log("warning", f"the autopilot refused {cmd.kind} ({error}); trying again later")]
-        n = s.schedule.failures + 1
-        wait = min(self.rules.retry_s * 2 ** (n - 1), self.rules.max_retry_s)
-        if cmd.kind == "set_current":
+        if cmd.kind == "set_current":  # the hold goes on: ended again when next judged served
             return replace(s, holds=replace(s.holds, early_end=None))
-        return replace(s, schedule=replace(s.schedule, failures=n, retry_at=now + wait))
+        return replace(s, schedule=s.schedule.command_failed(now, self.rules.backoff))
 
     def _safety(self, s: Sortie, v: ins.VehicleSnapshot, out: list[fx.Effect]) -> Sortie:
         """Return to launch when the battery reaches the threshold (the planner should never
@@ -894,12 +872,7 @@ class SortieLogic:
 
     # --- requests and the operator --------------------------------------------------------------
     def _request(self, s: Sortie, user: str, tasks: int, out: list[fx.Effect]) -> Sortie:
-        b = s.holds.binding
-        if b is not None and b.user_id == user and tasks <= 0 and b.request_id is not None and not b.done:
-            s = replace(s, holds=replace(s.holds, binding=replace(b, done=True)))
-        if s.schedule.failures >= self.rules.max_failures:
-            s = replace(s, schedule=replace(s.schedule, failures=0, retry_at=0.0))
-        return replace(s, schedule=replace(s.schedule, dirty=True))
+        return replace(s, holds=s.holds.user_said_done(user, tasks), schedule=s.schedule.request_in(self.rules.backoff))
 
     def operator(self, s: Sortie, cmd: ins.OperatorAsked, v: ins.VehicleSnapshot,
                  now: float) -> tuple[Sortie, list[fx.Effect], bool, str]:
@@ -923,7 +896,7 @@ class SortieLogic:
             return replace(s, authority=authority, onboard=replace(s.onboard, resume_pending=False)), out, True, (
                 f"authority withdrawn: the service commands no mode and no arming{did}; the vehicle keeps the "
                 f"mission it holds{because}")
-        refusal = self._start_refusal(s, v)
+        refusal = s.life.start_refusal(v)
         if refusal is not None:
             return s, out, False, refusal
         if s.authority.granted:
@@ -938,27 +911,13 @@ class SortieLogic:
                 f"{said}; sortie {s.life.number + 1} begins"
         if v.airborne and v.mode in MISSION_MODES:  # handed over flying a mission: that mode is expected
             authority = authority.commanding(v.mode)
-        s = replace(s, authority=authority, schedule=replace(s.schedule, failures=0, retry_at=0.0))
+        s = replace(s, authority=authority, schedule=s.schedule.granted())
         out.append(fx.Emit(ev.AuthorityGranted(authority.detail[:256])))
         if v.airborne and v.mode in HOLDING_MODES:
             s = replace(s, onboard=replace(s.onboard, must_upload=True, resume_pending=True))
             said += "; re-planning from where the vehicle is, then resuming"
         s = self._next(s, v, now, out)
         return s, out, True, said
-
-    def _start_refusal(self, s: Sortie, v: ins.VehicleSnapshot) -> str | None:
-        """Why the operator's start cannot be taken now, or None."""
-        if s.life.degraded is not None:
-            return f"the service is degraded: {s.life.degraded}"
-        if not v.connected:
-            return "the autopilot is not connected"
-        if s.life.over is not None and (v.airborne or v.armed):
-            return f"sortie {s.life.number} is over and the vehicle is not on the ground and disarmed"
-        if not v.airborne and not v.position_ok:
-            return "the autopilot has no position yet"
-        if not v.airborne and v.battery_source != "autopilot":
-            return f"the battery's charge is {v.battery_source}: no arming on it"
-        return None
 
     def describe(self, s: Sortie, v: ins.VehicleSnapshot) -> str:
         held = f"plan {s.onboard.held.plan_id}" if s.onboard.held is not None else "no mission"
@@ -971,29 +930,15 @@ class SortieLogic:
     def _end(self, s: Sortie, why: str, v: ins.VehicleSnapshot, out: list[fx.Effect]) -> Sortie:
         if s.life.over is not None:
             return s
-        if s.holds.watch is not None:
-            s = self._judge(replace(s, holds=replace(s.holds, watch=s.holds.watch.abandon(why))), out)
-        out.append(fx.EndSortie(why))
-        return replace(s, life=replace(s.life, over=why), schedule=replace(s.schedule, version=s.schedule.version + 1, busy="" if s.schedule.busy == "plan" else s.schedule.busy))
-
-    def _maybe_begin(self, s: Sortie, v: ins.VehicleSnapshot, out: list[fx.Effect]) -> Sortie:
-        """Begin the next sortie once the vehicle is ready again: on the ground, disarmed,
-        its battery swapped or charged (a known reading)."""
-        r = self.rules
-        if s.life.over is None or not r.repeat or s.life.degraded is not None or s.life.beginning:
-            return s
-        if not (v.connected and v.position_ok) or v.airborne or v.armed:
-            return s
-        if v.battery_source != "autopilot" or v.battery_fraction is None or v.battery_fraction < r.next_battery_fraction:
-            return s
-        out.append(fx.BeginSortie(v.battery_fraction))
-        return replace(s, life=replace(s.life, beginning=True))
+        s = self._abandon(s, why, out)
+        life, said = s.life.ended(why)
+        out += said
+        return replace(s, life=life, schedule=s.schedule.ended())
 
     def _begun(self, s: Sortie, number: int, out: list[fx.Effect]) -> Sortie:
         authority = s.life.next_authority or next_sortie(s.authority)
         out.append(fx.Emit(ev.SortieStarted(f"sortie {number}: authority {authority.state} ({authority.detail})")))
-        return Sortie(life=Life(number=number, warming=s.life.warming), authority=authority,
-                      schedule=Schedule(plan_id=s.schedule.plan_id, version=s.schedule.version + 1))
+        return Sortie(life=s.life.next_sortie(number), authority=authority, schedule=s.schedule.next_sortie())
 
 
 def marked_current(items: list[MissionItem], seq: int) -> list[MissionItem]:
