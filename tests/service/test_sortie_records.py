@@ -48,7 +48,7 @@ def test_a_request_revives_plans_given_up_on_and_only_those() -> None:
     assert (waiting.failures, waiting.retry_at, waiting.dirty) == (2, 50.0, True)
 
 
-def test_a_refused_command_waits_but_is_never_given_up() -> None:
+def test_a_refused_command_waits_as_a_failed_plan_does() -> None:
     s = Schedule(failures=3, commanding="start").command_answered().command_failed(100.0, BACKOFF)
     assert (s.failures, s.retry_at, s.commanding) == (4, 105.0, "")
 

@@ -90,8 +90,8 @@ class Schedule:
         return replace(self, commanding="")
 
     def command_failed(self, now: float, backoff: Backoff) -> Schedule:
-        """A refused command waits like a failed plan (but is never given up: the autopilot
-        may accept it once its state changes)."""
+        """A refused command waits like a failed plan, counted with them (the abandonment
+        is the plans' alone: ``failed``)."""
         n = self.failures + 1
         return replace(self, failures=n, retry_at=now + backoff.wait_s(n))
 
