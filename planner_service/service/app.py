@@ -143,7 +143,7 @@ class Service:
         ), self.world)
         self.state = self._restore()
         self.plan_msg: Plan | None = None
-        if self.state.over:
+        if self.state.life.over:
             self.intake.closed_reason = self._closed_reason()
 
     # --- the sortie as the journal left it ------------------------------------------------------
@@ -162,9 +162,12 @@ class Service:
         if last is not None:
             held = HeldMission.from_journal(last.plan_id, last.items, last.points, self.flavour)
             judged = held.served_since(last.time_s, [(s.user_id, s.time_s) for s in services])
-        return replace(state, just_started=True, warming=True, over=(sortie.why or "ended") if sortie.over else None,
-                       flown=j.get_meta(FLOWN_KEY) == str(sortie.number), held=held, judged=judged,
-                       last_hover_index=services[-1].hover_index if services else -1, services=len(services))
+        life = replace(state.life, just_started=True, warming=True, services=len(services),
+                       over=(sortie.why or "ended") if sortie.over else None,
+                       flown=j.get_meta(FLOWN_KEY) == str(sortie.number))
+        return replace(state, life=life, onboard=replace(state.onboard, held=held),
+                       holds=replace(state.holds, judged=judged),
+                       schedule=replace(state.schedule, last_hover_index=services[-1].hover_index if services else -1))
 
     # --- lifecycle ----------------------------------------------------------------------------
     async def run(self) -> int:
@@ -192,7 +195,7 @@ class Service:
             log.info("zenoh %s session on %s (connect %s%s); keys %s/**", z.mode, list(z.listen), list(z.connect),
                      f"; base {z.config_file}" if z.config_file else "", f"{self.keys.prefix}/{self.keys.vehicle}")
             log.info("ready: sortie %d (%s): %d pending requests, %d services in the journal %s",
-                     self.state.number, f"over: {self.state.over}" if self.state.over else "running",
+                     self.state.life.number, f"over: {self.state.life.over}" if self.state.life.over else "running",
                      self.journal.pending_count(), len(self.journal.services()), self.cfg.journal.path)
         await self.stopping.wait()
         await self._shutdown()
@@ -262,7 +265,7 @@ class Service:
         """Carry out the logic's effects; once the service is stopping, only those that
         record (journal, events, logs): no plan, upload, read-back or command starts."""
         if self.state.authority != before.authority:
-            self._save_meta(AUTHORITY_KEY, f"{self.state.number}|{self.state.authority.state}|"
+            self._save_meta(AUTHORITY_KEY, f"{self.state.life.number}|{self.state.authority.state}|"
                                            f"{self.state.authority.detail}")
         stopping = self.stopping.is_set()
         for effect in effects:
@@ -298,7 +301,7 @@ class Service:
             case fx.BeginSortie(battery_fraction=fraction):
                 self._begin_sortie(fraction)
             case fx.MarkFlown():
-                self._save_meta(FLOWN_KEY, str(self.state.number))
+                self._save_meta(FLOWN_KEY, str(self.state.life.number))
             case _:
                 assert_never(e)
 
@@ -326,7 +329,7 @@ class Service:
         fix = self._planning_fix(basis)
         try:
             assembled = assemble(self.scenario, self.journal.users(), self.journal.pending(),
-                                 self.journal.services(), fix, self.state.last_hover_index)
+                                 self.journal.services(), fix, self.state.schedule.last_hover_index)
         except JournalError as err:
             return ins.PlanFailed(basis, f"journal: {err}")
         if basis.at_point is not None:
@@ -511,17 +514,17 @@ class Service:
     # --- publications --------------------------------------------------------------------------------
     def _phase(self) -> str:
         t, s = self.link.telemetry, self.state
-        if s.degraded:
+        if s.life.degraded:
             return "degraded"
         if not t.connected:
             return "lost"
-        if s.over:
+        if s.life.over:
             return "landed"
         if t.airborne and t.mode in RETURNING_MODES:
             return "returning"
         if t.airborne:
             return "flying"
-        return "planning" if s.busy == "plan" else "idle"
+        return "planning" if s.schedule.busy == "plan" else "idle"
 
     def _status(self) -> Status:
         t, s = self.link.telemetry, self.state
@@ -534,11 +537,11 @@ class Service:
             mission_seq=max(t.mission_seq, 0), mission_total=max(t.mission_total, 0),
             pending_requests=self.journal.pending_count(), served_users=len(self.journal.service_counts()),
             authority=s.authority.state, authority_detail=s.authority.detail[:256], position_ok=v.position_ok,
-            waiting_for=self._waiting()[:256], degraded=(s.degraded or "")[:256],
+            waiting_for=self._waiting()[:256], degraded=(s.life.degraded or "")[:256],
         )
 
     def _waiting(self) -> str:
-        warming = "the planner warming up (compiling its kernels)" if self.state.warming else ""
+        warming = "the planner warming up (compiling its kernels)" if self.state.life.warming else ""
         return "; ".join(w for w in (warming, self._waiting_for) if w)
 
     def _publish_plan(self, held: HeldMission, predicted_energy_j: float = 0.0) -> None:
@@ -552,7 +555,7 @@ class Service:
         self._event(ev.PlanUpdated(f"plan {held.plan_id}: {len(ahead)} points ahead"))
         try:
             places = plan_places(ahead, v.xyz, self.scenario.speed_mps)
-            messages = user_places(self.journal.user_backlogs(), places, sortie=self.state.number,
+            messages = user_places(self.journal.user_backlogs(), places, sortie=self.state.life.number,
                                    plan_id=held.plan_id, time_s=self.wall())
         except (JournalError, PlanningError) as err:
             log.error("plan %d: users' places not published: %s", held.plan_id, err)
@@ -574,7 +577,7 @@ class Service:
         """Something the service needs failed: it takes no more requests, says why (status,
         an event, the log), withdraws its liveliness and commands nothing more; the vehicle
         flies on the complete mission it holds (it ends in return to launch)."""
-        if self.state.degraded is not None:
+        if self.state.life.degraded is not None:
             return
         self.intake.closed_reason = f"the service is degraded: {why}"[:256]
         self.zio.withdraw_liveliness()
@@ -593,27 +596,27 @@ class Service:
         try:
             self.journal.end_sortie(why, reasons, self.wall())
         except JournalError as err:
-            log.error("could not close sortie %d in the journal: %s", self.state.number, err)
+            log.error("could not close sortie %d in the journal: %s", self.state.life.number, err)
         for rid, reason in reasons.items():
             self._event(ev.RequestRejected(f"not served: {reason}", request_id=rid))
         self.intake.closed_reason = self._closed_reason()
-        self._event(ev.Landed(f"sortie {self.state.number}: {why}"))
-        log.info("sortie %d over: %s; %d services, %d requests not served", self.state.number, why,
+        self._event(ev.Landed(f"sortie {self.state.life.number}: {why}"))
+        log.info("sortie %d over: %s; %d services, %d requests not served", self.state.life.number, why,
                  len(self.journal.services()), len(reasons))
 
     def _closed_reason(self) -> str:
         """What a request hears between sorties."""
         if not self.cfg.sortie.repeat:
-            return f"sortie over: {self.state.over}; this service flies one sortie (sortie.repeat = false)"
+            return f"sortie over: {self.state.life.over}; this service flies one sortie (sortie.repeat = false)"
         return (f"sortie over: waiting for the battery (at least {self.cfg.sortie.next_battery_fraction:.0%}) "
-                f"with the vehicle on the ground and disarmed before sortie {self.state.number + 1}")
+                f"with the vehicle on the ground and disarmed before sortie {self.state.life.number + 1}")
 
     def _begin_sortie(self, battery_fraction: float) -> None:
         try:
             number = self.journal.begin_sortie(self.wall())
         except JournalError as err:
             log.error("could not begin the next sortie: %s", err)
-            self.state = replace(self.state, beginning=False)
+            self.state = replace(self.state, life=replace(self.state.life, beginning=False))
             return
         self.plan_msg = None
         self.planner.new_sortie()

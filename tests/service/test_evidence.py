@@ -16,7 +16,7 @@ FLYING = Settled(over=False, commanding=False, granted=True)
 
 def held_and_vehicle() -> tuple:
     run, _ = fly_to_first_point(FakeWorld())
-    return run.s.held, run.v
+    return run.s.onboard.held, run.v
 
 
 def test_off_segment() -> None:

@@ -74,7 +74,8 @@ def test_start_after_a_revocation_gives_it_back_and_twice_is_harmless() -> None:
 
 
 @pytest.mark.parametrize("state, vehicle, words", [
-    (replace(NONE, degraded="the status task failed"), READY, "degraded: the status task failed"),
+    (replace(NONE, life=replace(NONE.life, degraded="the status task failed")), READY,
+     "degraded: the status task failed"),
     (NONE, VehicleSnapshot(), "not connected"),
     (NONE, replace(READY, position_ok=False), "no position"),
     (NONE, replace(READY, battery_fraction=None, battery_source="unknown"), "battery's charge is unknown"),
@@ -87,7 +88,8 @@ def test_start_is_refused_when_the_service_cannot_take_it(state, vehicle, words:
 
 def test_hold_always_takes_the_authority_back() -> None:
     flying = replace(READY, armed=True, airborne=True, mode="AUTO")
-    new, out, accepted, said = operator(replace(GIVEN, degraded="a task died"), "hold", "pilot takes over", flying)
+    new, out, accepted, said = operator(replace(GIVEN, life=replace(GIVEN.life, degraded="a task died")), "hold",
+                                        "pilot takes over", flying)
     assert accepted and new.authority.state == "none" and "pilot takes over" in new.authority.detail
     assert [e.kind for e in out if isinstance(e, fx.Command)] == ["hold"]
     assert said.startswith("authority withdrawn")

@@ -171,12 +171,13 @@ def test_restore_between_and_during_sorties(tmp_path: Path) -> None:
 
     between = Service(config, build_parts(config))  # between sorties: the intake refuses, waiting for the battery
     try:
-        assert between.state.over == "the vehicle landed" and between.state.number == between.journal.sortie == 1
+        assert between.state.life.over == "the vehicle landed"
+        assert between.state.life.number == between.journal.sortie == 1
         assert between.intake.closed_reason == (
             "sortie over: waiting for the battery (at least 90%) with the vehicle on the ground and disarmed "
             "before sortie 2")
-        assert between.state.plan_id == 1 and between.state.held is not None
-        assert between.state.judged == {2}  # its one point was served after its mission was accepted
+        assert between.state.schedule.plan_id == 1 and between.state.onboard.held is not None
+        assert between.state.holds.judged == {2}  # its one point was served after its mission was accepted
     finally:
         between.journal.close()
     once = build_config({}, {"journal.path": str(path), "sortie.repeat": "false"})
@@ -193,10 +194,10 @@ def test_restore_between_and_during_sorties(tmp_path: Path) -> None:
 
     during = Service(config, build_parts(config))  # in sortie 2: nothing of sortie 1 is held or counted
     try:
-        assert during.state.over is None and during.intake.closed_reason is None
-        assert during.state.number == during.journal.sortie == 2 and during.state.held is None
-        assert during.state.last_hover_index == -1 and during.state.services == 0
-        assert during.state.plan_id == 1  # plan ids run on
+        assert during.state.life.over is None and during.intake.closed_reason is None
+        assert during.state.life.number == during.journal.sortie == 2 and during.state.onboard.held is None
+        assert during.state.schedule.last_hover_index == -1 and during.state.life.services == 0
+        assert during.state.schedule.plan_id == 1  # plan ids run on
         assert [(u.user_id, u.services) for u in during.journal.users()] == [("u2", 0)]
     finally:
         during.journal.close()

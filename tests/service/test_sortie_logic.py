@@ -115,28 +115,28 @@ def fly_to_first_point(world: FakeWorld) -> tuple[Run, fx.Upload]:
 def test_a_sortie_records_only_holds_the_vehicle_was_seen_at() -> None:
     world = FakeWorld()
     run, _ = fly_to_first_point(world)
-    assert run.s.flown
+    assert run.s.life.flown
     # On the way to point 3 (item 2): not there yet, nothing judged.
     run.tick(seq=2, xyz=(60.0, 100.0, 100.0), boot_s=10.0)
-    assert run.s.watch is not None and run.s.watch.phase == "approaching"
+    assert run.s.holds.watch is not None and run.s.holds.watch.phase == "approaching"
     # Arrives: the request in force is bound and the next point is decided from there.
     out = run.tick(seq=2, xyz=(119.0, 200.5, 100.0), boot_s=12.0)
     (plan,) = only(out, fx.MakePlan)
     assert plan.basis.keep_through == 2 and plan.basis.serving == "a" and plan.basis.at_point.hover_index == 3
     assert plan.basis.serving_reward == 0.4, "the planned q of the planned tasks, as the hold's end records it"
-    assert run.s.binding.request_id == 1 and run.s.binding.planned
+    assert run.s.holds.binding.request_id == 1 and run.s.holds.binding.planned
     out = run.feed(ins.Planned(plan.basis, path(point(9, 400.0, 300.0, "b", 2))))
     (up,) = only(out, fx.Upload)
     # Index-preserving: home, takeoff, point 3 kept; the new decision at item 3; RTL.
     assert [i.seq for i in up.items] == [0, 1, 2, 3, 4] and up.keep_through == 2 and up.current_seq is None
-    kept, before = up.items[2], run.s.held.items[2]
+    kept, before = up.items[2], run.s.onboard.held.items[2]
     assert (kept.command, kept.x, kept.y, kept.z, kept.param1) == (before.command, before.x, before.y, before.z,
                                                                    before.param1)
     assert [i.seq for i in up.items if i.current] == [2], "the item held stays the one flown (PX4 flies the mark)"
     run.feed(ins.Uploaded(up, 2))
-    assert run.s.watch.phase == "holding", "the hold goes on across the replacement"
+    assert run.s.holds.watch.phase == "holding", "the hold goes on across the replacement"
     # Holds as long as the request needs, then the vehicle flies item 3.
-    needed = run.s.binding.needed_s
+    needed = run.s.holds.binding.needed_s
     end = 12 + math.ceil(needed)
     for t in range(13, end + 1):
         run.tick(seq=2, xyz=(120.5, 199.5, 100.0), boot_s=float(t))
@@ -154,7 +154,7 @@ def test_a_hold_cut_short_serves_what_it_carried() -> None:
     world = FakeWorld()
     run, _ = fly_to_first_point(world)
     run.tick(seq=2, xyz=(120.0, 200.0, 100.0), boot_s=20.0)
-    needed = run.s.binding.needed_s
+    needed = run.s.holds.binding.needed_s
     run.tick(seq=2, xyz=(120.0, 200.0, 100.0), boot_s=20.0 + needed / 2)
     out = run.tick(seq=2, xyz=(150.0, 200.0, 100.0), boot_s=21.0 + needed / 2)  # pushed away
     (svc,) = only(out, fx.RecordService)
@@ -171,8 +171,8 @@ def test_a_second_service_cut_short_records_the_backlog_it_was_bound_to() -> Non
     beta = SCENARIO.fairness_threshold_tasks
     world.ask("a", 120.0, 200.0, beta + 1, 5)
     run.tick(seq=2, xyz=(120.0, 200.0, 100.0), boot_s=20.0)
-    assert run.s.binding.user_id == "a" and run.s.binding.tasks == beta + 1
-    needed = run.s.binding.needed_s
+    assert run.s.holds.binding.user_id == "a" and run.s.holds.binding.tasks == beta + 1
+    needed = run.s.holds.binding.needed_s
     out = run.tick(seq=3, xyz=(140.0, 200.0, 100.0), boot_s=20.0 + needed / (beta + 1))  # the hold ended early
     (svc,) = only(out, fx.RecordService)
     assert svc.user_id == "a" and svc.tasks < beta < svc.bound_tasks == beta + 1
@@ -187,10 +187,10 @@ def test_nothing_is_planned_while_the_vehicles_clock_rate_is_unknown() -> None:
     world = FakeWorld()
     run, _ = fly_to_first_point(world)
     out = run.tick(seq=2, xyz=(120.0, 200.0, 100.0), boot_s=20.0, time_rate=None)
-    assert run.s.watch.phase == "holding" and not only(out, fx.MakePlan)
+    assert run.s.holds.watch.phase == "holding" and not only(out, fx.MakePlan)
     (plan,) = only(run.tick(seq=2, xyz=(120.0, 200.0, 100.0), boot_s=21.0, time_rate=80.0), fx.MakePlan)
     out = run.feed(ins.Planned(plan.basis, path(point(9, 400.0, 300.0, "b", 2))), time_rate=None)
-    assert not only(out, fx.Upload) and run.s.dirty
+    assert not only(out, fx.Upload) and run.s.schedule.dirty
 
 
 def test_a_hold_longer_than_needed_ends_once_the_next_decision_is_on_board() -> None:
@@ -198,7 +198,7 @@ def test_a_hold_longer_than_needed_ends_once_the_next_decision_is_on_board() -> 
     run, _ = fly_to_first_point(world)
     out = run.tick(seq=2, xyz=(120.0, 200.0, 100.0), boot_s=20.0)
     (plan,) = only(out, fx.MakePlan)
-    needed = run.s.binding.needed_s
+    needed = run.s.holds.binding.needed_s
     run.tick(seq=2, boot_s=20.0 + needed + 1)
     assert not only(run.effects, fx.Command)[1:], "no early end before the replacement is uploaded"
     (up,) = only(run.feed(ins.Planned(plan.basis, path(point(9, 400.0, 300.0, "b", 2)))), fx.Upload)
@@ -215,7 +215,7 @@ def test_a_hold_is_not_ended_early_without_the_authority_or_degraded(after: str)
     world = FakeWorld()
     run, _ = fly_to_first_point(world)
     (plan,) = only(run.tick(seq=2, xyz=(120.0, 200.0, 100.0), boot_s=20.0), fx.MakePlan)
-    needed = run.s.binding.needed_s
+    needed = run.s.holds.binding.needed_s
     (up,) = only(run.feed(ins.Planned(plan.basis, path(point(9, 400.0, 300.0, "b", 2)))), fx.Upload)
     run.feed(ins.Uploaded(up, 2))
     if after == "the journal failed":
@@ -240,7 +240,7 @@ def test_restart_read_back_and_a_lost_mission_resumed_from_where_it_is() -> None
     assert only(out, fx.ReadBack), "read back before anything else"
     assert run.s.authority.state == "revoked", "a restart ends the authority"
     out = run.feed(ins.ReadBackDone((), 3))  # the mission is gone
-    assert run.s.must_upload and run.s.resume_pending
+    assert run.s.onboard.must_upload and run.s.onboard.resume_pending
     (plan,) = only(out, fx.MakePlan)
     assert plan.basis.keep_through is None and plan.basis.reason == "the vehicle lost its mission"
     (up2,) = only(run.feed(ins.Planned(plan.basis, path(point(7, 320.0, 200.0, "b", 2)))), fx.Upload)
@@ -263,9 +263,9 @@ def test_a_hold_found_under_way_is_left_to_the_autopilot() -> None:
     # known, so no decision is made there (a replacement would start the hold again).
     world = FakeWorld()
     run, _ = fly_to_first_point(world)
-    run.s = replace(run.s, watch=None)
+    run.s = replace(run.s, holds=replace(run.s.holds, watch=None))
     out = run.tick(seq=2, xyz=(120.0, 200.0, 100.0), boot_s=20.0)
-    assert run.s.watch.phase == "holding" and not run.s.watch.approached
+    assert run.s.holds.watch.phase == "holding" and not run.s.holds.watch.approached
     assert not only(out, fx.MakePlan) and not only(run.tick(seq=2, boot_s=25.0), fx.MakePlan)
 
 
@@ -277,7 +277,7 @@ def test_a_link_gap_read_back_as_ours_keeps_the_hold() -> None:
     out = run.feed(ins.Planned(searching.basis, path(point(9, 400.0, 300.0, "b", 2))))
     (rb,) = only(out, fx.ReadBack)
     out = run.feed(ins.ReadBackDone(up.items, 3))
-    assert run.s.held_known and run.s.watch is not None and run.s.watch.phase == "holding"
+    assert run.s.onboard.known and run.s.holds.watch is not None and run.s.holds.watch.phase == "holding"
     # The decision dropped during the doubt is made again from the point.
     (plan,) = only(out, fx.MakePlan)
     assert plan.basis.keep_through == 2
@@ -293,11 +293,11 @@ def test_holds_flown_while_in_doubt_are_judged_once_the_read_back_shows_our_miss
     for t in range(10, 80):  # the whole hold at point 3 (item 2), in doubt
         run.tick(seq=2, xyz=(120.0, 200.0, 100.0), boot_s=float(t))
     run.tick(seq=3, xyz=(160.0, 200.0, 100.0), boot_s=82.0)  # and on to item 3
-    assert not only(run.effects, fx.RecordService) and run.s.watch.phase == "approaching"
+    assert not only(run.effects, fx.RecordService) and run.s.holds.watch.phase == "approaching"
     out = run.feed(ins.ReadBackDone(up.items, 3))
     (svc,) = only(out, fx.RecordService)
     assert (svc.user_id, svc.tasks, svc.hover_index) == ("a", 10, 3) and svc.held_s == pytest.approx(69.0)
-    assert run.s.watch is not None and run.s.watch.seq == 3 and run.s.doubted == ()
+    assert run.s.holds.watch is not None and run.s.holds.watch.seq == 3 and run.s.onboard.doubted == ()
 
 
 def test_reports_in_doubt_are_judged_against_the_upload_that_went_through() -> None:
@@ -312,7 +312,8 @@ def test_reports_in_doubt_are_judged_against_the_upload_that_went_through() -> N
     out = run.feed(ins.ReadBackDone(up.items, 3))  # the upload went through
     (svc,) = only(out, fx.RecordService)
     assert (svc.hover_index, svc.held_s) == (3, 69.0)
-    assert run.s.watch.seq == 3 and run.s.watch.xyz == (400.0, 300.0, 100.0) and run.s.watch.phase == "approaching", \
+    watch = run.s.holds.watch
+    assert watch.seq == 3 and watch.xyz == (400.0, 300.0, 100.0) and watch.phase == "approaching", \
         "item 3 is the new plan's point, not yet reached"
 
 
@@ -341,7 +342,7 @@ def test_reports_in_doubt_count_for_nothing_when_the_vehicle_holds_another_missi
     for t in range(10, 80):
         run.tick(seq=2, xyz=(120.0, 200.0, 100.0), boot_s=float(t))
     out = run.feed(ins.ReadBackDone(up.items[:2], 3))  # not ours: nothing it flew is ours to record
-    assert not only(out, fx.RecordService) and run.s.doubted == ()
+    assert not only(out, fx.RecordService) and run.s.onboard.doubted == ()
 
 
 def test_another_stations_mission_ends_the_authority_and_is_left_alone() -> None:
@@ -357,7 +358,7 @@ def test_another_stations_mission_ends_the_authority_and_is_left_alone() -> None
     theirs = tuple(replace(i, x=i.x + 1000) for i in up.items[:4])
     out = run.feed(ins.ReadBackDone(theirs, 3))
     assert run.s.authority.state == "revoked" and "not ours" in run.s.authority.detail
-    assert run.s.held is None and not run.s.must_upload and not run.s.resume_pending
+    assert run.s.onboard.held is None and not run.s.onboard.must_upload and not run.s.onboard.resume_pending
     assert not only(out, fx.MakePlan) and not only(run.tick(seq=2, mission_total=3, boot_s=11.0), fx.MakePlan), \
         "another station's mission is not replaced"
 
@@ -367,7 +368,7 @@ def test_a_count_a_read_back_showed_to_be_ours_doubts_nothing_again() -> None:
     run, up = fly_to_first_point(world)
     (rb,) = only(run.tick(seq=2, mission_total=99, boot_s=10.0), fx.ReadBack)
     run.feed(ins.ReadBackDone(up.items, 3))  # ours after all (the autopilot counts otherwise)
-    assert run.s.authority.granted and run.s.held is not None
+    assert run.s.authority.granted and run.s.onboard.held is not None
     assert not only(run.tick(seq=2, mission_total=99, boot_s=11.0), fx.ReadBack)
 
 
@@ -388,12 +389,12 @@ def test_a_pilots_landing_ends_the_sortie_and_the_next_never_arms() -> None:
     run, _ = fly_to_first_point(world)
     run.feed(ins.ModeChanged("LAND", commanded=False), mode="LAND")
     run.feed(ins.OnGround("EXTENDED_SYS_STATE"), airborne=False)
-    assert run.s.over == "the vehicle landed"
+    assert run.s.life.over == "the vehicle landed"
     out = run.tick(armed=False)
     (begin,) = only(out, fx.BeginSortie)
     world.requests.clear()
     run.feed(ins.SortieBegun(2))
-    assert run.s.number == 2 and run.s.authority.state == "none"
+    assert run.s.life.number == 2 and run.s.authority.state == "none"
     world.ask("c", 200.0, 200.0, 9, 3)
     out = run.feed(ins.RequestIn("c", 9))
     (plan,) = only(out, fx.MakePlan)
@@ -455,7 +456,7 @@ def test_the_services_own_arming_and_its_landings_disarming_keep_the_authority()
     # The disarming reported while the vehicle flies its mission, away from its return: not ours.
     assert run.s.authority.on_arming(False, commanded=False, landing=False).state == "revoked"
     # At the mission's return item: the touchdown's disarming, its report within 2 s.
-    rtl = run.s.held.rtl_seq
+    rtl = run.s.onboard.held.rtl_seq
     run.feed(ins.ArmedChanged(False, commanded=False), armed=False, seq=rtl, xyz=(0.0, 0.0, 0.5))
     run.now += 1.5
     run.tick(airborne=False)
@@ -464,7 +465,7 @@ def test_the_services_own_arming_and_its_landings_disarming_keep_the_authority()
     assert run.s.authority.granted
     # Reported landed first at the return item, then disarmed: the landing's.
     run2, _ = fly_to_first_point(FakeWorld())
-    run2.feed(ins.OnGround("EXTENDED_SYS_STATE"), airborne=False, seq=run2.s.held.rtl_seq, xyz=(0.0, 0.0, 0.1))
+    run2.feed(ins.OnGround("EXTENDED_SYS_STATE"), airborne=False, seq=run2.s.onboard.held.rtl_seq, xyz=(0.0, 0.0, 0.1))
     run2.feed(ins.ArmedChanged(False, commanded=False), armed=False)
     assert run2.s.authority.granted
 
@@ -472,7 +473,8 @@ def test_the_services_own_arming_and_its_landings_disarming_keep_the_authority()
 def test_a_disarming_on_the_way_home_not_followed_by_a_landing_is_nobodys() -> None:
     world = FakeWorld()
     run, _ = fly_to_first_point(world)
-    run.feed(ins.ArmedChanged(False, commanded=False), armed=False, seq=run.s.held.rtl_seq, xyz=(50.0, 50.0, 60.0))
+    run.feed(ins.ArmedChanged(False, commanded=False), armed=False, seq=run.s.onboard.held.rtl_seq,
+             xyz=(50.0, 50.0, 60.0))
     run.now += 1.0
     run.tick()
     assert run.s.authority.granted, "its landing's report may still come"
@@ -488,7 +490,7 @@ def test_a_disarming_in_the_air_reported_landed_first_is_not_a_landing() -> None
     world = FakeWorld()
     run, _ = fly_to_first_point(world)
     run.feed(ins.OnGround("EXTENDED_SYS_STATE"), airborne=False, xyz=(30.0, 50.0, 40.0))
-    assert run.s.over is not None
+    assert run.s.life.over is not None
     run.feed(ins.ArmedChanged(False, commanded=False), armed=False)
     assert run.s.authority.state == "revoked", "away from the mission's return: not ours"
 
@@ -496,7 +498,7 @@ def test_a_disarming_in_the_air_reported_landed_first_is_not_a_landing() -> None
 def test_a_service_started_beside_a_vehicle_armed_on_the_ground_has_no_authority() -> None:
     world = FakeWorld()
     run = Run(world)
-    run.s = replace(run.s, just_started=True)
+    run.s = replace(run.s, life=replace(run.s.life, just_started=True))
     out = run.tick(armed=True)
     assert run.s.authority.state == "revoked" and "armed on the ground" in run.s.authority.detail
     assert not only(out, fx.Command)
@@ -524,19 +526,19 @@ def test_failed_uploads_back_off_and_stop_after_the_bound() -> None:
     run = Run(world, rules(max_failures=3))
     waits = []
     for n in range(3):
-        run.now = max(run.now, run.s.retry_at)
+        run.now = max(run.now, run.s.schedule.retry_at)
         out = run.tick()
         (plan,) = only(out, fx.MakePlan)
         (up,) = only(run.feed(ins.Planned(plan.basis, path(point(3, 120.0, 200.0, "a", 1)))), fx.Upload)
         run.feed(ins.NotUploaded(up, "NO_ANSWER"))
-        waits.append(run.s.retry_at - run.now)
+        waits.append(run.s.schedule.retry_at - run.now)
     assert waits[0] == pytest.approx(1.0, abs=0.1) and waits[1] == pytest.approx(2.0, abs=0.1)
-    assert math.isinf(run.s.retry_at)
+    assert math.isinf(run.s.schedule.retry_at)
     assert "upload_abandoned" in [e.event.kind for e in only(run.effects, fx.Emit)]
     run.now += 100.0
     assert not only(run.tick(), fx.MakePlan)
     run.feed(ins.RequestIn("a", 11))
-    assert run.s.failures == 0
+    assert run.s.schedule.failures == 0
 
 
 def test_operator_hold_releases_authority() -> None:
@@ -551,7 +553,7 @@ def test_a_backlog_grown_since_the_plan_lengthens_the_hold_it_is_bound_to() -> N
     run, _ = fly_to_first_point(world)
     world.ask("a", 120.0, 200.0, 20, 5)  # twice the tasks the plan saw, before the vehicle arrives
     (plan,) = only(run.tick(seq=2, xyz=(120.0, 200.0, 100.0), boot_s=20.0), fx.MakePlan)
-    b = run.s.binding
+    b = run.s.holds.binding
     assert (b.request_id, b.tasks, b.planned) == (5, 20, False)
     assert b.needed_s > 60.0, "the planned 60 s hold cannot carry 20 tasks"
     assert plan.basis.at_point.hold_s >= b.needed_s + 1.0, "the planner pays for the longer hold"
@@ -571,7 +573,7 @@ def test_a_hold_the_battery_cannot_carry_is_cut_to_what_keeps_the_reserve() -> N
     world.ask("a", 120.0, 200.0, 100, 5)
     (plan,) = only(run.tick(seq=2, xyz=(120.0, 200.0, 100.0), boot_s=20.0), fx.MakePlan)
     bound = plan.basis.at_point.hold_s
-    assert bound >= run.s.binding.needed_s > 300.0
+    assert bound >= run.s.holds.binding.needed_s > 300.0
     home = PlannedPath((), 4000.0, SCENARIO.energy_floor_j - 2000.0, "the energy reserve")
     (up,) = only(run.feed(ins.Planned(plan.basis, home)), fx.Upload)
     cut = bound - 2000.0 / SCENARIO.hover_power_w
@@ -612,7 +614,7 @@ def test_a_restart_that_landed_the_vehicle_leaves_the_next_sortie_to_the_operato
     run, _ = fly_to_first_point(world)
     run.feed(ins.ModeChanged("STABILIZE", commanded=False), mode="STABILIZE", boot_s=1.0)
     run.feed(ins.OnGround("EXTENDED_SYS_STATE"), airborne=False, armed=False)
-    assert run.s.over is not None and run.s.authority.state == "revoked"
+    assert run.s.life.over is not None and run.s.authority.state == "revoked"
     run.feed(ins.Restarted("its clock went back"))
     run.tick()
     run.feed(ins.SortieBegun(2))
@@ -622,17 +624,17 @@ def test_a_restart_that_landed_the_vehicle_leaves_the_next_sortie_to_the_operato
 def test_a_service_started_with_the_vehicle_in_the_air_has_no_authority() -> None:
     world = FakeWorld()
     run = Run(world)
-    run.s = replace(run.s, just_started=True)
+    run.s = replace(run.s, life=replace(run.s.life, just_started=True))
     assert run.s.authority.granted  # the configuration's
     run.tick(airborne=None, landed_known=False)
-    assert run.s.authority.granted and run.s.just_started, "not known yet whether it flies"
+    assert run.s.authority.granted and run.s.life.just_started, "not known yet whether it flies"
     out = run.tick(airborne=True, armed=True, landed_known=True, mode="AUTO")
     assert run.s.authority.state == "revoked" and "in the air" in run.s.authority.detail
     assert "authority_revoked" in [e.event.kind for e in only(out, fx.Emit)]
     grounded = Run(world)
-    grounded.s = replace(grounded.s, just_started=True)
+    grounded.s = replace(grounded.s, life=replace(grounded.s.life, just_started=True))
     grounded.tick()
-    assert grounded.s.authority.granted and not grounded.s.just_started
+    assert grounded.s.authority.granted and not grounded.s.life.just_started
 
 
 def test_the_holds_margins_are_paid_for_out_of_the_reserve() -> None:
@@ -670,7 +672,7 @@ def test_the_user_served_is_the_models_choice_at_arrival() -> None:
     world.ask("a", 120.0, 200.0, 0, 5)
     world.ask("c", 125.0, 195.0, 9, 6)
     run.tick(seq=2, xyz=(120.0, 200.0, 100.0), boot_s=20.0)
-    b = run.s.binding
+    b = run.s.holds.binding
     assert (b.user_id, b.request_id, b.tasks, b.planned) == ("c", 6, 9, False)
 
 
@@ -680,7 +682,7 @@ def test_a_user_done_early_ends_the_hold_but_not_the_physics() -> None:
     (plan,) = only(run.tick(seq=2, xyz=(120.0, 200.0, 100.0), boot_s=20.0), fx.MakePlan)
     (up,) = only(run.feed(ins.Planned(plan.basis, path(point(9, 400.0, 300.0, "b", 2)))), fx.Upload)
     run.feed(ins.Uploaded(up, 2))
-    needed = run.s.binding.needed_s
+    needed = run.s.holds.binding.needed_s
     run.tick(seq=2, boot_s=20.0 + needed / 4)
     out = run.feed(ins.RequestIn("a", 0))  # "nothing more to offload"
     out += run.tick(seq=2, boot_s=21.0 + needed / 4)
@@ -720,7 +722,7 @@ def _replacement_arriving_late(world: FakeWorld, then: PlannedPoint) -> tuple[Ru
     (up,) = only(run.feed(ins.Planned(plan.basis, path(then, point(9, 400.0, 300.0, "b", 2)))), fx.Upload)
     run.tick(seq=3, xyz=(200.0, 200.0, 100.0), boot_s=60.0)  # the autopilot's timer ended the hold
     run.tick(seq=3, xyz=(319.0, 200.0, 100.0), boot_s=70.0)
-    assert not only(run.effects, fx.RecordService) and run.s.watch.seq == 2, "kept until the upload's outcome"
+    assert not only(run.effects, fx.RecordService) and run.s.holds.watch.seq == 2, "kept until the upload's outcome"
     out = run.feed(ins.Uploaded(up, 2))
     assert [s.hover_index for s in only(out, fx.RecordService)] == [3]
     return run, out
@@ -732,10 +734,10 @@ def test_a_replacement_that_flies_the_point_reached_meanwhile_keeps_its_hold() -
     # point in the same stay: two services the vehicle's log shows as one).
     world = FakeWorld()
     run, out = _replacement_arriving_late(world, point(7, 320.0, 200.0, "b", 2))
-    assert run.s.watch.seq == 3 and run.s.watch.phase == "holding" and run.s.binding.user_id == "b"
+    assert run.s.holds.watch.seq == 3 and run.s.holds.watch.phase == "holding" and run.s.holds.binding.user_id == "b"
     (plan,) = only(out, fx.MakePlan)  # and decides from there at once
     assert plan.basis.keep_through == 3 and plan.basis.at_point.hover_index == 7 and plan.basis.serving == "b"
-    needed = run.s.binding.needed_s
+    needed = run.s.holds.binding.needed_s
     run.tick(seq=3, xyz=(320.0, 200.0, 100.0), boot_s=70.0 + needed)
     out = run.tick(seq=4, xyz=(340.0, 230.0, 100.0), boot_s=72.0 + needed)
     assert [(s.hover_index, s.user_id, s.tasks) for s in only(out, fx.RecordService)] == [(7, "b", 12)]
@@ -745,7 +747,7 @@ def test_a_replacement_that_flies_elsewhere_judges_the_hold_it_replaced() -> Non
     world = FakeWorld()
     run, out = _replacement_arriving_late(world, point(8, 250.0, 350.0, "b", 2))
     # item 3 is now point 8, to be flown: nobody was bound at point 7 for it
-    assert run.s.watch.seq == 3 and run.s.watch.phase == "approaching" and 3 not in run.s.judged
+    assert run.s.holds.watch.seq == 3 and run.s.holds.watch.phase == "approaching" and 3 not in run.s.holds.judged
     assert [(s.hover_index, s.user_id) for s in only(out, fx.RecordService)] == [(3, "a")]
 
 
@@ -759,23 +761,23 @@ def test_an_upload_failed_part_way_is_read_back_at_once_whatever_the_back_off() 
     (plan,) = only(run.tick(seq=2, xyz=(120.0, 200.0, 100.0), boot_s=12.0), fx.MakePlan)
     (up,) = only(run.feed(ins.Planned(plan.basis, path(point(9, 400.0, 300.0, "b", 2)))), fx.Upload)
     out = run.feed(ins.NotUploaded(up, "MAV_MISSION_OPERATION_CANCELLED"))
-    assert run.s.retry_at > run.now, "the next plan still backs off"
+    assert run.s.schedule.retry_at > run.now, "the next plan still backs off"
     (read,) = only(out, fx.ReadBack)
     assert "failed part-way" in read.why
     out = run.feed(ins.ReadBackDone(up.items, 3))
     records = only(out, fx.RecordMission)
     assert [(r.plan_id, r.result) for r in records] == [(up.plan_id, "accepted")]
     # a read-back that fails is tried again after a wait
-    run.s = replace(run.s, doubt="test")
+    run.s = replace(run.s, onboard=replace(run.s.onboard, doubt="test"))
     run.feed(ins.ReadBackFailed("NO_ANSWER"))
-    assert run.s.readback_at > run.now and not only(run.tick(), fx.ReadBack)
+    assert run.s.schedule.readback_at > run.now and not only(run.tick(), fx.ReadBack)
 
 
 def test_a_service_started_between_sorties_gives_the_configurations_authority_to_the_next() -> None:
     # Restarted after sortie 1 landed: the configuration's authority is this process's first
     # and unused, so sortie 2 begins with it; once used, it is not passed on again.
     run = Run(FakeWorld())
-    run.s = replace(run.s, over="the vehicle landed", flown=True, just_started=True)
+    run.s = replace(run.s, life=replace(run.s.life, over="the vehicle landed", flown=True, just_started=True))
     run.tick()
     run.feed(ins.SortieBegun(2))
     assert run.s.authority.granted and run.s.authority.unused
@@ -789,10 +791,10 @@ def test_nothing_is_planned_or_started_while_the_planner_warms_up() -> None:
     world = FakeWorld()
     world.ask("a", 120.0, 200.0, 10, 1)
     run = Run(world)
-    run.s = replace(run.s, warming=True)
+    run.s = replace(run.s, life=replace(run.s.life, warming=True))
     assert not only(run.tick(), fx.MakePlan)
-    run.feed(ins.SortieBegun(run.s.number))  # (a sortie begun meanwhile keeps waiting)
-    assert run.s.warming
+    run.feed(ins.SortieBegun(run.s.life.number))  # (a sortie begun meanwhile keeps waiting)
+    assert run.s.life.warming
     (plan,) = only(run.feed(ins.WarmedUp()), fx.MakePlan)
     (up,) = only(run.feed(ins.Planned(plan.basis, path(point(3, 120.0, 200.0, "a", 1)))), fx.Upload)
     assert only(run.feed(ins.Uploaded(up, 1)), fx.Command)[0].kind == "start"
@@ -803,7 +805,7 @@ def test_a_disarming_after_the_mission_index_went_back_to_0_on_touching_down_is_
     # MISSION_CURRENT 0 came before the heartbeat showing the disarming: the landing at the
     # end of our own return was taken for nobody's.
     run, _ = fly_to_first_point(FakeWorld())
-    rtl = run.s.held.rtl_seq
+    rtl = run.s.onboard.held.rtl_seq
     run.tick(seq=rtl, xyz=(10.0, 10.0, 30.0), boot_s=30.0)  # on the way home
     run.tick(seq=0, xyz=(0.0, 0.0, 0.2), boot_s=40.0)
     run.feed(ins.ArmedChanged(False, False), armed=False)
@@ -845,7 +847,7 @@ def test_a_refused_command_and_a_failed_part_are_announced() -> None:
                                                                             "start: MAV_RESULT_DENIED")]
     out = run.feed(ins.PartFailed("journal: disk full"))
     assert [(e.event.kind, e.event.detail) for e in only(out, fx.Emit)] == [("degraded", "journal: disk full")]
-    assert run.s.degraded == "journal: disk full" and not only(run.tick(), fx.Command)
+    assert run.s.life.degraded == "journal: disk full" and not only(run.tick(), fx.Command)
 
 
 def test_a_landing_away_from_the_missions_return_ends_the_authority() -> None:
@@ -854,12 +856,12 @@ def test_a_landing_away_from_the_missions_return_ends_the_authority() -> None:
     run, _ = fly_to_first_point(FakeWorld())
     out = run.feed(ins.OnGround("EXTENDED_SYS_STATE"), airborne=False, seq=2, xyz=(60.0, 100.0, 0.0))
     assert run.s.authority.state == "revoked" and "landed away from its mission's return" in run.s.authority.detail
-    assert "authority_revoked" in [e.event.kind for e in only(out, fx.Emit)] and run.s.over is not None
+    assert "authority_revoked" in [e.event.kind for e in only(out, fx.Emit)] and run.s.life.over is not None
     # ... and at the return item it is the service's own landing
     run2, _ = fly_to_first_point(FakeWorld())
-    run2.tick(seq=run2.s.held.rtl_seq, xyz=(5.0, 5.0, 20.0), boot_s=30.0)
+    run2.tick(seq=run2.s.onboard.held.rtl_seq, xyz=(5.0, 5.0, 20.0), boot_s=30.0)
     run2.feed(ins.OnGround("EXTENDED_SYS_STATE"), airborne=False, seq=0, xyz=(0.0, 0.0, 0.0))
-    assert run2.s.authority.granted and run2.s.over is not None
+    assert run2.s.authority.granted and run2.s.life.over is not None
 
 
 def fly_px4_home() -> Run:
@@ -873,7 +875,7 @@ def fly_px4_home() -> Run:
     run.feed(ins.Uploaded(up, 1))
     run.feed(ins.CommandDone(fx.Command("start")), armed=True, mode="AUTO.MISSION")
     run.tick(airborne=True, seq=0, xyz=(0.0, 0.0, 50.0), boot_s=5.0)
-    rtl = run.s.held.rtl_seq
+    rtl = run.s.onboard.held.rtl_seq
     run.tick(seq=rtl, xyz=(120.0, 200.0, 100.0), boot_s=60.0)
     world.ask("b", 320.0, 200.0, 12, 2)
     run.now += 5.0

@@ -29,7 +29,7 @@ def test_a_mission_id_not_ours_reads_back_and_a_same_length_mission_ends_the_aut
     assert "0x1234abcd" in rb.why and "0x7d59a53b" in rb.why, rb.why
     run.feed(ins.ReadBackDone(moved(up.items), 3, THEIRS))
     assert run.s.authority.state == "revoked" and "not ours" in run.s.authority.detail
-    assert run.s.held is None and not only(run.tick(boot_s=11.0), fx.MakePlan), "theirs is not replaced"
+    assert run.s.onboard.held is None and not only(run.tick(boot_s=11.0), fx.MakePlan), "theirs is not replaced"
 
 
 def test_an_id_the_link_did_not_learn_is_read_back_once_then_known() -> None:
@@ -77,7 +77,7 @@ def test_the_mission_is_read_back_periodically_under_authority_and_a_changed_one
     (rb,) = only(run.tick(seq=2, boot_s=10.0), fx.ReadBack)
     assert "periodic" in rb.why
     run.feed(ins.ReadBackDone(up.items, 3))
-    assert run.s.authority.granted and run.s.held is not None
+    assert run.s.authority.granted and run.s.onboard.held is not None
     assert not only(run.tick(seq=2, boot_s=11.0), fx.ReadBack), "checked just now"
     run.now += interval
     assert only(run.tick(seq=2, boot_s=12.0), fx.ReadBack)
@@ -87,10 +87,11 @@ def test_the_mission_is_read_back_periodically_under_authority_and_a_changed_one
 
 def test_no_periodic_read_back_during_an_upload_or_without_authority() -> None:
     run, up = fly_to_first_point(FakeWorld())
-    run.s = replace(run.s, busy="upload")
+    run.s = replace(run.s, schedule=replace(run.s.schedule, busy="upload"))
     run.now += 10 * run.logic.rules.readback_interval_s
     assert not only(run.tick(seq=2, boot_s=9.0), fx.ReadBack), "an upload in flight is not disturbed"
-    run.s = replace(run.s, busy="", authority=run.s.authority.release("the operator's hold"))
+    run.s = replace(run.s, authority=run.s.authority.release("the operator's hold"),
+                    schedule=replace(run.s.schedule, busy=""))
     assert not only(run.tick(seq=2, boot_s=10.0), fx.ReadBack)
 
 

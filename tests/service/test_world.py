@@ -39,7 +39,7 @@ def hold(run: Run, world: JournalWorld, seq: int, xyz: tuple[float, float, float
     refused = []
     before = len(run.effects)
     run.tick(seq=seq, xyz=xyz, boot_s=start_s)
-    needed = run.s.binding.needed_s if run.s.binding is not None else 0.0
+    needed = run.s.holds.binding.needed_s if run.s.holds.binding is not None else 0.0
     for t in range(1, int(needed) + 2):
         run.tick(seq=seq, xyz=xyz, boot_s=start_s + t)
     run.tick(seq=seq + 1, xyz=(xyz[0] + 60.0, xyz[1], xyz[2]), boot_s=start_s + needed + 3)

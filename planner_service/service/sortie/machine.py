@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, replace
-from typing import Literal, assert_never
+from typing import assert_never
 
 import numpy as np
 
@@ -51,23 +51,19 @@ from . import inputs as ins
 from .authority import Authority, next_sortie
 from .evidence import Evidence, Settled, judge
 from .hold import HoldWatch, Sample
+from .holds import Binding, Holds
+from .life import Life
 from .mission import HeldMission
-
-Busy = Literal["", "plan", "upload", "readback"]
+from .onboard import OnBoard
+from .schedule import Backoff, Schedule
 
 CONTROL_LATENCY_S = 0.1
 """Wall seconds from a hold's position report to the vehicle obeying the command that ends
 it (a tick of the loop and a command's round trip): that much more hovering, in vehicle time,
 is planned at each point."""
-MAX_DOUBTED = 1200
-"""Reports kept while in doubt: a minute of the service's ticks (the oldest are dropped)."""
 DISARM_LANDING_S = 2.0
 """Wall seconds a disarming on the service's own return waits for the landing's report (it
 may follow the heartbeat showing the disarming) before it is taken as nobody's."""
-START_LAPSE_S = 5.0
-"""Wall seconds after an accepted start before a vehicle still on the ground, disarmed, is
-taken as not started."""
-
 
 
 @dataclass(frozen=True)
@@ -99,6 +95,11 @@ class Rules:
     before the mission is read back (``evidence.judge``); 0: not checked."""
 
     @property
+    def backoff(self) -> Backoff:
+        """How failed plans, uploads and commands are retried (``schedule.Backoff``)."""
+        return Backoff(self.max_failures, self.retry_s, self.max_retry_s)
+
+    @property
     def autopilot(self) -> Autopilot:
         """The configured autopilot's profile (``protocol.autopilot``)."""
         return autopilot_for(self.flavour)
@@ -110,91 +111,20 @@ class Rules:
 
 
 @dataclass(frozen=True)
-class Binding:
-    """The request a hold serves, bound when the vehicle arrives at the point."""
-
-    seq: int
-    user_id: str
-    request_id: int | None
-    """None: nothing to serve there (``why_not``)."""
-    tasks: int = 0
-    needed_s: float = 0.0
-    """The hold the bound tasks need from this point (upload time)."""
-    planned: bool = False
-    """The request bound is the one the plan was made for."""
-    why_not: str = ""
-    done: bool = False
-    """The user said its upload is done (a newer request with no tasks)."""
-
-
-@dataclass(frozen=True)
 class Sortie:
-    """Everything the sortie logic knows; a new sortie is a new value."""
+    """Everything the sortie logic knows, as records that change apart; a new sortie is a new
+    value."""
 
-    number: int = 1
-    over: str | None = None
-    """Why the sortie ended; None while it runs."""
-    flown: bool = False
-    """The vehicle has been airborne in this sortie (so a landing ends it)."""
-    started: bool = False
-    """The mission was started (by the service or, seen airborne, by someone)."""
-    started_at: float = -math.inf
+    life: Life = field(default_factory=Life)
+    """Where the sortie is in its life (``life.py``)."""
     authority: Authority = field(default_factory=Authority)
-    held: HeldMission | None = None
-    held_known: bool = False
-    """The vehicle is known to hold ``held`` (an upload accepted, a read-back); False while
-    in doubt or before it is known."""
-    unconfirmed: HeldMission | None = None
-    """An upload whose outcome is unknown: the vehicle may hold it."""
-    doubt: str | None = None
-    """Why the vehicle may hold another mission than ``held``: read it back first."""
-    must_upload: bool = False
-    """The vehicle lost its mission in the air: upload whatever the plan."""
-    resume_pending: bool = False
-    restarted: bool = False
-    watch: HoldWatch | None = None
-    binding: Binding | None = None
-    judged: frozenset[int] = frozenset()
-    """Seqs of ``held``'s points already judged (served or not)."""
-    decided_at: int | None = None
-    """The seq from whose hold the last decision was made (one decision per interval)."""
-    early_end: int | None = None
-    """The seq whose hold the service ended early."""
-    plan_id: int = 0
-    version: int = 0
-    """Bumped when a plan being searched is stale (doubt, restart, sortie over)."""
-    last_hover_index: int = -1
-    busy: Busy = ""
-    commanding: str = ""
-    failures: int = 0
-    retry_at: float = 0.0
-    readback_at: float = 0.0
-    """The next read-back, apart from ``retry_at``: a doubt is resolved at once, whatever
-    the plans' back-off (holds flown meanwhile are not judged), and only a failed read-back
-    waits."""
-    dirty: bool = True
-    """Requests came in since the last plan."""
-    last_plan_at: float = -math.inf
-    degraded: str | None = None
-    beginning: bool = False
-    """The next sortie was asked of the journal (``BeginSortie``)."""
-    next_authority: Authority | None = None
-    """The authority the next sortie begins with, when the operator gave it."""
-    services: int = 0
-    """Services recorded in this sortie (the interval count)."""
-    just_started: bool = False
-    """The service has just started (restored from its journal) and has not yet seen whether
-    the vehicle is in the air: if it is, the authority ends."""
-    disarmed_at: float | None = None
-    """When a disarming on the service's own return, not yet reported landed, was seen
-    (``_disarm_check``)."""
-    homing: bool = False
-    """The vehicle was seen on the service's own way home (``_homing``)."""
-    warming: bool = False
-    """The planner's kernels are being compiled: no plan, no start until they are."""
-    doubted: tuple[Sample, ...] = ()
-    """The vehicle's reports while in doubt or an upload is in flight (``_replay``), at most
-    ``MAX_DOUBTED``."""
+    """Who may command the vehicle (``authority.py``)."""
+    onboard: OnBoard = field(default_factory=OnBoard)
+    """The mission on board as far as the service knows (``onboard.py``)."""
+    holds: Holds = field(default_factory=Holds)
+    """The hold watched and the points judged (``holds.py``)."""
+    schedule: Schedule = field(default_factory=Schedule)
+    """What is in flight and when the next may go (``schedule.py``)."""
     evidence: Evidence = field(default_factory=Evidence)
     """What the vehicle's reports say of whose mission it flies (``evidence.py``)."""
 
@@ -223,13 +153,14 @@ class SortieLogic:
                 out += [fx.Emit(ev.LinkLost(why)), fx.Log("warning", f"link lost: {why}")]
             case ins.Restored(mode=mode):
                 out += [fx.Emit(ev.LinkRestored(mode)), fx.Log("info", f"link restored ({mode})")]
-                if s.held is not None or s.flown:
+                if s.onboard.held is not None or s.life.flown:
                     s = self._doubt(s, "the link was lost", out)
-                s = replace(s, retry_at=min(s.retry_at, now), failures=0)
+                s = replace(s, schedule=s.schedule.link_restored(now))
             case ins.Restarted(detail=why):
                 # A restart only ever ends the authority: nothing the service commanded holds
                 # across it, and a restart is what an unsigned link can forge.
-                s = self._revoke(replace(s, restarted=True), f"the autopilot restarted ({why})", out)
+                s = self._revoke(replace(s, onboard=replace(s.onboard, restarted=True)),
+                                 f"the autopilot restarted ({why})", out)
                 out.append(fx.Emit(ev.VehicleRestarted(why[:256])))
                 s = self._doubt(s, f"the vehicle restarted: {why}", out, hold_interrupted=True)
             case ins.ModeChanged(mode=mode, commanded=commanded):
@@ -237,32 +168,33 @@ class SortieLogic:
             case ins.ArmedChanged(armed=armed, commanded=commanded):
                 s = self._arming(s, v, armed, commanded, now, out)
             case ins.OnGround():
-                if s.flown and not (s.homing or self._on_return(s, v)):
+                if s.life.flown and not (s.life.homing or self._on_return(s, v)):
                     s = self._revoke(s, f"the vehicle landed away from its mission's return (item {v.seq}, "
                                         f"{v.mode or 'mode unknown'}): not the service's landing", out)
-                if s.flown:
+                if s.life.flown:
                     s = self._end(s, "the vehicle landed", v, out)
             case ins.Planned():
-                s = self._planned(replace(s, busy="", last_plan_at=now), event, v, now, out)
+                s = self._planned(replace(s, schedule=s.schedule.plan_returned(now)), event, v, now, out)
             case ins.PlanFailed(error=error):
-                s = self._failed(replace(s, busy="", last_plan_at=now), f"plan {s.plan_id + 1} not flown: {error}",
-                                 now, out)
+                s = self._failed(replace(s, schedule=s.schedule.plan_returned(now)),
+                                 f"plan {s.schedule.plan_id + 1} not flown: {error}", now, out)
             case ins.Uploaded():
-                s = self._uploaded(replace(s, busy=""), event, v, out)
+                s = self._uploaded(replace(s, schedule=s.schedule.answered()), event, v, out)
                 s = self._known(s, now, event.mission_id)
             case ins.NotUploaded(upload=up, error=error, outcome_unknown=unknown):
-                s = self._upload_failed(replace(s, busy=""), up, error, unknown, v, now, out)
+                s = self._upload_failed(replace(s, schedule=s.schedule.answered()), up, error, unknown, v, now, out)
             case ins.ReadBackDone(items=items):
-                s = self._read_back(replace(s, busy=""), items, v, out)
+                s = self._read_back(replace(s, schedule=s.schedule.answered()), items, v, out)
                 s = self._known(s, now, event.mission_id, read_back=True)
             case ins.ReadBackFailed(error=error):
-                out.append(fx.Log("warning", f"could not read back the vehicle's mission ({s.doubt}): {error}; "
+                out.append(fx.Log("warning", f"could not read back the vehicle's mission ({s.onboard.doubt}): {error}; "
                                              f"trying again"))
-                s = replace(s, busy="", readback_at=now + self.rules.retry_s)
+                s = replace(s, schedule=s.schedule.read_back_failed(now, self.rules.retry_s))
             case ins.CommandDone(command=cmd):
-                s = self._command_done(replace(s, commanding="", evidence=s.evidence.commanded()), cmd, now, out)
+                s = self._command_done(replace(s, evidence=s.evidence.commanded(),
+                                               schedule=s.schedule.command_answered()), cmd, now, out)
             case ins.CommandNotDone(command=cmd, error=error):
-                s = self._command_failed(replace(s, commanding=""), cmd, error, now, out)
+                s = self._command_failed(replace(s, schedule=s.schedule.command_answered()), cmd, error, now, out)
             case ins.RequestIn(user_id=user, tasks=tasks):
                 s = self._request(s, user, tasks, out)
             case ins.OperatorAsked():
@@ -270,11 +202,12 @@ class SortieLogic:
             case ins.SortieBegun(number=number):
                 s = self._begun(s, number, out)
             case ins.PartFailed(why=why):
-                if s.degraded is None:
-                    s = replace(s, degraded=why, version=s.version + 1)
-                    out += [fx.Emit(ev.Degraded(why[:256])), fx.Log("error", f"degraded: {why}")]
+                life, said = s.life.degrade(why)
+                if said:  # the first reason stays; plans in search are stale
+                    s = replace(s, life=life, schedule=s.schedule.stale())
+                    out += said
             case ins.WarmedUp():
-                s = replace(s, warming=False)
+                s = replace(s, life=replace(s.life, warming=False))
             case ins.Reached() | ins.Current() | ins.PositionChanged():
                 # Progress and position are read from the telemetry at each tick: holds are
                 # judged from where the vehicle is, never from a mission index alone.
@@ -289,22 +222,26 @@ class SortieLogic:
 
     # --- the periodic look at the vehicle --------------------------------------------------------
     def _tick(self, s: Sortie, v: ins.VehicleSnapshot, now: float, out: list[fx.Effect]) -> Sortie:
-        if s.just_started and v.connected and v.landed_known:
-            s = replace(s, just_started=False)
-            if v.airborne or (v.armed and not s.started and s.commanding != "start"):
+        if s.life.just_started and v.connected and v.landed_known:
+            s = replace(s, life=replace(s.life, just_started=False))
+            if v.airborne or (v.armed and not s.life.started and s.schedule.commanding != "start"):
                 # The service (re)started with the vehicle in the air, or armed by someone:
                 # what was done to the vehicle while it was away (a pilot's switch and back)
                 # cannot be known.
                 where = "in the air" if v.airborne else "armed on the ground"
                 s = self._revoke(s, f"the service started with the vehicle {where} (in {v.mode}): what "
                                     f"happened to it meanwhile is not known", out)
-        if v.airborne and not s.flown and s.over is None:
-            s = replace(s, flown=True)
-            out.append(fx.MarkFlown())
-        if (s.flown and s.over is None and v.connected and v.landed_known and not v.airborne and not v.armed):
+        if v.airborne:
+            life, said = s.life.airborne()
+            s = replace(s, life=life)
+            out += said
+        if (s.life.flown and s.life.over is None and v.connected and v.landed_known and not v.airborne and not v.armed):
             s = self._end(s, "the vehicle was found landed", v, out)
-        s = self._maybe_begin(s, v, out)
-        s = self._start_lapsed(s, v, now, out)
+        life, begin = s.life.next_wanted(v, repeat=self.rules.repeat,
+                                         next_battery_fraction=self.rules.next_battery_fraction)
+        life, lapsed = life.start_lapsed(v, now, s.authority.granted)
+        s = replace(s, life=life)
+        out += begin + lapsed
         s = self._watch(s, v, out)
         s = self._homing(s, v)
         s = self._disarm_check(s, v, now, out)
@@ -314,50 +251,44 @@ class SortieLogic:
 
     def _next(self, s: Sortie, v: ins.VehicleSnapshot, now: float, out: list[fx.Effect]) -> Sortie:
         """Start whatever is due and not running: a read-back, a plan, a command."""
-        if s.over is not None or s.degraded is not None:
+        if s.life.over is not None or s.life.degraded is not None:
             return s
-        if s.busy == "" and s.doubt is not None and v.connected and now >= s.readback_at:
-            out.append(fx.ReadBack(s.doubt))
-            return replace(s, busy="readback")
-        if s.busy == "" and s.doubt is None and now >= s.retry_at:
+        if s.schedule.busy == "" and s.onboard.doubt is not None and v.connected and now >= s.schedule.readback_at:
+            out.append(fx.ReadBack(s.onboard.doubt))
+            return replace(s, schedule=s.schedule.reading_back())
+        if s.schedule.busy == "" and s.onboard.doubt is None and now >= s.schedule.retry_at:
             basis = self._plan_wanted(s, v, now)
             if basis is not None:
                 out.append(fx.MakePlan(basis))
-                s = replace(s, busy="plan", dirty=False)
-        if s.commanding == "" and now >= s.retry_at:
+                s = replace(s, schedule=s.schedule.planning())
+        if s.schedule.commanding == "" and now >= s.schedule.retry_at:
             s = self._command_due(s, v, out)
         return self._resume_needed(s, v, out)
 
     # --- holds: truth from the vehicle's position ---------------------------------------------
     def _watch(self, s: Sortie, v: ins.VehicleSnapshot, out: list[fx.Effect]) -> Sortie:
-        if s.held is None or not (v.connected and v.position_ok) or math.isnan(v.boot_s):
+        if s.onboard.held is None or not (v.connected and v.position_ok) or math.isnan(v.boot_s):
             return s
         sample = Sample(v.boot_s, v.xyz, v.seq)
-        if not s.held_known or s.busy == "upload":
+        if not s.onboard.known or s.schedule.busy == "upload":
             # In doubt, or an upload in flight (the vehicle may fly the new mission before its
             # ACK reaches us: on a lossy link seconds, minutes of flight at x40): kept, and
             # judged once the mission the vehicle flies is known.
-            if (s.doubt is not None or s.busy == "upload") and (not s.doubted or s.doubted[-1].boot_s < sample.boot_s):
-                s = replace(s, doubted=(*s.doubted, sample)[-MAX_DOUBTED:])
-            return s
+            return replace(s, onboard=s.onboard.keep(sample, uploading=s.schedule.busy == "upload"))
         return self._maybe_end_hold(self._seen(s, sample, v, out), out)
 
     def _seen(self, s: Sortie, sample: Sample, v: ins.VehicleSnapshot, out: list[fx.Effect]) -> Sortie:
         """One report of the vehicle flying ``held``: the watch fed, or begun at its item."""
-        held = s.held
+        held = s.onboard.held
         assert held is not None
-        if s.watch is not None:
-            s = self._feed(s, s.watch, sample, v, out)
-        if s.watch is None:
-            # Points before the one flown that no watch ever saw (reports lost, or the
-            # service was away): flown unseen, so no service is recorded for them.
-            for seq, point in held.points:
-                if seq < sample.seq and seq not in s.judged:
-                    out.append(fx.Emit(ev.WaypointSkipped(f"point {point.hover_index}: not seen held (the vehicle "
-                                                           f"flies item {sample.seq})", user_id=point.user_id)))
-                    s = replace(s, judged=s.judged | {seq})
+        if s.holds.watch is not None:
+            s = self._feed(s, s.holds.watch, sample, v, out)
+        if s.holds.watch is None:
+            holds, said = s.holds.skipped_unseen(held, sample.seq)
+            s = replace(s, holds=holds)
+            out += said
             point = held.point_at(sample.seq)
-            if point is not None and sample.seq not in s.judged:
+            if point is not None and sample.seq not in s.holds.judged:
                 watch = HoldWatch(sample.seq, (point.x_m, point.y_m, point.z_m), self.rules.hold_radius_m)
                 s = self._feed(s, watch, sample, v, out)
         return s
@@ -366,10 +297,11 @@ class SortieLogic:
         """The vehicle's latest report against the mission held (``evidence.judge``), while
         it is known to hold it and nothing the service does now changes it: a disagreement
         reads the mission back."""
-        held = s.held
-        if held is None or not s.held_known or s.busy or s.doubt is not None or not v.connected:
+        held = s.onboard.held
+        if held is None or not s.onboard.known or s.schedule.busy or s.onboard.doubt is not None or not v.connected:
             return s
-        settled = Settled(over=s.over is not None, commanding=bool(s.commanding), granted=s.authority.granted)
+        settled = Settled(over=s.life.over is not None, commanding=bool(s.schedule.commanding),
+                          granted=s.authority.granted)
         evidence, doubt = judge(s.evidence, held, v, now, settled, leg_tolerance_m=self.rules.leg_tolerance_m,
                                 readback_interval_s=self.rules.readback_interval_s)
         s = replace(s, evidence=evidence)
@@ -377,28 +309,29 @@ class SortieLogic:
             return s
         if doubt.periodic:  # no disagreement: nothing planned is stale
             out.append(fx.Log("info", f"{doubt.why}: reading the mission back"))
-            return replace(s, doubt=doubt.why, held_known=False, readback_at=0.0)
+            return replace(s, onboard=s.onboard.rechecking(doubt.why), schedule=replace(s.schedule, readback_at=0.0))
         return self._doubt(s, doubt.why, out)
 
     def _known(self, s: Sortie, now: float, mission_id: int, *, read_back: bool = False) -> Sortie:
         """The vehicle was just seen to hold ``held`` (an upload accepted, a read-back)."""
-        if s.held is None:
+        if s.onboard.held is None:
             return replace(s, evidence=s.evidence.no_mission())
-        if not s.held_known:
+        if not s.onboard.known:
             return s
         return replace(s, evidence=s.evidence.known(now, mission_id, read_back=read_back))
 
     def _replay(self, s: Sortie, v: ins.VehicleSnapshot, out: list[fx.Effect]) -> Sortie:
         """The reports kept during a doubt or an upload, judged now that the vehicle is known
-        to hold ``s.held``: a hold flown meanwhile (on a lossy link a read-back or an upload
+        to hold ``s.onboard.held``: a hold flown meanwhile (on a lossy link a read-back or an upload
         takes seconds, tens of seconds of flight at x40, in which whole holds were flown) is
         recorded as the reports show it. Reports of the mission before, flown at the same
         item before the switch to this one, are judged against this one's point: the
         position decides, so at worst a hold there goes unrecorded, never a hold recorded
         where the vehicle was not. A hold that arrived meanwhile is bound to the request in
         force now, as its arrival is seen now."""
-        kept, s = s.doubted, replace(s, doubted=())
-        if s.held is None:
+        onboard, kept = s.onboard.replayed()
+        s = replace(s, onboard=onboard)
+        if s.onboard.held is None:
             return s
         for sample in kept:
             s = self._seen(s, sample, v, out)
@@ -407,7 +340,7 @@ class SortieLogic:
     def _feed(self, s: Sortie, watch: HoldWatch, sample: Sample, v: ins.VehicleSnapshot, out: list[fx.Effect]) -> Sortie:
         before = watch
         watch = watch.feed(sample)
-        s = replace(s, watch=watch)
+        s = replace(s, holds=replace(s.holds, watch=watch))
         if watch.arrived and not before.arrived:
             s = self._arrived(s, v, out)
         return self._judge(s, out) if watch.over else s
@@ -417,9 +350,9 @@ class SortieLogic:
         rule serves from here now (the nearest eligible, ties to the larger backlog: the rule
         the planner's futures follow), the planned user or, if its backlog or place changed,
         another."""
-        assert s.watch is not None and s.held is not None
-        seq = s.watch.seq
-        point = s.held.point_at(seq)
+        assert s.holds.watch is not None and s.onboard.held is not None
+        seq = s.holds.watch.seq
+        point = s.onboard.held.point_at(seq)
         assert point is not None
         request = self._served_here(point)
         if request is None:
@@ -441,7 +374,8 @@ class SortieLogic:
             out.append(fx.Emit(ev.WaypointReached(f"point {point.hover_index}: serving {backlog} tasks, "
                                                    f"{needed:.1f} s", user_id=request.user_id,
                                request_id=request.request_id)))
-        return replace(s, binding=binding, last_hover_index=point.hover_index)
+        return replace(s, holds=replace(s.holds, binding=binding),
+                       schedule=replace(s.schedule, last_hover_index=point.hover_index))
 
     def _served_here(self, point: PlannedPoint) -> RequestRow | None:
         """The request the model's rule serves from ``point`` now (``model.served_user``)."""
@@ -462,32 +396,31 @@ class SortieLogic:
         not the timer, ends it, as soon as the next item is the decision made from this
         point (uploaded) and the reports show the hold the request needs. Only under its
         authority, not degraded: without, it commands nothing and the timer ends the hold."""
-        w, b, held = s.watch, s.binding, s.held
-        if w is None or b is None or held is None or w.phase != "holding" or s.early_end == w.seq:
+        w, held = s.holds.watch, s.onboard.held
+        why = s.holds.served_why()
+        if why is None or w is None or held is None:
             return s
-        if not s.authority.granted or s.degraded is not None:
+        if not s.authority.granted or s.life.degraded is not None:
             return s
-        if s.decided_at != w.seq or s.busy == "upload" or s.commanding:
+        if s.schedule.decided_at != w.seq or s.schedule.busy == "upload" or s.schedule.commanding:
             return s
         point = held.point_at(w.seq)
         assert point is not None
-        if b.request_id is None:
-            why = f"nothing to serve ({b.why_not})"
-        elif b.done:
-            why = "the user's upload is done"
-        elif w.covered_s >= b.needed_s:
-            why = f"held {w.covered_s:.1f} s, the {b.needed_s:.1f} s the bound request needs"
-        else:
-            return s
         out.append(fx.Command("set_current", w.seq + 1, f"hold at point {point.hover_index} ended: {why}"))
-        return replace(s, early_end=w.seq, commanding="set_current")
+        return replace(s, holds=replace(s.holds, early_end=w.seq), schedule=s.schedule.command_sent("set_current"))
+
+    def _abandon(self, s: Sortie, why: str, out: list[fx.Effect]) -> Sortie:
+        """The hold watched, if any, ended from outside (``why``) and judged as it stands."""
+        if s.holds.watch is None:
+            return s
+        return self._judge(replace(s, holds=s.holds.abandoned(why)), out)
 
     def _judge(self, s: Sortie, out: list[fx.Effect]) -> Sortie:
         """The vehicle left the point (or passed it): record what the hold carried."""
-        w, b, held = s.watch, s.binding, s.held
+        w, b, held = s.holds.watch, s.holds.binding, s.onboard.held
         assert w is not None and held is not None
         point = held.point_at(w.seq)
-        s = replace(s, watch=None, binding=None, judged=s.judged | {w.seq})
+        s = replace(s, holds=s.holds.closed(w.seq))
         if point is None:
             return s
         if not w.arrived:
@@ -514,7 +447,7 @@ class SortieLogic:
         detail = f"{tasks} tasks at point {point.hover_index}" + ("" if tasks == b.tasks else f" of {b.tasks}")
         out.append(fx.Emit(ev.UserServed(f"{detail}; held {w.held_s:.1f} s", user_id=b.user_id,
                            request_id=b.request_id)))
-        return replace(s, services=s.services + 1)
+        return replace(s, life=s.life.served())
 
     def _service_reward(self, point: PlannedPoint, tasks: int) -> float:
         """q of ``tasks`` served at ``point``, as the journal records it: the plan's own
@@ -524,47 +457,47 @@ class SortieLogic:
     # --- deciding ------------------------------------------------------------------------------
     def _plan_wanted(self, s: Sortie, v: ins.VehicleSnapshot, now: float) -> fx.PlanBasis | None:
         r = self.rules
-        if s.warming:
+        if s.life.warming:
             return None  # a plan now would wait for the compiler (minutes on a cold cache)
         if not (v.connected and v.position_ok) or v.battery_fraction is None:
             return None
         if v.time_rate is None:
             return None  # how much flight a second of waiting costs is not known yet
-        if s.flown and not v.landed_known:
+        if s.life.flown and not v.landed_known:
             return None  # in the air or landed meanwhile? know first
         if not v.airborne:
-            if s.started or s.flown or s.commanding == "start":
+            if s.life.started or s.life.flown or s.schedule.commanding == "start":
                 return None  # starting or taking off (a new mission now would restart it), or landed
             if self.world.pending_count() < r.min_requests:
                 return None
-            if s.held is not None and (s.authority.granted or not s.dirty
-                                       or now - s.last_plan_at < r.replan_min_interval_s):
+            if s.onboard.held is not None and (s.authority.granted or not s.schedule.dirty
+                                       or now - s.schedule.last_plan_at < r.replan_min_interval_s):
                 return None  # held and about to be started (a new one now would delay it), or nothing new
-            return fx.PlanBasis("requests before takeoff", s.version, None)
+            return fx.PlanBasis("requests before takeoff", s.schedule.version, None)
         if v.mode in RETURNING_MODES:
             return None  # returning: the safety, the pilot or the mission decided
-        if s.must_upload:
-            return fx.PlanBasis("the vehicle lost its mission", s.version, None)
-        if s.held is None or v.mode not in MISSION_MODES:
+        if s.onboard.must_upload:
+            return fx.PlanBasis("the vehicle lost its mission", s.schedule.version, None)
+        if s.onboard.held is None or v.mode not in MISSION_MODES:
             return None  # not flying a mission of ours: the operator has the vehicle
-        w = s.watch
-        if w is not None and w.phase == "holding" and s.decided_at != w.seq and w.approached:
+        w = s.holds.watch
+        if w is not None and w.phase == "holding" and s.schedule.decided_at != w.seq and w.approached:
             # (a hold found already under way, its start unseen, is left to the autopilot's
             # own timer: a replacement now would start it again; the next arrival decides)
-            point = s.held.point_at(w.seq)
+            point = s.onboard.held.point_at(w.seq)
             assert point is not None
-            b = s.binding
+            b = s.holds.binding
             serving = b.user_id if b is not None and b.request_id is not None else None
             # the hold the bound request needs, so that the planner pays for all of it
             bound = replace(point, hold_s=self._bound_hold_s(s, w.seq, point.hold_s, self._margin_s(v)))
             reward = self._service_reward(point, b.tasks) if serving and b else 0.0
-            return fx.PlanBasis(f"arrived at point {point.hover_index}", s.version, w.seq, at_point=bound,
+            return fx.PlanBasis(f"arrived at point {point.hover_index}", s.schedule.version, w.seq, at_point=bound,
                                 serving=serving, serving_reward=reward)
-        if (s.dirty and v.seq == s.held.rtl_seq and r.autopilot.return_item_mode is None
-                and now - s.last_plan_at >= r.replan_min_interval_s
+        if (s.schedule.dirty and v.seq == s.onboard.held.rtl_seq and r.autopilot.return_item_mode is None
+                and now - s.schedule.last_plan_at >= r.replan_min_interval_s
                 and self.world.pending_count() > 0 and v.xyz[2] >= r.area.min_flight_altitude_m
                 and self._could_turn_back(s, v)):
-            return fx.PlanBasis("new requests on the way home", s.version, s.held.rtl_seq - 1)
+            return fx.PlanBasis("new requests on the way home", s.schedule.version, s.onboard.held.rtl_seq - 1)
         return None
 
     def _could_turn_back(self, s: Sortie, v: ins.VehicleSnapshot) -> bool:
@@ -577,24 +510,26 @@ class SortieLogic:
         battery = planning_battery_j(sc, (v.battery_fraction or 0.0) * sc.battery_j, 0.0, self.rules.energy_margin_j)
         counts = self.world.service_counts()
         served = [counts.get(row.user_id, 0) for row in rows]
-        return first_steps(sc, self.points, rows, served, v.xyz, s.last_hover_index, battery) > 0
+        return first_steps(sc, self.points, rows, served, v.xyz, s.schedule.last_hover_index, battery) > 0
 
     def _planned(self, s: Sortie, planned: ins.Planned, v: ins.VehicleSnapshot, now: float, out: list[fx.Effect]) -> Sortie:
         basis, path = planned.basis, planned.path
-        if (basis.version != s.version or s.over is not None or s.doubt is not None or s.degraded is not None
+        if (basis.version != s.schedule.version or s.life.over is not None or s.onboard.doubt is not None
+                or s.life.degraded is not None
                 or v.time_rate is None):
-            return replace(s, dirty=True)  # stale: the state it was made on is gone (or its clock)
+            # stale: the state it was made on is gone (or its clock)
+            return replace(s, schedule=replace(s.schedule, dirty=True))
         if basis.at_point is not None:
-            s = replace(s, decided_at=basis.keep_through)
-        held = s.held
+            s = replace(s, schedule=replace(s.schedule, decided_at=basis.keep_through))
+        held = s.onboard.held
         airborne = v.airborne
-        if not path.points and not airborne and not s.must_upload:
+        if not path.points and not airborne and not s.onboard.must_upload:
             return s  # nothing to fly yet
         path = self._with_margins(path, self._margin_s(v))
         try:
             check_path(path, self.rules.area, self.rules.scenario, path.battery_after_j + path.predicted_energy_j)
             hover = [HoverPoint(p.x_m, p.y_m, p.z_m, p.hold_s) for p in path.points]
-            plan_id = s.plan_id + 1
+            plan_id = s.schedule.plan_id + 1
             if basis.keep_through is None or held is None:
                 items = encode_path(hover, self.rules.origin, self.rules.flavour)  # type: ignore[arg-type]
                 mission = HeldMission.fresh(plan_id, items, path.points, self.rules.flavour)
@@ -624,11 +559,12 @@ class SortieLogic:
             validate_mission(items, self.rules.origin, self.rules.area, self.rules.flavour,  # type: ignore[arg-type]
                              max_items=self.rules.max_mission_items)
         except (PlanningError, MissionError) as err:
-            return self._failed(replace(s, plan_id=s.plan_id + 1), f"plan {s.plan_id + 1} not flown: {err}", now, out)
+            return self._failed(replace(s, schedule=replace(s.schedule, plan_id=s.schedule.plan_id + 1)),
+                                f"plan {s.schedule.plan_id + 1} not flown: {err}", now, out)
         out.append(fx.Upload(plan_id, tuple(items), mission, path, current, basis.keep_through,
                              restart_current=current is not None and basis.keep_through is not None,
                              planner_ms=planned.planner_ms, newest_request=planned.newest_request))
-        return replace(s, busy="upload", plan_id=plan_id)
+        return replace(s, schedule=s.schedule.uploading(plan_id))
 
     def _with_margins(self, path: PlannedPath, margin_s: float) -> PlannedPath:
         """The path as it will be flown: each hold ``margin_s`` longer than its upload needs
@@ -662,7 +598,7 @@ class SortieLogic:
         """The hold at ``seq`` as long as the request bound there needs (it was sized on the
         request the plan saw; the user's backlog may have grown since, or the model's rule
         serves another user there now), never shorter than planned."""
-        b = s.binding
+        b = s.holds.binding
         if b is None or b.seq != seq or b.request_id is None:
             return planned_s
         return max(planned_s, min(b.needed_s + margin_s, MAX_HOLD_S))
@@ -696,14 +632,12 @@ class SortieLogic:
 
     def _uploaded(self, s: Sortie, uploaded: ins.Uploaded, v: ins.VehicleSnapshot, out: list[fx.Effect]) -> Sortie:
         up, keep = uploaded.upload, uploaded.upload.keep_through
-        judged = frozenset(q for q in s.judged if keep is not None and q <= keep)
-        watch, binding = s.watch, s.binding
+        watch = s.holds.watch
         if watch is not None and (keep is None or watch.seq > keep) and not self._flies_on(s, up, watch.seq):
             # the point watched was replaced: what it held so far is judged now
-            s = self._judge(replace(s, watch=watch.abandon(f"replaced by plan {up.plan_id}")), out)
-            watch, binding, judged = None, None, frozenset(q for q in s.judged if keep is not None and q <= keep)
-        s = replace(s, held=up.mission, held_known=True, unconfirmed=None, must_upload=False, failures=0,
-                    judged=judged, watch=watch, binding=binding, plan_id=up.plan_id)
+            s = self._abandon(s, f"replaced by plan {up.plan_id}", out)
+        s = replace(s, onboard=s.onboard.accepted(up.mission), schedule=s.schedule.uploaded(up.plan_id),
+                    holds=s.holds.kept_through(keep))
         out += [fx.RecordMission(up.plan_id, up.mission, "accepted"),
                 fx.PublishPlan(up.mission, up.path.predicted_energy_j),
                 fx.Emit(ev.MissionUploaded(f"plan {up.plan_id}: {len(up.path.points)} points"
@@ -720,100 +654,80 @@ class SortieLogic:
         also chose. The autopilot restarts the item, at the same place: the hold goes on,
         bound as it was (judging it and watching it afresh would bind a second user at the
         point in the same stay)."""
-        if up.keep_through is None or s.held is None:
+        if up.keep_through is None or s.onboard.held is None:
             return False  # a mission begun afresh: its items are not the old ones'
-        return s.held.point_at(seq) is not None and _same_point(s.held, up.mission, seq)
+        return s.onboard.held.point_at(seq) is not None and _same_point(s.onboard.held, up.mission, seq)
 
     def _upload_failed(self, s: Sortie, up: fx.Upload, error: str, unknown: bool, v: ins.VehicleSnapshot, now: float,
                        out: list[fx.Effect]) -> Sortie:
         out.append(fx.RecordMission(up.plan_id, up.mission, f"{'unknown' if unknown else 'failed'}: {error}"))
         if unknown:  # the vehicle may hold it: find out before anything else
-            s = self._doubt(replace(s, unconfirmed=up.mission), f"the outcome of plan {up.plan_id}'s upload is unknown",
-                            out)
-        elif self.rules.autopilot.writes_items_as_they_arrive and s.held is not None:
+            s = self._doubt(replace(s, onboard=s.onboard.maybe(up.mission)),
+                            f"the outcome of plan {up.plan_id}'s upload is unknown", out)
+        elif self.rules.autopilot.writes_items_as_they_arrive and s.onboard.held is not None:
             # ArduPilot writes an upload's items as they arrive: a failed one may leave part of
             # it in the mission held, or all of it if only its ACK was lost (PX4 switches over
             # only when the upload is complete). The read-back tells which.
-            s = self._doubt(replace(s, unconfirmed=up.mission), f"plan {up.plan_id}'s upload failed part-way", out)
-        if s.doubt is None:  # not taken: the reports kept during it were of the mission held
+            s = self._doubt(replace(s, onboard=s.onboard.maybe(up.mission)),
+                            f"plan {up.plan_id}'s upload failed part-way", out)
+        if s.onboard.doubt is None:  # not taken: the reports kept during it were of the mission held
             s = self._replay(s, v, out)
         return self._failed(s, f"plan {up.plan_id} not flown: {error}", now, out)
 
     def _failed(self, s: Sortie, why: str, now: float, out: list[fx.Effect]) -> Sortie:
         """A plan or upload failed: try again after a growing wait, give up after a bound."""
-        n = s.failures + 1
-        out += [fx.Emit(ev.UploadFailed(why[:256])), fx.Log("error", why)]
-        if n >= self.rules.max_failures:
-            out.append(fx.Emit(ev.UploadAbandoned(f"{n} failures in a row; no more plans until the link, a "
-                                                   f"request or the operator changes something"[:256])))
-            return replace(s, failures=n, retry_at=math.inf, dirty=True)
-        wait = min(self.rules.retry_s * 2 ** (n - 1), self.rules.max_retry_s)
-        return replace(s, failures=n, retry_at=now + wait, dirty=True)
+        schedule, said = s.schedule.failed(why, now, self.rules.backoff)
+        out += said
+        return replace(s, schedule=schedule)
 
     # --- doubt ---------------------------------------------------------------------------------
     def _doubt(self, s: Sortie, why: str, out: list[fx.Effect], *, hold_interrupted: bool = False) -> Sortie:
         """The vehicle may hold another mission: no reports count until it is read back. A
         hold being watched goes on being watched once the read-back shows our mission (a
         radio gap interrupts nothing), unless the vehicle restarted: then it was cut."""
-        out.append(fx.Log("warning", f"{why}: the mission held will be read back before planning"))
-        s = replace(s, doubt=why, held_known=False, version=s.version + 1, retry_at=0.0, readback_at=0.0)
-        if hold_interrupted and s.watch is not None:
-            s = self._judge(replace(s, watch=s.watch.abandon(why)), out)
-        return s
+        onboard, said = s.onboard.doubting(why)
+        out += said
+        s = replace(s, onboard=onboard, schedule=s.schedule.in_doubt())
+        return self._abandon(s, why, out) if hold_interrupted else s
 
     def _read_back(self, s: Sortie, items: tuple, v: ins.VehicleSnapshot, out: list[fx.Effect]) -> Sortie:
-        why = s.doubt
-        s = replace(s, doubt=None)
-        for candidate in (s.held, s.unconfirmed):
-            if candidate is None or not same_mission(items, candidate.items, self.rules.flavour):  # type: ignore[arg-type]
-                continue
-            if candidate is not s.held:  # the upload whose ACK was lost went through
-                s = replace(s, held=candidate, judged=frozenset())
-                out += [fx.RecordMission(candidate.plan_id, candidate, "accepted"), fx.PublishPlan(candidate)]
-            out.append(fx.Log("info", f"{why}: the vehicle holds plan {candidate.plan_id} (read back)"))
-            # A restarted vehicle may hold our mission and still hover where it came back
-            # (what it flew across its restart is not judged: its holds were cut).
-            restarted = s.restarted
-            s = replace(s, held_known=True, unconfirmed=None, resume_pending=restarted and v.airborne, restarted=False,
-                        evidence=s.evidence.explained())
-            return replace(s, doubted=()) if restarted else self._replay(s, v, out)
-        s = replace(s, doubted=())
-        if s.watch is not None:
-            s = self._judge(replace(s, watch=s.watch.abandon("the vehicle no longer holds our mission")), out)
-        lost = s.held
-        ours = f"plan {lost.plan_id}" if lost is not None else "a mission of ours"
-        gone = replace(s, held=None, held_known=False, judged=frozenset(), unconfirmed=None, restarted=False,
-                       decided_at=None, evidence=s.evidence.lost())
-        if s.unconfirmed is None and len(items) > self.rules.autopilot.home_slots:
-            # A mission no upload of ours explains (not one cut short: an upload of ours is
-            # then unconfirmed): another station's. Not ours to fly, nor to replace.
-            detail = f"{why}: the vehicle holds a mission of {len(items)} items that is not ours ({ours}): " \
-                     f"another station's; left to the operator"
-            out.append(fx.Log("warning", detail))
-            return self._revoke(replace(gone, must_upload=False, resume_pending=False), "the vehicle holds a "
-                                f"mission that is not ours ({len(items)} items, another station's)", out)
-        detail = f"{why}: the vehicle holds {len(items)} items, not {ours}; re-planning from where it is"
-        out.append(fx.Log("warning", detail))
-        if not why or "restarted" not in why:
-            out.append(fx.Emit(ev.VehicleRestarted(detail[:256])))
-        return replace(gone, must_upload=v.airborne, resume_pending=v.airborne)
+        candidate = s.onboard.matching(items, self.rules.flavour)  # type: ignore[arg-type]
+        if candidate is not None:
+            restarted, fresh = s.onboard.restarted, candidate is not s.onboard.held
+            onboard, said = s.onboard.confirmed(candidate, v.airborne)
+            out += said
+            s = replace(s, onboard=onboard, evidence=s.evidence.explained(),
+                        holds=replace(s.holds, judged=frozenset()) if fresh else s.holds)
+            # a restarted vehicle's reports were dropped (its holds were cut); else judged now
+            return s if restarted else self._replay(s, v, out)
+        s = self._abandon(replace(s, onboard=replace(s.onboard, doubted=())),
+                          "the vehicle no longer holds our mission", out)
+        foreign = s.onboard.foreign(len(items), self.rules.autopilot.home_slots)
+        onboard, said = s.onboard.lost(len(items), v.airborne, foreign)
+        out += said
+        s = replace(s, onboard=onboard, holds=replace(s.holds, judged=frozenset()), evidence=s.evidence.lost(),
+                    schedule=replace(s.schedule, decided_at=None))
+        if foreign:  # another station's: not ours to fly, nor to replace
+            return self._revoke(s, f"the vehicle holds a mission that is not ours ({len(items)} items, another "
+                                   f"station's)", out)
+        return s
 
     # --- link events -------------------------------------------------------------------------------
     def _connected(self, s: Sortie, v: ins.VehicleSnapshot, mode: str, out: list[fx.Effect]) -> Sortie:
         out.append(fx.Log("info", f"autopilot connected ({mode})"))
         if v.airborne:
-            s = replace(s, started=True)
-        if s.held is not None:  # from the journal: does the vehicle still fly it?
-            s = self._doubt(s, f"the service started with plan {s.held.plan_id} in its journal", out)
+            s = replace(s, life=replace(s.life, started=True))
+        if s.onboard.held is not None:  # from the journal: does the vehicle still fly it?
+            s = self._doubt(s, f"the service started with plan {s.onboard.held.plan_id} in its journal", out)
         return s
 
     def _mode(self, s: Sortie, v: ins.VehicleSnapshot, mode: str, commanded: bool, now: float,
               out: list[fx.Effect]) -> Sortie:
-        held = s.held
+        held = s.onboard.held
         mission_return = (held is not None and v.seq == held.rtl_seq and mode in RETURNING_MODES)
         a = self.rules.autopilot
         # PX4 goes back to the mission mode once the landing of its mission's return disarms it
-        after_return = (s.homing and not v.armed and not v.airborne and a.return_item_mode is not None
+        after_return = (s.life.homing and not v.armed and not v.airborne and a.return_item_mode is not None
                         and s.authority.expected_mode == a.return_item_mode and mode == a.mission_mode)
         authority = s.authority.on_mode(mode, armed=v.armed or v.airborne, mission_return=mission_return,
                                         commanded=commanded, autopilots_own=after_return)
@@ -826,7 +740,7 @@ class SortieLogic:
     def _on_return(self, s: Sortie, v: ins.VehicleSnapshot) -> bool:
         """The vehicle flies the service's own way home: its mission's return item, or the
         return mode the service expects."""
-        held = s.held
+        held = s.onboard.held
         return ((held is not None and v.seq == held.rtl_seq)
                 or (v.mode in RETURNING_MODES and v.mode == s.authority.expected_mode))
 
@@ -835,36 +749,36 @@ class SortieLogic:
         flying to a point again: ArduCopter's disarming on touching down resets its mission
         index to 0, and that MISSION_CURRENT may come before the heartbeat showing the
         disarming (seen on SITL with the MAVSDK backend)."""
-        if not v.airborne or s.held is None:
+        if not v.airborne or s.onboard.held is None:
             return s
-        if not s.homing and self._on_return(s, v):
-            return replace(s, homing=True)
-        if s.homing and s.held.point_at(v.seq) is not None and v.mode in MISSION_MODES:
-            return replace(s, homing=False)
+        if not s.life.homing and self._on_return(s, v):
+            return replace(s, life=replace(s.life, homing=True))
+        if s.life.homing and s.onboard.held.point_at(v.seq) is not None and v.mode in MISSION_MODES:
+            return replace(s, life=replace(s.life, homing=False))
         return s
 
     def _arming(self, s: Sortie, v: ins.VehicleSnapshot, armed: bool, commanded: bool, now: float,
                 out: list[fx.Effect]) -> Sortie:
-        returning = s.flown and (s.homing or self._on_return(s, v))
+        returning = s.life.flown and (s.life.homing or self._on_return(s, v))
         if not armed and not commanded and returning and v.airborne and s.authority.granted:
             # On the service's own return: the landing's disarming if the landing is
             # reported too (its report may come after the disarming's): judged then.
-            return replace(s, disarmed_at=now)
+            return replace(s, life=replace(s.life, disarmed_at=now))
         authority = s.authority.on_arming(armed, commanded=commanded, landing=returning)
         if authority is not s.authority:
             out += self._revoked_effects(authority)
-        return replace(s, authority=authority, disarmed_at=None)
+        return replace(s, authority=authority, life=replace(s.life, disarmed_at=None))
 
     def _disarm_check(self, s: Sortie, v: ins.VehicleSnapshot, now: float, out: list[fx.Effect]) -> Sortie:
         """A disarming on the service's own return is its landing's once the vehicle is
         reported on the ground within ``DISARM_LANDING_S``; otherwise nobody's."""
-        if s.disarmed_at is None:
+        if s.life.disarmed_at is None:
             return s
         if v.armed or (v.landed_known and not v.airborne):
-            return replace(s, disarmed_at=None)
-        if now - s.disarmed_at < DISARM_LANDING_S:
+            return replace(s, life=replace(s.life, disarmed_at=None))
+        if now - s.life.disarmed_at < DISARM_LANDING_S:
             return s
-        s = replace(s, disarmed_at=None)
+        s = replace(s, life=replace(s.life, disarmed_at=None))
         return self._revoke(s, f"the vehicle was disarmed (not commanded by the service) and not reported "
                                f"landed within {DISARM_LANDING_S:g} s", out)
 
@@ -886,19 +800,21 @@ class SortieLogic:
     def _command_due(self, s: Sortie, v: ins.VehicleSnapshot, out: list[fx.Effect]) -> Sortie:
         """Start or resume the mission when the service may and should (not while the
         planner warms up: the decisions in flight would wait for the compiler)."""
-        if not s.authority.granted or s.held is None or not v.connected or s.warming:
+        if not s.authority.granted or s.onboard.held is None or not v.connected or s.life.warming:
             return s
-        if (not v.airborne and not s.started and s.held.points and s.busy == "" and v.position_ok
+        if (not v.airborne and not s.life.started and s.onboard.held.points and s.schedule.busy == "" and v.position_ok
                 and v.battery_fraction is not None and v.battery_source == "autopilot"):
-            return self._command(s, fx.Command("start", why=f"plan {s.held.plan_id}"), out)
-        if s.resume_pending and s.held_known and s.busy == "" and v.airborne:
+            return self._command(s, fx.Command("start", why=f"plan {s.onboard.held.plan_id}"), out)
+        if s.onboard.resume_pending and s.onboard.known and s.schedule.busy == "" and v.airborne:
             if v.mode in MISSION_MODES:  # PX4 flies a new mission's marked item in mission mode by itself
-                out.append(fx.Emit(ev.MissionResumed(f"plan {s.held.plan_id}: the vehicle flies it in {v.mode}")))
-                return replace(s, resume_pending=False)
+                out.append(fx.Emit(ev.MissionResumed(f"plan {s.onboard.held.plan_id}: the vehicle flies it in "
+                                                     f"{v.mode}")))
+                return replace(s, onboard=replace(s.onboard, resume_pending=False))
             if v.mode not in HOLDING_MODES:
-                return replace(s, resume_pending=False)  # going home, or in the operator's hands
-            first = s.held.points[0][0] if s.held.points else s.held.rtl_seq
-            return self._command(s, fx.Command("resume", first, f"plan {s.held.plan_id} (was {v.mode})"), out)
+                # going home, or in the operator's hands
+                return replace(s, onboard=replace(s.onboard, resume_pending=False))
+            first = s.onboard.held.points[0][0] if s.onboard.held.points else s.onboard.held.rtl_seq
+            return self._command(s, fx.Command("resume", first, f"plan {s.onboard.held.plan_id} (was {v.mode})"), out)
         return s
 
     def _resume_needed(self, s: Sortie, v: ins.VehicleSnapshot, out: list[fx.Effect]) -> Sortie:
@@ -906,40 +822,31 @@ class SortieLogic:
         gap), on board, the vehicle holding, and no authority to resume it: the operator is
         told once (``resume_needed``); ``operator start`` plans from where the vehicle is then
         and resumes."""
-        held = s.held
-        if (not s.resume_pending or s.authority.granted or held is None or not s.held_known or s.busy != ""
+        held = s.onboard.held
+        if (not s.onboard.resume_pending or s.authority.granted or held is None or not s.onboard.known
+                or s.schedule.busy != ""
                 or not v.airborne or v.mode not in HOLDING_MODES):
             return s
         out += [fx.Emit(ev.ResumeNeeded(f"plan {held.plan_id} is on board and the vehicle holds in {v.mode}: the "
                                         f"service has no authority ({s.authority.state}); operator start resumes it")),
                 fx.Log("warning", f"plan {held.plan_id} is on board, the vehicle holds in {v.mode}: the operator "
                                   f"must resume it (operator start)")]
-        return replace(s, resume_pending=False)
-
-    def _start_lapsed(self, s: Sortie, v: ins.VehicleSnapshot, now: float, out: list[fx.Effect]) -> Sortie:
-        """A start the autopilot accepted but that never took off (it disarmed on the ground
-        again: its own auto-disarm, a refused takeoff, the ground crew) is not started: the
-        disarming ended the authority (``_arming``), and the operator's start starts it again."""
-        if not s.started or s.flown or v.airborne or v.armed or not v.landed_known or now - s.started_at < START_LAPSE_S:
-            return s
-        then = "starting it again" if s.authority.granted else "the operator's start starts it again"
-        out.append(fx.Log("warning", f"the vehicle is on the ground and disarmed after the mission was started: {then}"))
-        return replace(s, started=False)
+        return replace(s, onboard=replace(s.onboard, resume_pending=False))
 
     def _command(self, s: Sortie, cmd: fx.Command, out: list[fx.Effect]) -> Sortie:
         mode = self.rules.mode_names.get(cmd.kind)
         authority = s.authority.commanding(mode) if mode else s.authority
         out.append(cmd)
-        return replace(s, commanding=cmd.kind, authority=authority)
+        return replace(s, authority=authority, schedule=s.schedule.command_sent(cmd.kind))
 
     def _command_done(self, s: Sortie, cmd: fx.Command, now: float, out: list[fx.Effect]) -> Sortie:
         match cmd.kind:
             case "start":
                 out.append(fx.Log("info", "mission started"))
-                return replace(s, started=True, started_at=now, failures=0)
+                return replace(s, life=s.life.started_now(now), schedule=replace(s.schedule, failures=0))
             case "resume":
                 out.append(fx.Emit(ev.MissionResumed(f"{cmd.why}; from item {cmd.seq}")))
-                return replace(s, resume_pending=False)
+                return replace(s, onboard=replace(s.onboard, resume_pending=False))
             case "return":
                 return s
             case "hold":
@@ -953,17 +860,15 @@ class SortieLogic:
     def _command_failed(self, s: Sortie, cmd: fx.Command, error: str, now: float, out: list[fx.Effect]) -> Sortie:
         out += [fx.Emit(ev.CommandFailed(f"{cmd.kind}: {error}"[:256])),
                 fx.Log("warning", f"the autopilot refused {cmd.kind} ({error}); trying again later")]
-        n = s.failures + 1
-        wait = min(self.rules.retry_s * 2 ** (n - 1), self.rules.max_retry_s)
-        if cmd.kind == "set_current":
-            return replace(s, early_end=None)
-        return replace(s, failures=n, retry_at=now + wait)
+        if cmd.kind == "set_current":  # the hold goes on: ended again when next judged served
+            return replace(s, holds=replace(s.holds, early_end=None))
+        return replace(s, schedule=s.schedule.command_failed(now, self.rules.backoff))
 
     def _safety(self, s: Sortie, v: ins.VehicleSnapshot, out: list[fx.Effect]) -> Sortie:
         """Return to launch when the battery reaches the threshold (the planner should never
         let it: this is the guard if the model and the aircraft disagree)."""
         f = v.battery_fraction
-        if (f is None or not v.connected or not v.airborne or v.mode in RETURNING_MODES or s.commanding
+        if (f is None or not v.connected or not v.airborne or v.mode in RETURNING_MODES or s.schedule.commanding
                 or not s.authority.granted or f > self.rules.rtl_battery_fraction):
             return s
         out.append(fx.Emit(ev.Returning(f"battery at {f:.0%} ({v.battery_source}): return to launch commanded")))
@@ -971,12 +876,7 @@ class SortieLogic:
 
     # --- requests and the operator --------------------------------------------------------------
     def _request(self, s: Sortie, user: str, tasks: int, out: list[fx.Effect]) -> Sortie:
-        b = s.binding
-        if b is not None and b.user_id == user and tasks <= 0 and b.request_id is not None and not b.done:
-            s = replace(s, binding=replace(b, done=True))
-        if s.failures >= self.rules.max_failures:
-            s = replace(s, failures=0, retry_at=0.0)
-        return replace(s, dirty=True)
+        return replace(s, holds=s.holds.user_said_done(user, tasks), schedule=s.schedule.request_in(self.rules.backoff))
 
     def operator(self, s: Sortie, cmd: ins.OperatorAsked, v: ins.VehicleSnapshot,
                  now: float) -> tuple[Sortie, list[fx.Effect], bool, str]:
@@ -992,15 +892,15 @@ class SortieLogic:
                 return s, out, True, (f"the service has no authority ({s.authority.state}: {s.authority.detail}); "
                                       f"nothing changed")
             did = ""
-            if v.airborne and v.mode not in RETURNING_MODES and s.commanding == "":
+            if v.airborne and v.mode not in RETURNING_MODES and s.schedule.commanding == "":
                 s = self._command(s, fx.Command("hold", why=f"the operator's hold{because}"), out)
                 did = f"; {self.rules.mode_names['hold']} commanded"
             authority = s.authority.release(f"handed back by the operator's hold{because}")
             out.append(fx.Emit(ev.AuthorityReleased(authority.detail[:256])))
-            return replace(s, authority=authority, resume_pending=False), out, True, (
+            return replace(s, authority=authority, onboard=replace(s.onboard, resume_pending=False)), out, True, (
                 f"authority withdrawn: the service commands no mode and no arming{did}; the vehicle keeps the "
                 f"mission it holds{because}")
-        refusal = self._start_refusal(s, v)
+        refusal = s.life.start_refusal(v)
         if refusal is not None:
             return s, out, False, refusal
         if s.authority.granted:
@@ -1008,68 +908,41 @@ class SortieLogic:
         authority = Authority.by_operator(cmd.reason)
         said = ("authority given: the service may arm, switch to the mission mode and start or resume the "
                 f"mission{because}")
-        if s.over is not None:
-            if not s.beginning:
+        if s.life.over is not None:
+            if not s.life.beginning:
                 out.append(fx.BeginSortie(v.battery_fraction or 0.0))
-            return replace(s, next_authority=authority, beginning=True), out, True, \
-                f"{said}; sortie {s.number + 1} begins"
+            return replace(s, life=replace(s.life, next_authority=authority, beginning=True)), out, True, \
+                f"{said}; sortie {s.life.number + 1} begins"
         if v.airborne and v.mode in MISSION_MODES:  # handed over flying a mission: that mode is expected
             authority = authority.commanding(v.mode)
-        s = replace(s, authority=authority, failures=0, retry_at=0.0)
+        s = replace(s, authority=authority, schedule=s.schedule.granted())
         out.append(fx.Emit(ev.AuthorityGranted(authority.detail[:256])))
         if v.airborne and v.mode in HOLDING_MODES:
-            s = replace(s, must_upload=True, resume_pending=True)
+            s = replace(s, onboard=replace(s.onboard, must_upload=True, resume_pending=True))
             said += "; re-planning from where the vehicle is, then resuming"
         s = self._next(s, v, now, out)
         return s, out, True, said
 
-    def _start_refusal(self, s: Sortie, v: ins.VehicleSnapshot) -> str | None:
-        """Why the operator's start cannot be taken now, or None."""
-        if s.degraded is not None:
-            return f"the service is degraded: {s.degraded}"
-        if not v.connected:
-            return "the autopilot is not connected"
-        if s.over is not None and (v.airborne or v.armed):
-            return f"sortie {s.number} is over and the vehicle is not on the ground and disarmed"
-        if not v.airborne and not v.position_ok:
-            return "the autopilot has no position yet"
-        if not v.airborne and v.battery_source != "autopilot":
-            return f"the battery's charge is {v.battery_source}: no arming on it"
-        return None
-
     def describe(self, s: Sortie, v: ins.VehicleSnapshot) -> str:
-        held = f"plan {s.held.plan_id}" if s.held is not None else "no mission"
-        state = f"over ({s.over})" if s.over else "running"
-        return (f"authority {s.authority.state}: {s.authority.detail}; sortie {s.number} {state}; {held}; "
-                f"{s.services} services; vehicle {v.mode or '?'} {'armed' if v.armed else 'disarmed'}"
-                f"{', airborne' if v.airborne else ''}" + (f"; degraded: {s.degraded}" if s.degraded else ""))
+        held = f"plan {s.onboard.held.plan_id}" if s.onboard.held is not None else "no mission"
+        state = f"over ({s.life.over})" if s.life.over else "running"
+        return (f"authority {s.authority.state}: {s.authority.detail}; sortie {s.life.number} {state}; {held}; "
+                f"{s.life.services} services; vehicle {v.mode or '?'} {'armed' if v.armed else 'disarmed'}"
+                f"{', airborne' if v.airborne else ''}" + (f"; degraded: {s.life.degraded}" if s.life.degraded else ""))
 
     # --- sortie end and begin -------------------------------------------------------------------
     def _end(self, s: Sortie, why: str, v: ins.VehicleSnapshot, out: list[fx.Effect]) -> Sortie:
-        if s.over is not None:
+        if s.life.over is not None:
             return s
-        if s.watch is not None:
-            s = self._judge(replace(s, watch=s.watch.abandon(why)), out)
-        out.append(fx.EndSortie(why))
-        return replace(s, over=why, version=s.version + 1, busy="" if s.busy == "plan" else s.busy)
-
-    def _maybe_begin(self, s: Sortie, v: ins.VehicleSnapshot, out: list[fx.Effect]) -> Sortie:
-        """Begin the next sortie once the vehicle is ready again: on the ground, disarmed,
-        its battery swapped or charged (a known reading)."""
-        r = self.rules
-        if s.over is None or not r.repeat or s.degraded is not None or s.beginning:
-            return s
-        if not (v.connected and v.position_ok) or v.airborne or v.armed:
-            return s
-        if v.battery_source != "autopilot" or v.battery_fraction is None or v.battery_fraction < r.next_battery_fraction:
-            return s
-        out.append(fx.BeginSortie(v.battery_fraction))
-        return replace(s, beginning=True)
+        s = self._abandon(s, why, out)
+        life, said = s.life.ended(why)
+        out += said
+        return replace(s, life=life, schedule=s.schedule.ended())
 
     def _begun(self, s: Sortie, number: int, out: list[fx.Effect]) -> Sortie:
-        authority = s.next_authority or next_sortie(s.authority)
+        authority = s.life.next_authority or next_sortie(s.authority)
         out.append(fx.Emit(ev.SortieStarted(f"sortie {number}: authority {authority.state} ({authority.detail})")))
-        return Sortie(number=number, authority=authority, plan_id=s.plan_id, version=s.version + 1, warming=s.warming)
+        return Sortie(life=s.life.next_sortie(number), authority=authority, schedule=s.schedule.next_sortie())
 
 
 def marked_current(items: list[MissionItem], seq: int) -> list[MissionItem]:
@@ -1081,9 +954,9 @@ def marked_current(items: list[MissionItem], seq: int) -> list[MissionItem]:
 def new_sortie(number: int, rules: Rules, plan_id: int = 0) -> Sortie:
     """The state of the sortie the service starts in: the configuration's authority
     (``start_mission``) is for it only, and it ends if the vehicle is found in the air or
-    armed (``Sortie.just_started``)."""
+    armed (``Life.just_started``)."""
     authority = Authority.by_configuration() if rules.start_mission else Authority()
-    return Sortie(number=number, authority=authority, plan_id=plan_id)
+    return Sortie(life=Life(number=number), authority=authority, schedule=Schedule(plan_id=plan_id))
 
 
 def _same_point(a: HeldMission | None, b: HeldMission | None, seq: int) -> bool:

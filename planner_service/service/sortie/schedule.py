@@ -1,0 +1,138 @@
+"""The sortie's schedule: what the service has in flight (a plan, an upload, a read-back, a
+command), when the next may go, and what the decisions are counted by. Pure.
+
+Its fields change together: a plan or an upload sent, returned or failed moves ``busy``,
+``failures`` and ``retry_at`` in one step, whatever the mission on board. Failures wait as
+``Backoff`` says: doubling from ``retry_s`` up to ``max_retry_s``, given up after
+``max_failures`` in a row until something changes (a request, the link, the operator)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+from typing import Literal
+
+from .. import events as ev
+from . import effects as fx
+
+Busy = Literal["", "plan", "upload", "readback"]
+
+
+@dataclass(frozen=True)
+class Backoff:
+    """How failed plans, uploads and commands are retried (from ``Rules``)."""
+
+    max_failures: int = 8
+    retry_s: float = 1.0
+    max_retry_s: float = 30.0
+
+    def wait_s(self, failures: int) -> float:
+        """The wait after the ``failures``-th failure in a row: doubling, capped."""
+        return min(self.retry_s * 2 ** (failures - 1), self.max_retry_s)
+
+
+@dataclass(frozen=True)
+class Schedule:
+    """What is in flight and when the next plan, read-back or command may go."""
+
+    plan_id: int = 0
+    """The last plan id given (a plan uploaded, or refused before its upload)."""
+    version: int = 0
+    """Bumped when a plan being searched is stale (doubt, restart, sortie over)."""
+    busy: Busy = ""
+    commanding: str = ""
+    """The command sent and not yet answered ('' for none)."""
+    failures: int = 0
+    retry_at: float = 0.0
+    readback_at: float = 0.0
+    """The next read-back, apart from ``retry_at``: a doubt is resolved at once, whatever
+    the plans' back-off (holds flown meanwhile are not judged), and only a failed read-back
+    waits."""
+    dirty: bool = True
+    """Requests came in since the last plan."""
+    last_plan_at: float = -math.inf
+    decided_at: int | None = None
+    """The seq from whose hold the last decision was made (one decision per interval)."""
+    last_hover_index: int = -1
+    """The hover point the vehicle last arrived at (where the way home's decisions start)."""
+
+    # --- what goes out and comes back ---------------------------------------------------------
+    def planning(self) -> Schedule:
+        """A plan asked of the planner: the requests so far are in it."""
+        return replace(self, busy="plan", dirty=False)
+
+    def plan_returned(self, now: float) -> Schedule:
+        """The planner answered (a plan or a failure)."""
+        return replace(self, busy="", last_plan_at=now)
+
+    def uploading(self, plan_id: int) -> Schedule:
+        return replace(self, busy="upload", plan_id=plan_id)
+
+    def uploaded(self, plan_id: int) -> Schedule:
+        """The vehicle accepted plan ``plan_id``: the failures in a row end."""
+        return replace(self, failures=0, plan_id=plan_id)
+
+    def answered(self) -> Schedule:
+        """What was in flight (an upload, a read-back) was answered."""
+        return replace(self, busy="")
+
+    def reading_back(self) -> Schedule:
+        return replace(self, busy="readback")
+
+    def read_back_failed(self, now: float, retry_s: float) -> Schedule:
+        """Only the read-back waits: the plans' back-off is not touched."""
+        return replace(self, busy="", readback_at=now + retry_s)
+
+    def command_sent(self, kind: str) -> Schedule:
+        return replace(self, commanding=kind)
+
+    def command_answered(self) -> Schedule:
+        return replace(self, commanding="")
+
+    def command_failed(self, now: float, backoff: Backoff) -> Schedule:
+        """A refused command waits like a failed plan, counted with them (the abandonment
+        is the plans' alone: ``failed``)."""
+        n = self.failures + 1
+        return replace(self, failures=n, retry_at=now + backoff.wait_s(n))
+
+    def failed(self, why: str, now: float, backoff: Backoff) -> tuple[Schedule, list[fx.Effect]]:
+        """A plan or upload failed: try again after a growing wait, give up after a bound."""
+        n = self.failures + 1
+        out: list[fx.Effect] = [fx.Emit(ev.UploadFailed(why[:256])), fx.Log("error", why)]
+        if n >= backoff.max_failures:
+            out.append(fx.Emit(ev.UploadAbandoned(f"{n} failures in a row; no more plans until the link, a "
+                                                   f"request or the operator changes something"[:256])))
+            return replace(self, failures=n, retry_at=math.inf, dirty=True), out
+        return replace(self, failures=n, retry_at=now + backoff.wait_s(n), dirty=True), out
+
+    # --- what changes the schedule from outside -----------------------------------------------
+    def stale(self) -> Schedule:
+        """What is being searched now is made on a state that is gone (degraded)."""
+        return replace(self, version=self.version + 1)
+
+    def in_doubt(self) -> Schedule:
+        """The vehicle may hold another mission: plans in search are stale, and the read-back
+        goes at once, whatever the back-off."""
+        return replace(self, version=self.version + 1, retry_at=0.0, readback_at=0.0)
+
+    def link_restored(self, now: float) -> Schedule:
+        """A new link is a change: the failures in a row are forgiven."""
+        return replace(self, retry_at=min(self.retry_at, now), failures=0)
+
+    def request_in(self, backoff: Backoff) -> Schedule:
+        """A request is a change: plans given up on are tried again."""
+        s = replace(self, failures=0, retry_at=0.0) if self.failures >= backoff.max_failures else self
+        return replace(s, dirty=True)
+
+    def granted(self) -> Schedule:
+        """The operator gave the authority: whatever waited goes now."""
+        return replace(self, failures=0, retry_at=0.0)
+
+    def ended(self) -> Schedule:
+        """The sortie is over: a plan in search is stale (an upload or a read-back in flight
+        is still answered)."""
+        return replace(self, version=self.version + 1, busy="" if self.busy == "plan" else self.busy)
+
+    def next_sortie(self) -> Schedule:
+        """The schedule a new sortie begins with: plan ids run on, anything in search is stale."""
+        return Schedule(plan_id=self.plan_id, version=self.version + 1)
