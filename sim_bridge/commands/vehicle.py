@@ -85,6 +85,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--disarm-delay-s", type=float, default=10.0, metavar="SECONDS",
                         help="armed on the ground this many simulated seconds without taking off, the motors stop "
                              "(ArduPilot DISARM_DELAY, PX4 COM_DISARM_PRFLT); 0: never (default %(default)s)")
+    parser.add_argument("--max-stream-hz", type=float, default=50.0, metavar="HZ",
+                        help="the most any streamed message is sent per wall second: PX4's rates are in its "
+                             "simulated time, so a speed-up multiplies them up to this (default %(default)s)")
     parser.add_argument("--log-level", default="INFO", choices=("DEBUG", "INFO", "WARNING", "ERROR"))
 
 
@@ -108,7 +111,7 @@ def run(args: argparse.Namespace) -> int:
             max_mission_items=args.max_mission_items,
             signing_key_file=args.signing_key, signing_timestamp_file=args.signing_timestamp_file,
             state_file=args.state_file, track_file=args.track, recharge_s=args.recharge_s, gps_delay_s=args.gps_delay_s,
-            disarm_delay_s=args.disarm_delay_s,
+            disarm_delay_s=args.disarm_delay_s, max_stream_hz=args.max_stream_hz,
         )
         vehicle = Vehicle(config)
     except (ScenarioError, MissionError, VehicleError, SigningError) as exc:

@@ -83,6 +83,10 @@ class Behaviour:
     mission_start_range: bool
     """MAV_CMD_MISSION_START's first item is honoured: PX4 sets it current; Copter answers a
     first or last item DENIED (``GCS_MAVLINK_Copter::handle_command_mission_start``)."""
+    mission_start_arms: bool
+    """MAV_CMD_MISSION_START arms a disarmed vehicle (its pre-arm checks first) and switches
+    to the mission mode: PX4 SITL 1.18 (measured: ACK 0, armed, AUTO.MISSION, takes off);
+    Copter needs arming first."""
     waits_for_mission_start: bool
     """AUTO armed on the ground climbs only after MISSION_START (Copter's ``auto_armed``,
     ``ModeAuto::run``); PX4 flies the mission once armed in mission mode."""
@@ -206,7 +210,7 @@ ARDUPILOT_BEHAVIOUR = Behaviour(
     arming_text="Arming motors", disarming_text="Disarming motors", prearm_report_s=30.0,
     mode_checks_disarmed=False, mode_no_position_text="requires position",
     mode_refused_text="Mode change to {name} failed: ", auto_needs_takeoff_on_ground=True, auto_needs_mission=False,
-    mission_start_range=False, waits_for_mission_start=True, pause_switches_to_hold=False,
+    mission_start_range=False, mission_start_arms=False, waits_for_mission_start=True, pause_switches_to_hold=False,
     takeoff_switches_mode=False, takeoff_alt_amsl=False, set_current_to_nav_command=True,
     resumes_at_nav_index=True, do_items_reached=False, disarms_at_mission_end_landed=True,
     empty_mission_keeps_command=True,
@@ -231,11 +235,11 @@ ARDUPILOT_BEHAVIOUR = Behaviour(
 PX4_BEHAVIOUR = Behaviour(
     autopilot=PX4, boot_mode=Mode.HOLD,
     arm_position_in_any_mode=True, arm_no_origin_text=None,
-    arm_no_position_text="Navigation error: No valid global position estimate", arms_in_mission_mode=True,
+    arm_no_position_text="Arming denied: Resolve system health failures first", arms_in_mission_mode=True,
     disarm_resets_mission=False, arming_text=None, disarming_text=None, prearm_report_s=None,
-    mode_checks_disarmed=True, mode_no_position_text="Navigation error: No valid global position estimate",
+    mode_checks_disarmed=False, mode_no_position_text="Navigation error: No valid global position estimate",
     mode_refused_text=None, auto_needs_takeoff_on_ground=False, auto_needs_mission=True,
-    mission_start_range=True, waits_for_mission_start=False, pause_switches_to_hold=True,
+    mission_start_range=True, mission_start_arms=True, waits_for_mission_start=False, pause_switches_to_hold=True,
     takeoff_switches_mode=True, takeoff_alt_amsl=True, set_current_to_nav_command=False,
     resumes_at_nav_index=False, do_items_reached=True, disarms_at_mission_end_landed=False,
     empty_mission_keeps_command=False,
@@ -251,7 +255,7 @@ PX4_BEHAVIOUR = Behaviour(
     unknown_mode_result=M.MAV_RESULT_DENIED, unknown_message_result=M.MAV_RESULT_UNSUPPORTED,
     home_request_sends_origin=False,
     standby_while_landed=False, gps_position_before_estimate=False, local_position_from=Stage.NAVIGATING,
-    prearm_in_sys_status=False, stopped_mission_paused=True, estimator_report_streamed=False,
+    prearm_in_sys_status=True, stopped_mission_paused=True, estimator_report_streamed=False,
     firmware_version=(1, 15, 0),
     params_bytewise=True, param_index_by_name=None,
     item_problem=px4_problem,

@@ -329,6 +329,12 @@ class Flight:
             return None
         if first > 0 and not self.set_current(first):
             return Refusal((f"no mission item {first}",))
+        if self.behaviour.auto_needs_mission and not self.mission_present:
+            return Refusal(("No valid mission available",))
+        if self.behaviour.mission_start_arms and not self.armed:
+            refusal = self.arm()
+            if refusal is not None:
+                return refusal
         return self.set_mode(Mode.AUTO)
 
     def pause(self, pause: bool) -> Refusal | None:

@@ -40,7 +40,7 @@ from .params import ParamTable, vehicle_params
 from .state_file import SAVE_INTERVAL_S, load_state, save_state
 from .track import Track
 from .stored_items import Problem, ardupilot_stored
-from .streams import PeerStreams
+from .streams import DEFAULT_MAX_STREAM_HZ, PeerStreams
 
 log = logging.getLogger(__name__)
 
@@ -93,6 +93,8 @@ class VehicleConfig:
     gps_delay_s: float = DEFAULT_GPS_DELAY_S
     """Simulated seconds after boot until the estimator navigates with GPS (no position,
     no arming in a position mode before; estimator.py)."""
+    max_stream_hz: float = DEFAULT_MAX_STREAM_HZ
+    """The most a streamed message is sent per wall second (``streams.PeerStreams``)."""
     disarm_delay_s: float = 10.0
     """Armed on the ground this many simulated seconds without taking off, the motors stop
     (ArduPilot's DISARM_DELAY, PX4's COM_DISARM_PRFLT); 0: never."""
@@ -110,6 +112,8 @@ class VehicleConfig:
             raise VehicleError("max_mission_items", f"must lie in 1..65535, got {self.max_mission_items}")
         if self.recharge_s is not None and not (math.isfinite(self.recharge_s) and self.recharge_s >= 0):
             raise VehicleError("recharge_s", f"must be a finite number of seconds >= 0, got {self.recharge_s}")
+        if not (math.isfinite(self.max_stream_hz) and self.max_stream_hz > 0):
+            raise VehicleError("max_stream_hz", f"must be a positive number of Hz, got {self.max_stream_hz}")
         for name in ("gps_delay_s", "disarm_delay_s"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0):
@@ -259,7 +263,8 @@ class Vehicle:
     def _peer_streams(self, peer: Hashable) -> PeerStreams:
         table = self.streams.get(peer)
         if table is None:
-            table = self.streams[peer] = PeerStreams(self.config.flavour)
+            table = self.streams[peer] = PeerStreams(self.config.flavour, self.config.speedup,
+                                                     self.config.max_stream_hz)
         return table
 
     def _stream(self, now: float) -> None:

@@ -29,7 +29,11 @@ from pymavlink.dialects.v20 import common as mavlink
 from protocol.autopilot import ARDUPILOT, PX4, Autopilot, autopilot_for
 
 M = mavlink
-MIN_INTERVAL_S = 0.02
+DEFAULT_MAX_STREAM_HZ = 50.0
+"""The most a streamed message is sent per wall second (``--max-stream-hz``): an autopilot's
+rates are in its own clock, so a speed-up multiplies them; this keeps a stub at a speed-up of
+160 from sending thousands of messages a second (PX4's fastest default is 50 Hz of its time)."""
+MIN_INTERVAL_S = 1.0 / DEFAULT_MAX_STREAM_HZ
 EKF_STATUS_REPORT_ID = 193
 """ArduPilot's EKF_STATUS_REPORT (ardupilotmega dialect, not in common)."""
 
@@ -50,27 +54,29 @@ GROUPS: dict[int, tuple[int, ...]] = {
 }
 GROUP_OF: dict[int, int] = {msg_id: group for group, ids in GROUPS.items() for msg_id in ids}
 
-# PX4's MAVLINK_MODE_NORMAL defaults (Hz), for the messages the stub builds.
+# PX4's onboard (API) link unasked, per simulated second, for the messages the stub builds:
+# measured on PX4 SITL 1.18.0-dev at speed 5 and 10 (MAVLINK_MODE_ONBOARD, the link a
+# companion computer and the service use; px4-rc.mavlink). GPS_RAW_INT follows the GPS
+# (7.7 Hz measured); MISSION_CURRENT is the mission manager's 1 Hz.
 PX4_DEFAULT_HZ: dict[int, float] = {
     M.MAVLINK_MSG_ID_HEARTBEAT: 1.0,
-    M.MAVLINK_MSG_ID_ATTITUDE: 15.0,
+    M.MAVLINK_MSG_ID_ATTITUDE: 100.0,
     M.MAVLINK_MSG_ID_BATTERY_STATUS: 0.5,
-    M.MAVLINK_MSG_ID_EXTENDED_SYS_STATE: 1.0,
-    M.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: 5.0,
-    M.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN: 1.0,
-    M.MAVLINK_MSG_ID_GPS_RAW_INT: 1.0,
+    M.MAVLINK_MSG_ID_EXTENDED_SYS_STATE: 5.0,
+    M.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: 50.0,
+    M.MAVLINK_MSG_ID_GPS_RAW_INT: 8.0,
     M.MAVLINK_MSG_ID_HOME_POSITION: 0.5,
-    M.MAVLINK_MSG_ID_LOCAL_POSITION_NED: 1.0,
-    M.MAVLINK_MSG_ID_SYS_STATUS: 1.0,
-    M.MAVLINK_MSG_ID_VFR_HUD: 4.0,
+    M.MAVLINK_MSG_ID_LOCAL_POSITION_NED: 30.0,
+    M.MAVLINK_MSG_ID_SYS_STATUS: 5.0,
+    M.MAVLINK_MSG_ID_SYSTEM_TIME: 1.0,
+    M.MAVLINK_MSG_ID_VFR_HUD: 10.0,
     M.MAVLINK_MSG_ID_MISSION_CURRENT: 1.0,
-    # MISSION_CURRENT is sent by PX4's mission manager at 1 Hz (MavlinkMissionManager::send).
 }
 ARDUPILOT_STREAMABLE = frozenset(GROUP_OF) | {
     M.MAVLINK_MSG_ID_HEARTBEAT, M.MAVLINK_MSG_ID_EXTENDED_SYS_STATE, M.MAVLINK_MSG_ID_HOME_POSITION,
     M.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN, M.MAVLINK_MSG_ID_AUTOPILOT_VERSION,
 }
-PX4_STREAMABLE = frozenset(PX4_DEFAULT_HZ) | {M.MAVLINK_MSG_ID_SYSTEM_TIME, M.MAVLINK_MSG_ID_AUTOPILOT_VERSION}
+PX4_STREAMABLE = frozenset(PX4_DEFAULT_HZ) | {M.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN, M.MAVLINK_MSG_ID_AUTOPILOT_VERSION}
 
 
 @dataclass(frozen=True)
@@ -87,11 +93,17 @@ class StreamRules:
     """SET_MESSAGE_INTERVAL of HEARTBEAT is accepted and changes nothing (PX4's 1 Hz)."""
     data_streams: bool
     """REQUEST_DATA_STREAM is honoured (ArduPilot); PX4 has no handler for it."""
+    simulated_time: bool
+    """Rates and requested intervals are in the vehicle's own (simulated) clock, so a
+    speed-up multiplies them, as PX4 SITL's do (measured: 5 times the messages at speed 5);
+    False: wall time (the ArduPilot flavour, kept so; docs/VEHICLE.md)."""
 
 
 STREAM_RULES: Mapping[str, StreamRules] = MappingProxyType({
-    ARDUPILOT.name: StreamRules(ARDUPILOT_STREAMABLE, None, fixed_heartbeat=False, data_streams=True),
-    PX4.name: StreamRules(PX4_STREAMABLE, MappingProxyType(PX4_DEFAULT_HZ), fixed_heartbeat=True, data_streams=False),
+    ARDUPILOT.name: StreamRules(ARDUPILOT_STREAMABLE, None, fixed_heartbeat=False, data_streams=True,
+                                   simulated_time=False),
+    PX4.name: StreamRules(PX4_STREAMABLE, MappingProxyType(PX4_DEFAULT_HZ), fixed_heartbeat=True,
+                             data_streams=False, simulated_time=True),
 })
 """The stream rules by the autopilot profile's name."""
 
@@ -99,20 +111,34 @@ STREAM_RULES: Mapping[str, StreamRules] = MappingProxyType({
 @dataclass
 class PeerStreams:
     """One peer's message intervals (wall seconds; absent or 0: not sent) and the times
-    each is next due."""
+    each is next due. ``speedup`` (simulated seconds per wall second) turns the vehicle's
+    intervals into wall ones where the rules say they are simulated; ``max_hz`` caps every
+    message's wall rate."""
 
     flavour: Union[str, Autopilot]
+    speedup: float = 1.0
+    max_hz: float = DEFAULT_MAX_STREAM_HZ
     intervals: dict[int, float] = field(default_factory=dict)
     group_hz: dict[int, float] = field(default_factory=dict)
     due: dict[int, float] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         self.rules = STREAM_RULES[autopilot_for(self.flavour).name]
+        if not (self.speedup > 0 and self.max_hz > 0):
+            raise ValueError(f"speedup and max_hz must be positive, got {self.speedup} and {self.max_hz}")
         if not self.intervals:
             if self.rules.default_hz is not None:
-                self.intervals = {m: 1.0 / hz for m, hz in self.rules.default_hz.items()}
+                self.intervals = {m: self._wall(1.0 / hz) for m, hz in self.rules.default_hz.items()}
             else:
                 self.intervals = {M.MAVLINK_MSG_ID_HEARTBEAT: 1.0}
+
+    def _wall(self, interval_s: float) -> float:
+        """A vehicle interval as wall seconds (0 stays off), never under 1/max_hz."""
+        if interval_s <= 0:
+            return 0.0
+        if self.rules.simulated_time:
+            interval_s /= self.speedup
+        return max(interval_s, 1.0 / self.max_hz)
 
     @property
     def streamable(self) -> frozenset[int]:
@@ -121,11 +147,11 @@ class PeerStreams:
     def default_interval(self, msg_id: int) -> float:
         """What interval 0 ("the default rate") means for ``msg_id``."""
         if msg_id == M.MAVLINK_MSG_ID_HEARTBEAT:
-            return 1.0
+            return self._wall(1.0)
         if self.rules.default_hz is not None:
             hz = self.rules.default_hz.get(msg_id, 0.0)
-        else:
-            hz = self.group_hz.get(GROUP_OF.get(msg_id, -1), 0.0)
+            return self._wall(1.0 / hz) if hz > 0 else 0.0
+        hz = self.group_hz.get(GROUP_OF.get(msg_id, -1), 0.0)
         return 1.0 / hz if hz > 0 else 0.0
 
     def set_interval(self, msg_id: int, interval_us: float) -> bool:
@@ -139,7 +165,7 @@ class PeerStreams:
         elif interval_us < 0:
             interval = 0.0
         else:
-            interval = max(MIN_INTERVAL_S, min(interval_us / 1e6, 60.0))
+            interval = self._wall(min(interval_us / 1e6, 60.0))
         self._set(msg_id, interval)
         return True
 

@@ -205,11 +205,14 @@ def battery_status(flight: Flight, power_w: float) -> Any:
 
 
 def extended_sys_state(flight: Flight) -> Any:
+    """PX4 SITL says TAKEOFF for the whole climb to a first item from the ground and LANDING
+    for a mission's LAND item (measured: 1, 3, 2, 4, 1)."""
+    landing_item = flight.loaded is not None and flight.loaded.command == mavlink.MAV_CMD_NAV_LAND
     if flight.landed:
         landed = mavlink.MAV_LANDED_STATE_ON_GROUND
-    elif flight.vel[2] > 0.1 and flight.pos[2] < 5.0:
+    elif flight.vel[2] > 0.1 and (flight.pos[2] < 5.0 or flight.climb_out is not None):
         landed = mavlink.MAV_LANDED_STATE_TAKEOFF
-    elif flight.vel[2] < -0.1 and flight.mode in (Mode.LAND, Mode.RTL):
+    elif flight.vel[2] < -0.1 and (flight.mode in (Mode.LAND, Mode.RTL) or landing_item):
         landed = mavlink.MAV_LANDED_STATE_LANDING
     else:
         landed = mavlink.MAV_LANDED_STATE_IN_AIR

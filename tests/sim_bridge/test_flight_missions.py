@@ -170,7 +170,20 @@ def test_the_estimator_stages_and_arming() -> None:
     flight.set_mode(Mode.GUIDED)
     assert flight.arm() is None
     px4 = Flight(preset("field"), ORIGIN, "px4", gps_delay_s=40.0)
-    assert px4.arm().reasons == ("Navigation error: No valid global position estimate",)
+    # PX4 SITL 1.18's STATUSTEXT (TEMPORARILY_REJECTED): the navigation error goes as an event.
+    assert px4.arm().reasons == ("Arming denied: Resolve system health failures first",)
+    # ... and a mode is taken disarmed without a position (PX4 checks it at arming).
+    assert px4.set_mode(Mode.RTL) is None and px4.set_mode(Mode.HOLD) is None
+
+
+def test_px4_mission_start_arms_and_starts_a_mission_it_has() -> None:
+    px4 = Flight(preset("field"), ORIGIN, "px4", gps_delay_s=0.0)
+    px4.step(0.1)
+    refusal = px4.mission_start()
+    assert refusal is not None and refusal.reasons == ("No valid mission available",) and not px4.armed
+    px4.mission = [MissionItem(seq=0, frame=6, command=16, current=1, x=round(ORIGIN.lat_deg * 1e7), y=round(ORIGIN.lon_deg * 1e7), z=10.0)]
+    assert px4.mission_start() is None
+    assert px4.armed and px4.mode is Mode.AUTO
 
 
 def test_armed_on_the_ground_too_long_the_motors_stop() -> None:

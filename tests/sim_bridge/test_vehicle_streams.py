@@ -77,7 +77,8 @@ def test_px4_streams_its_default_set_unasked_and_ignores_request_data_stream(veh
     got = counts(gcs, 2.5)
     assert {"GLOBAL_POSITION_INT", "EXTENDED_SYS_STATE", "SYS_STATUS", "ATTITUDE", "GPS_RAW_INT",
             "HOME_POSITION", "BATTERY_STATUS", "MISSION_CURRENT"} <= got.keys(), got
-    assert got["ATTITUDE"] > got["GLOBAL_POSITION_INT"] > got["SYS_STATUS"]  # 15, 5 and 1 Hz
+    # PX4 SITL's onboard link: 50, 30 and 5 Hz (ATTITUDE's 100 Hz capped at --max-stream-hz 50).
+    assert got["GLOBAL_POSITION_INT"] > got["LOCAL_POSITION_NED"] > got["SYS_STATUS"] > got["MISSION_CURRENT"]
     assert gcs.command(M.MAV_CMD_SET_MESSAGE_INTERVAL, M.MAVLINK_MSG_ID_ATTITUDE, -1) == M.MAV_RESULT_ACCEPTED
     counts(gcs, 0.3)
     assert "ATTITUDE" not in counts(gcs, 1.0)
@@ -171,3 +172,21 @@ def test_failing_prearm_checks_are_reported_every_30_s() -> None:
             sent.clear()
     finally:
         vehicle.link.close()
+
+
+def test_px4_rates_are_simulated_time_scaled_by_the_speedup_and_capped() -> None:
+    from sim_bridge.vehicle.streams import PeerStreams
+
+    # PX4 SITL at speed 5 sends SYS_STATUS (5 Hz of its time) 25 times a wall second.
+    fast = PeerStreams("px4", speedup=5.0, max_hz=50.0)
+    assert fast.intervals[M.MAVLINK_MSG_ID_SYS_STATUS] == pytest.approx(1 / 25)
+    assert fast.intervals[M.MAVLINK_MSG_ID_HEARTBEAT] == pytest.approx(1 / 5)
+    assert fast.intervals[M.MAVLINK_MSG_ID_ATTITUDE] == pytest.approx(1 / 50)  # 500 Hz, capped
+    assert fast.set_interval(M.MAVLINK_MSG_ID_BATTERY_STATUS, 1_000_000)  # 1 s of its time
+    assert fast.intervals[M.MAVLINK_MSG_ID_BATTERY_STATUS] == pytest.approx(0.2)
+    # ArduPilot's stay in wall time.
+    ap = PeerStreams("ardupilot", speedup=5.0, max_hz=50.0)
+    assert ap.set_interval(M.MAVLINK_MSG_ID_BATTERY_STATUS, 1_000_000)
+    assert ap.intervals[M.MAVLINK_MSG_ID_BATTERY_STATUS] == pytest.approx(1.0)
+    with pytest.raises(ValueError, match="max_hz"):
+        PeerStreams("px4", speedup=5.0, max_hz=0.0)
