@@ -63,8 +63,12 @@ class Autopilot:
     """The mode a mission's RETURN_TO_LAUNCH item hands the vehicle to; None: flown in the
     mission mode. PX4 switches to AUTO.RTL as the item begins ("Mission finished, loitering",
     "Returning to launch", seen on PX4 SITL 1.18), so an upload can no longer turn the way
-    home back; after the landing's disarming it goes back to the mode chosen before
-    (AUTO.MISSION). ArduPilot flies the item in AUTO."""
+    home back. ArduPilot flies the item in AUTO."""
+    modes_after_landing: frozenset[str]
+    """Modes the autopilot switches to by itself when a landing in its return mode disarms
+    it. PX4 goes back to the last mode chosen that allows arming (``UserModeIntention::
+    onDisarm``): AUTO.MISSION after its mission's return, AUTO.LOITER (its mode at boot)
+    after a commanded one, both seen on PX4 SITL. ArduPilot stays in its mode."""
     set_current_by_command: bool
     """The flown item is set with MAV_CMD_DO_SET_MISSION_CURRENT (ArduPilot); False: with the
     MISSION_SET_CURRENT message, PX4 SITL 1.18 answering the command MAV_RESULT_UNSUPPORTED."""
@@ -123,7 +127,7 @@ ARDUPILOT = Autopilot(
     # ground station and checks the position as AUTO will.
     arm_mode="GUIDED",
     home_slots=1, whole_second_holds=True, compacts_items=True, writes_items_as_they_arrive=True,
-    return_item_mode=None, set_current_by_command=True, flies_changed_current_item=False,
+    return_item_mode=None, modes_after_landing=frozenset(), set_current_by_command=True, flies_changed_current_item=False,
     mav_autopilot=M.MAV_AUTOPILOT_ARDUPILOTMEGA, estimator_message="EKF_STATUS_REPORT", estimator_msg_id=M.MAVLINK_MSG_ID_EKF_STATUS_REPORT,
     estimator_stream=M.MAV_DATA_STREAM_EXTRA3, estimator_unaided_flags=M.EKF_CONST_POS_MODE,
 )
@@ -137,13 +141,24 @@ PX4 = Autopilot(
     main_shift=16, main_mask=0xFF, sub_shift=24, unknown_mode="PX4 {0}/{1}",
     mission_mode="AUTO.MISSION", return_mode="AUTO.RTL", hold_mode="AUTO.LOITER", arm_mode=None,
     home_slots=0, whole_second_holds=False, compacts_items=False, writes_items_as_they_arrive=False,
-    return_item_mode="AUTO.RTL", set_current_by_command=False, flies_changed_current_item=True,
+    return_item_mode="AUTO.RTL", modes_after_landing=frozenset({"AUTO.MISSION", "AUTO.LOITER"}),
+    set_current_by_command=False, flies_changed_current_item=True,
     mav_autopilot=M.MAV_AUTOPILOT_PX4, estimator_message="ESTIMATOR_STATUS", estimator_msg_id=M.MAVLINK_MSG_ID_ESTIMATOR_STATUS, estimator_stream=None,
     estimator_unaided_flags=0,
 )
 
 PROFILES: Mapping[str, Autopilot] = MappingProxyType({p.name: p for p in (ARDUPILOT, PX4)})
 FLAVOURS: tuple[str, ...] = tuple(PROFILES)
+
+
+def autopilot_name(mav_autopilot: int) -> str:
+    """The configuration's name of the autopilot a HEARTBEAT's ``autopilot`` field names, or
+    its MAV_AUTOPILOT name where no profile has it."""
+    for profile in PROFILES.values():
+        if profile.mav_autopilot == mav_autopilot:
+            return profile.name
+    entry = M.enums["MAV_AUTOPILOT"].get(mav_autopilot)
+    return entry.name if entry is not None else f"MAV_AUTOPILOT {mav_autopilot}"
 
 
 def autopilot_for(flavour: Union[str, Autopilot]) -> Autopilot:
@@ -157,4 +172,4 @@ def autopilot_for(flavour: Union[str, Autopilot]) -> Autopilot:
         raise MissionError("flavour", f"{flavour!r} is not one of {FLAVOURS}") from None
 
 
-__all__ = ["ARDUPILOT", "Autopilot", "FLAVOURS", "Flavour", "PROFILES", "PX4", "autopilot_for"]
+__all__ = ["ARDUPILOT", "Autopilot", "FLAVOURS", "Flavour", "PROFILES", "PX4", "autopilot_for", "autopilot_name"]

@@ -25,7 +25,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--speedup", type=positive_float, default=25.0, help="simulated seconds per wall second (default 25)")
     parser.add_argument("--budget-ms", type=positive_float, default=150.0, help="planner budget per decision (default 150)")
     parser.add_argument("--backend", default="pymavlink", choices=["pymavlink", "mavsdk"], help="MAVLink library")
-    parser.add_argument("--flavour", default="ardupilot", choices=["ardupilot", "px4"], help="autopilot the stub imitates (with --mavlink: the autopilot's)")
+    parser.add_argument("--flavour", default=None, choices=["ardupilot", "px4"],
+                        help="autopilot the stub imitates (with --mavlink: the autopilot's; it must say so in its "
+                             "HEARTBEAT); default: --config's mavlink.flavour, else ardupilot")
     parser.add_argument("--seed", type=int, default=1, help="seed of the users and the planner (default 1)")
     parser.add_argument("--timeout", type=positive_float, default=180.0, help="give up after this many wall seconds (default 180)")
     parser.add_argument("--algo", default="mcts", choices=("mcts", "greedy", "random", "ts-mcts", "mcts-paper"),

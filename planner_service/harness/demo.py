@@ -31,7 +31,7 @@ class DemoError(ServiceError):
 
 
 def run_demo(out: Path, *, users: int = 10, speedup: float = 25.0, budget_ms: float = 150.0,
-             backend: str = "pymavlink", flavour: str = "ardupilot", seed: int = 1, timeout_s: float = 180.0,
+             backend: str = "pymavlink", flavour: str | None = None, seed: int = 1, timeout_s: float = 180.0,
              mavlink: str | None = None, config: Path | None = None, algo: str = "mcts", offline: bool = True,
              echo: Callable[[str], None] = print) -> dict[str, Any]:
     """Fly one sortie; returns the summary (also written to ``out/summary.json``). With
@@ -47,6 +47,7 @@ def run_demo(out: Path, *, users: int = 10, speedup: float = 25.0, budget_ms: fl
     endpoint = f"tcp/127.0.0.1:{zenoh_port}"
     try:
         base = _read_toml(config) if config is not None else {}
+        flavour = flavour or str(base.get("mavlink", {}).get("flavour", "ardupilot"))
         service_config = build_config(base, {
             "zenoh.listen": endpoint, "mavlink.url": mavlink or f"udpout:127.0.0.1:{mav_port}",
             "mavlink.backend": backend, "mavlink.flavour": flavour, "mavlink.start_mission": "true",

@@ -354,3 +354,16 @@ def test_px4_at_rest_reports_constant_position_mode_with_its_gps_position() -> N
     assert assess_position(with_(at_rest, estimator_unaided_flags=PX4.estimator_unaided_flags)) == ""
     assert "no GPS position yet (flags 0x03ff)" in assess_position(
         with_(at_rest, estimator_unaided_flags=ARDUPILOT.estimator_unaided_flags))
+
+
+def test_another_autopilot_than_configured_is_never_taken_for_it() -> None:
+    # `demo --config docs/sitl-px4.toml` once flew PX4 SITL with ArduPilot's conventions (the
+    # demo's --flavour default won): it armed a PX4 with a mission shifted by a home slot.
+    events: list[LinkEvent] = []
+    state = VehicleState("ardupilot", events.append, clock=Clock())
+    assert not state.on_heartbeat(1, 1, heartbeat(autopilot=M.MAV_AUTOPILOT_PX4))
+    assert state.autopilot is None and events == []
+    assert state.wrong_autopilot == ("the autopilot 1/1 is px4 (HEARTBEAT autopilot 12), not ardupilot "
+                                     "as mavlink.flavour says")
+    px4 = VehicleState("px4", events.append, clock=Clock())
+    assert px4.on_heartbeat(1, 1, heartbeat(autopilot=M.MAV_AUTOPILOT_PX4)) and px4.wrong_autopilot == ""

@@ -897,6 +897,14 @@ def test_px4s_way_back_to_its_mission_mode_after_the_returns_landing_is_its_own(
     assert run.s.authority.state == "revoked"
 
 
+def test_px4s_hold_mode_after_the_landing_of_a_return_is_its_own_too() -> None:
+    run = fly_px4_home()  # after a return the service commanded it went back to its boot mode (SITL)
+    run.feed(ins.OnGround("EXTENDED_SYS_STATE"), airborne=False, xyz=(0.0, 0.0, 0.1))
+    run.feed(ins.ArmedChanged(False, commanded=False), armed=False)
+    run.feed(ins.ModeChanged("AUTO.LOITER", commanded=False), mode="AUTO.LOITER")
+    assert run.s.authority.granted
+
+
 def test_px4s_mission_mode_while_still_armed_after_the_return_is_not_explained() -> None:
     run = fly_px4_home()
     run.feed(ins.ModeChanged("AUTO.MISSION", commanded=False), mode="AUTO.MISSION")

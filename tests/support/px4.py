@@ -64,6 +64,23 @@ TRUTH_HZ = 10.0
 """GLOBAL_POSITION_INT on the monitor's link, in simulated time."""
 
 
+PARAMS = REPO / "docs" / "sitl-px4.params"
+"""The parameters docs/sitl-px4.toml's scenario needs (battery, cruise speed)."""
+
+
+def read_params(path: Path) -> dict[str, float]:
+    """A parameter file of ``NAME VALUE`` lines (``#`` comments)."""
+    params: dict[str, float] = {}
+    for number, line in enumerate(path.read_text().splitlines(), 1):
+        words = line.split("#", 1)[0].split()
+        if not words:
+            continue
+        if len(words) != 2:
+            raise ValueError(f"{path}:{number}: expected NAME VALUE, got {line!r}")
+        params[words[0]] = float(words[1])
+    return params
+
+
 def px4_root() -> Path | None:
     """The folder holding ``bin/px4`` and ``etc/``, or None."""
     candidates = [os.environ.get(ENV, ""), str(REPO.parent / "shared" / "px4"), "/work/shared/px4"]

@@ -129,6 +129,8 @@ class PymavlinkLink(VehicleLink):
         try:
             await asyncio.wait_for(self._connected.wait(), timeout_s)
         except TimeoutError:
+            if self.state.wrong_autopilot:
+                raise LinkError("connect", self.state.wrong_autopilot) from None
             raise LinkError("connect", f"no autopilot heartbeat at {self.settings.url} within {timeout_s:g} s"
                             f"{self.signing_hint()}") from None
 

@@ -146,6 +146,8 @@ class MavsdkLink(VehicleLink):
         try:
             await asyncio.wait_for(self._connected.wait(), timeout_s)
         except TimeoutError:
+            if self.state.wrong_autopilot:
+                raise LinkError("connect", self.state.wrong_autopilot) from None
             raise LinkError("connect", f"no autopilot heartbeat at {url} within {timeout_s:g} s") from None
 
     async def close(self) -> None:

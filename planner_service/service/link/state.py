@@ -23,7 +23,7 @@ from protocol.text import printable
 
 from .events import (MAX_TEXT, ArmedChanged, Connected, OnGround, LinkEvent, Lost, ModeChanged, PositionChanged,
                      Restarted, Restored, StatusText, TelemetryMissing)
-from protocol.autopilot import Autopilot, autopilot_for
+from protocol.autopilot import Autopilot, autopilot_for, autopilot_name
 
 from .modes import mode_name
 from .statustext import StatusTexts
@@ -66,6 +66,8 @@ class VehicleState:
         self.on_restart: Callable[[], None] = lambda: None
         """Set by the backend: the vehicle restarted (a new mission generation)."""
         self.texts: deque[tuple[float, int, str]] = deque(maxlen=32)
+        self.wrong_autopilot = ""
+        """Why the first autopilot heard was not taken: another autopilot than configured."""
         self._texts = StatusTexts()
         self.untrusted = 0
         """Messages dropped because they did not come from the autopilot."""
@@ -157,6 +159,13 @@ class VehicleState:
         first = self.autopilot is None
         if first:
             if component != AUTOPILOT_COMPONENT:
+                return False
+            if msg.autopilot != self.profile.mav_autopilot:
+                # Flown with another autopilot's conventions its mission would be wrong (a
+                # home slot, mode numbers): never taken for the autopilot configured.
+                self.wrong_autopilot = (f"the autopilot {system}/{component} is {autopilot_name(msg.autopilot)} "
+                                        f"(HEARTBEAT autopilot {msg.autopilot}), not {self.profile.name} "
+                                        f"as mavlink.flavour says")
                 return False
             self.autopilot = (system, component)
         elif (system, component) != self.autopilot:

@@ -61,8 +61,8 @@ class Authority:
         """The vehicle reports a change to ``mode``. A mode the link asked for (a step of the
         service's own command), in flight the mission's own return (its last item, from a
         mode the service commanded), and a change the autopilot makes by itself at a known
-        step of the service's sortie (``autopilots_own``: PX4's return to its mission mode
-        after the landing of the mission's return) are the service's. Anything else ends the
+        step of the service's sortie (``autopilots_own``: PX4's return to an earlier mode
+        after the landing of the service's return disarmed it) are the service's. Anything else ends the
         authority: a change while disarmed too (the ground crew's hand on the vehicle), and
         any change at all while the mode expected is unknown."""
         if not self.granted:

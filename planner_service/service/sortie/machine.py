@@ -726,9 +726,9 @@ class SortieLogic:
         held = s.onboard.held
         mission_return = (held is not None and v.seq == held.rtl_seq and mode in RETURNING_MODES)
         a = self.rules.autopilot
-        # PX4 goes back to the mission mode once the landing of its mission's return disarms it
-        after_return = (s.life.homing and not v.armed and not v.airborne and a.return_item_mode is not None
-                        and s.authority.expected_mode == a.return_item_mode and mode == a.mission_mode)
+        # PX4 goes back to an earlier mode once the landing of the service's return disarms it
+        after_return = (s.life.homing and not v.armed and not v.airborne and mode in a.modes_after_landing
+                        and s.authority.expected_mode in RETURNING_MODES)
         authority = s.authority.on_mode(mode, armed=v.armed or v.airborne, mission_return=mission_return,
                                         commanded=commanded, autopilots_own=after_return)
         if authority.state == "revoked" and s.authority.granted:
