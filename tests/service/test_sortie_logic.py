@@ -909,3 +909,11 @@ def test_px4s_mission_mode_while_still_armed_after_the_return_is_not_explained()
     run = fly_px4_home()
     run.feed(ins.ModeChanged("AUTO.MISSION", commanded=False), mode="AUTO.MISSION")
     assert run.s.authority.state == "revoked", "in the air, a switch back to the mission is a station's"
+
+
+def test_px4s_switch_after_the_returns_disarming_is_its_own_before_its_landed_state_comes() -> None:
+    run = fly_px4_home()  # MAVSDK on PX4 SITL: the heartbeat's disarming and mode before EXTENDED_SYS_STATE
+    run.feed(ins.ArmedChanged(False, commanded=False), armed=False, xyz=(0.0, 0.0, 0.2))
+    run.feed(ins.ModeChanged("AUTO.LOITER", commanded=False), mode="AUTO.LOITER")
+    run.feed(ins.OnGround("EXTENDED_SYS_STATE"), airborne=False)
+    assert run.s.authority.granted

@@ -31,15 +31,12 @@ Each test flies SITL at x10 and takes 1-2 minutes of wall time."""
 
 from __future__ import annotations
 
-import json
 import math
 import re
 import time
 import tomllib
-from collections import Counter
 from contextlib import contextmanager
 from dataclasses import replace
-from datetime import datetime
 from pathlib import Path
 from typing import Any, Callable, Iterator
 
@@ -47,18 +44,14 @@ import numpy as np
 import pytest
 
 from planner_service.mcts import MctsConfig
-from planner_service.model import Scenario
-from planner_service.policy import PolicySpec
 from planner_service.service.config import ServiceConfig, load_config
 from planner_service.service.planning import Planner
-from planner_service.model.fairness import fairness_violations
-from planner_service.service.sortie import item_from_dict
-from planner_service.sortie import run_sortie
-from protocol import validate_mission
-from protocol.mission import NAV_RTL, max_points
+from protocol.mission import max_points
 from tests.support.gcs import M, GroundStation
 from tests.support.sitl import Sitl, free_instance, read_dataflash
 from tests.support.stack import Stack
+from tests.support.autopilot_sortie import (BUDGET_MS, SEED, check_requests_and_missions, decisions, event_at,
+                                            logged_at, offline, service_log)
 from tests.support.truth import false_services, recorded_services, sitl_track
 
 pytestmark = [pytest.mark.sitl, pytest.mark.timeout(300)]
@@ -70,9 +63,6 @@ INSTANCES = range(30, 40)
 """SITL instance numbers of these tests (ports 6060..6153)."""
 SPEEDUP = 10
 USERS = 10
-SEED = 1
-BUDGET_MS = 100.0
-"""The planner's budget per decision (tests/service/stack.py's), offline too."""
 BACKENDS = ["pymavlink", "mavsdk"]
 TOLERANCE_S = 1.0
 """A hold is judged from GLOBAL_POSITION_INT and the log's POS, each 0.1 s apart in the
@@ -82,7 +72,6 @@ service's rounding, not a false service."""
 FAILSAFE = re.compile(r"(?i)failsafe|Battery \d is (low|critical)")
 AUTO, LOITER, LAND = 3, 5, 9
 """ArduCopter's custom modes."""
-LOG_TIME = re.compile(r"^(\d{4}-\d\d-\d\d \d\d:\d\d:\d\d,\d{3}) ")
 
 
 @pytest.fixture(scope="module")
@@ -134,44 +123,8 @@ def in_flight_beside_a_second_station(stack: Stack, sitl: Sitl) -> Iterator[tupl
         gcs.close()
 
 
-def service_log(stack: Stack) -> str:
-    return "\n".join(c.log() for c in stack.children if c.name == "planner_service serve")
 
 
-def logged_at(log: str, pattern: str, after: float) -> float | None:
-    """Wall time of the service's first log line matching ``pattern`` at or after ``after``."""
-    for line in log.splitlines():
-        m = LOG_TIME.match(line)
-        if m and re.search(pattern, line):
-            at = datetime.strptime(m.group(1), "%Y-%m-%d %H:%M:%S,%f").timestamp()
-            if at >= after:
-                return at
-    return None
-
-
-def event_at(stack: Stack, name: str, after: float, detail: str = "") -> float:
-    ev = stack.wait_event(lambda e: e.event == name and e.time_s >= after and detail in e.detail, 120.0,
-                          f"{name} {detail!r} after {after:.1f}")
-    return ev.time_s
-
-
-def check_requests_and_missions(stack: Stack, config: ServiceConfig) -> None:
-    """Every request closed with its reason, fairness held, every accepted mission complete,
-    valid and ending in return to launch, and the autopilot said it received each one."""
-    scenario = config.scenario()
-    statuses = Counter(s for (s,) in stack.rows("SELECT status FROM requests"))
-    assert statuses["pending"] == 0, statuses
-    for rid, status, reason in stack.rows("SELECT request_id, status, reason FROM requests"):
-        assert status == "served" or reason, f"request {rid} {status} without a reason"
-    for (number,) in stack.rows("SELECT DISTINCT sortie FROM services"):
-        served = [(u, t) for u, t in stack.rows(f"SELECT user_id, tasks FROM services WHERE sortie = {number}")]
-        assert fairness_violations(scenario, served) == 0, served
-        assert max(Counter(u for u, _ in served).values()) <= scenario.max_services_per_user
-    accepted = stack.rows("SELECT items FROM missions WHERE result = 'accepted' ORDER BY mission_id")
-    for (items_json,) in accepted:
-        items = [item_from_dict(i) for i in json.loads(items_json)]
-        validate_mission(items, config.origin_point(), config.area(), "ardupilot")
-        assert items[-1].command == NAV_RTL
 
 
 def check_truth(stack: Stack, sitl: Sitl, config: ServiceConfig) -> tuple[int, list[dict[str, Any]]]:
@@ -186,25 +139,6 @@ def check_truth(stack: Stack, sitl: Sitl, config: ServiceConfig) -> tuple[int, l
     return len(recorded), log
 
 
-def offline(scenario: Scenario, stack: Stack, sortie: int) -> tuple[dict[str, Any], dict[str, Any]]:
-    """The offline planner on the service's scenario: with the same seed, and with the
-    users' first backlogs and positions of ``sortie`` as its first interval (later draws its
-    own; its users stay near their places where the simulated ones walk)."""
-    spec = PolicySpec(iterations=None, budget_ms=BUDGET_MS)
-    same_seed = run_sortie(scenario, "mcts", SEED, spec)
-    first: dict[str, tuple[float, float, int]] = {}
-    for user, x, y, tasks in stack.rows(f"SELECT user_id, x_m, y_m, tasks FROM requests WHERE sortie = {sortie} "
-                                        "ORDER BY request_id"):
-        first.setdefault(user, (x, y, tasks))
-    users = sorted(first, key=lambda u: int(u.rsplit("-", 1)[1]))
-    world = run_sortie(scenario.replace(num_users=len(users)), "mcts", SEED, spec, options={
-        "task_table": np.array([[first[u][2] for u in users]]),
-        "users_xyz": np.array([[first[u][0], first[u][1], 0.0] for u in users])})
-    return same_seed, world
-
-
-def decisions(log: str) -> int:
-    return sum(1 for line in log.splitlines() if " decision (" in line)
 
 
 @pytest.mark.parametrize("backend", BACKENDS)

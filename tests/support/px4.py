@@ -43,6 +43,7 @@ os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavutil  # noqa: E402
 
 from planner_service.harness.processes import tied_to_parent  # noqa: E402
+from planner_service.service.link.extensions import MISSION_CURRENT_ID_OFFSET, extension_u32  # noqa: E402
 from protocol.geodesy import GeoOrigin  # noqa: E402
 from tests.support.sitl import port_is_free, reserve  # noqa: E402
 
@@ -295,7 +296,8 @@ class Px4:
             elif kind == "HEARTBEAT" and msg.get_srcComponent() == 1:
                 self.heartbeats.append((now, msg.custom_mode, bool(msg.base_mode & M.MAV_MODE_FLAG_SAFETY_ARMED)))
             elif kind == "MISSION_CURRENT":
-                self.mission_ids.append((now, msg.seq, getattr(msg, "total", 0), getattr(msg, "mission_id", 0)))
+                self.mission_ids.append((now, msg.seq, getattr(msg, "total", 0),
+                                         extension_u32(msg, "mission_id", MISSION_CURRENT_ID_OFFSET)))
             elif kind == "STATUSTEXT":
                 self.texts.append((now, str(msg.text)))
 

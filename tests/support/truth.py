@@ -130,3 +130,13 @@ def sitl_track(log_messages: Iterable[Mapping[str, Any]], origin: GeoOrigin) -> 
     past the last one's (``one_clock``)."""
     return one_clock(Fix(m["TimeUS"] / 1e6, global_to_local(origin, m["Lat"], m["Lng"], origin.alt_m + m["RelHomeAlt"]))
                      for m in log_messages if m.get("mavpackettype") == "POS")
+
+
+def px4_track(fixes: Iterable[Any], origin: GeoOrigin) -> list[Fix]:
+    """PX4's own flight from the GLOBAL_POSITION_INT it sent the harness's monitor on its
+    ground-station link (``Px4.fixes``: another link than the service's), local metres from
+    ``origin`` (PX4's home), the height above home (relative_alt); times are PX4's clock
+    (time_boot_ms), each boot moved on past the last (``one_clock``)."""
+    return one_clock(Fix(f.boot_ms / 1e3, global_to_local(origin, f.lat_e7 / 1e7, f.lon_e7 / 1e7,
+                                                          origin.alt_m + f.relative_alt_mm / 1e3))
+                     for f in fixes)

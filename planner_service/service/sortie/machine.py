@@ -727,7 +727,8 @@ class SortieLogic:
         mission_return = (held is not None and v.seq == held.rtl_seq and mode in RETURNING_MODES)
         a = self.rules.autopilot
         # PX4 goes back to an earlier mode once the landing of the service's return disarms it
-        after_return = (s.life.homing and not v.armed and not v.airborne and mode in a.modes_after_landing
+        # (its landed state may come later: a disarming in the air is _disarm_check's)
+        after_return = (s.life.homing and not v.armed and mode in a.modes_after_landing
                         and s.authority.expected_mode in RETURNING_MODES)
         authority = s.authority.on_mode(mode, armed=v.armed or v.airborne, mission_return=mission_return,
                                         commanded=commanded, autopilots_own=after_return)

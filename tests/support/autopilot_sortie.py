@@ -1,0 +1,89 @@
+"""What the whole-sortie tests on a real autopilot (ArduCopter SITL: test_sortie_sitl.py; PX4
+SITL: test_sortie_px4.py) share: the service's log and events read by time, the journal's
+requests and missions checked, the offline planner on the same scenario for comparison."""
+
+from __future__ import annotations
+
+import json
+import re
+from collections import Counter
+from datetime import datetime
+from typing import Any
+
+import numpy as np
+
+from planner_service.model import Scenario
+from planner_service.model.fairness import fairness_violations
+from planner_service.policy import PolicySpec
+from planner_service.service.config import ServiceConfig
+from planner_service.service.sortie import item_from_dict
+from planner_service.sortie import run_sortie
+from protocol import validate_mission
+from protocol.mission import NAV_RTL
+from tests.support.stack import Stack
+
+LOG_TIME = re.compile(r"^(\d{4}-\d\d-\d\d \d\d:\d\d:\d\d,\d{3}) ")
+SEED = 1
+BUDGET_MS = 100.0
+"""The planner's budget per decision (tests/service/stack.py's), offline too."""
+
+
+def service_log(stack: Stack) -> str:
+    return "\n".join(c.log() for c in stack.children if c.name == "planner_service serve")
+
+
+def logged_at(log: str, pattern: str, after: float) -> float | None:
+    """Wall time of the service's first log line matching ``pattern`` at or after ``after``."""
+    for line in log.splitlines():
+        m = LOG_TIME.match(line)
+        if m and re.search(pattern, line):
+            at = datetime.strptime(m.group(1), "%Y-%m-%d %H:%M:%S,%f").timestamp()
+            if at >= after:
+                return at
+    return None
+
+
+def event_at(stack: Stack, name: str, after: float, detail: str = "") -> float:
+    ev = stack.wait_event(lambda e: e.event == name and e.time_s >= after and detail in e.detail, 120.0,
+                          f"{name} {detail!r} after {after:.1f}")
+    return ev.time_s
+
+
+def check_requests_and_missions(stack: Stack, config: ServiceConfig, flavour: str = "ardupilot") -> None:
+    """Every request closed with its reason, fairness held, every accepted mission complete,
+    valid and ending in return to launch, and the autopilot said it received each one."""
+    scenario = config.scenario()
+    statuses = Counter(s for (s,) in stack.rows("SELECT status FROM requests"))
+    assert statuses["pending"] == 0, statuses
+    for rid, status, reason in stack.rows("SELECT request_id, status, reason FROM requests"):
+        assert status == "served" or reason, f"request {rid} {status} without a reason"
+    for (number,) in stack.rows("SELECT DISTINCT sortie FROM services"):
+        served = [(u, t) for u, t in stack.rows(f"SELECT user_id, tasks FROM services WHERE sortie = {number}")]
+        assert fairness_violations(scenario, served) == 0, served
+        assert max(Counter(u for u, _ in served).values()) <= scenario.max_services_per_user
+    accepted = stack.rows("SELECT items FROM missions WHERE result = 'accepted' ORDER BY mission_id")
+    for (items_json,) in accepted:
+        items = [item_from_dict(i) for i in json.loads(items_json)]
+        validate_mission(items, config.origin_point(), config.area(), flavour)  # type: ignore[arg-type]
+        assert items[-1].command == NAV_RTL
+
+
+def offline(scenario: Scenario, stack: Stack, sortie: int) -> tuple[dict[str, Any], dict[str, Any]]:
+    """The offline planner on the service's scenario: with the same seed, and with the
+    users' first backlogs and positions of ``sortie`` as its first interval (later draws its
+    own; its users stay near their places where the simulated ones walk)."""
+    spec = PolicySpec(iterations=None, budget_ms=BUDGET_MS)
+    same_seed = run_sortie(scenario, "mcts", SEED, spec)
+    first: dict[str, tuple[float, float, int]] = {}
+    for user, x, y, tasks in stack.rows(f"SELECT user_id, x_m, y_m, tasks FROM requests WHERE sortie = {sortie} "
+                                        "ORDER BY request_id"):
+        first.setdefault(user, (x, y, tasks))
+    users = sorted(first, key=lambda u: int(u.rsplit("-", 1)[1]))
+    world = run_sortie(scenario.replace(num_users=len(users)), "mcts", SEED, spec, options={
+        "task_table": np.array([[first[u][2] for u in users]]),
+        "users_xyz": np.array([[first[u][0], first[u][1], 0.0] for u in users])})
+    return same_seed, world
+
+
+def decisions(log: str) -> int:
+    return sum(1 for line in log.splitlines() if " decision (" in line)
