@@ -4,7 +4,9 @@ and bounded retries, each in milliseconds (no processes, no sockets)."""
 
 from __future__ import annotations
 
+import copy
 import math
+import pickle
 from dataclasses import dataclass, field, replace
 from typing import get_args
 
@@ -18,6 +20,7 @@ from planner_service.service.sortie import effects as fx
 from planner_service.service.sortie import inputs as ins
 from planner_service.service.sortie.authority import Authority, next_sortie
 from protocol import Area, GeoOrigin
+from protocol.errors import MissionError
 from protocol.mission import NAV_RTL
 
 SCENARIO = preset("field")
@@ -57,6 +60,15 @@ def path(*points: PlannedPoint) -> PlannedPath:
 
 def rules(**kw: object) -> Rules:
     return Rules(SCENARIO, GeoOrigin(), Area(500.0, 120.0, 10.0), start_mission=True, **kw)  # type: ignore[arg-type]
+
+
+def test_the_rules_derive_the_autopilot_once_and_refuse_an_unknown_flavour() -> None:
+    px4 = rules(flavour="px4")
+    assert px4.autopilot is px4.autopilot and px4.autopilot.name == "px4"
+    assert replace(px4, flavour="ardupilot").autopilot.name == "ardupilot"  # derived again
+    assert copy.deepcopy(px4) == px4 and pickle.loads(pickle.dumps(px4)).autopilot.name == "px4"
+    with pytest.raises(MissionError, match="flavour"):
+        rules(flavour="apm")  # when the rules are made, not at the first step that reads it
 
 
 GROUND = VehicleSnapshot(connected=True, position_ok=True, xyz=(0.0, 0.0, 0.0), boot_s=1.0, landed_known=True,
