@@ -359,14 +359,14 @@ class Service:
         log.info("plan %d: %s uploaded (%d items, %.0f ms; %s)", up.plan_id,
                  [p.hover_index for p in up.path.points], len(up.items), (self.mono() - t0) * 1e3,
                  up.path.stop_reason)
-        return ins.Uploaded(up, self.link.generation, (self.mono() - t0) * 1e3, self.link.mission_id)
+        return ins.Uploaded(up, upload_ms=(self.mono() - t0) * 1e3, mission_id=self.link.mission_id)
 
     async def _read_back(self) -> ins.Input:
         try:
             items = await self.link.download()
         except LinkError as err:
             return ins.ReadBackFailed(err.result)
-        return ins.ReadBackDone(tuple(items), self.link.generation, self.link.mission_id)
+        return ins.ReadBackDone(tuple(items), mission_id=self.link.mission_id)
 
     async def _command(self, cmd: fx.Command) -> ins.Input:
         try:

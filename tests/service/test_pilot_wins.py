@@ -10,13 +10,15 @@ from __future__ import annotations
 
 import re
 import time
+from contextlib import contextmanager
 from dataclasses import replace
+from typing import Callable, Iterator
 
 import pytest
 
 from planner_service.harness.processes import Child
 from planner_service.service.config import load_config
-from protocol import GeoOrigin, HoverPoint, encode_path
+from protocol import Event, GeoOrigin, HoverPoint, MissionItem, encode_path
 from tests.support.gcs import M, GroundStation
 from tests.support.sortie_checks import HOLD_RADIUS_M, TOLERANCE_S
 from tests.support.stack import Stack
@@ -47,6 +49,32 @@ def flying(stack: Stack, *vehicle: str, **service: str) -> tuple[Child, Child]:
     return stub, child
 
 
+@contextmanager
+def second_station(stack: Stack) -> Iterator[GroundStation]:
+    """A pilot's ground station beside the service's link, once it hears the vehicle."""
+    gcs = GroundStation(f"udpout:127.0.0.1:{stack.mav_port}")
+    try:
+        gcs.wait_vehicle()
+        yield gcs
+    finally:
+        gcs.close()
+
+
+def their_mission_ends_the_authority(stack: Stack,
+                                     theirs_of: Callable[[GroundStation], list[MissionItem]]) -> list[MissionItem]:
+    """A second station uploads its own mission (``theirs_of`` makes it, and may read ours
+    first), the vehicle accepts it, and the service ends its authority within 20 s, finding
+    the mission not its own: their mission."""
+    with second_station(stack) as gcs:
+        theirs = theirs_of(gcs)
+        uploaded_at = time.time()
+        assert gcs.upload(theirs) == M.MAV_MISSION_ACCEPTED
+    revoked: Event = stack.wait_event(lambda e: e.event == "authority_revoked" and e.time_s >= uploaded_at, 20.0,
+                                      "the end of the authority")
+    assert "not ours" in revoked.detail and f"{len(theirs)} items" in revoked.detail, revoked.detail
+    return theirs
+
+
 def the_next_sortie_waits(stack: Stack) -> None:
     """Wait for the next sortie (once the battery is swapped), then three seconds in which
     the users go on asking: the vehicle's log after that shows any arming or command."""
@@ -66,17 +94,13 @@ def test_a_pilots_loiter_ends_the_authority_and_after_the_pilots_landing_nothing
     assert client is not None
     assert client.state().status.authority == "operator"
 
-    gcs = GroundStation(f"udpout:127.0.0.1:{stack.mav_port}")
-    try:
-        gcs.wait_vehicle()
+    with second_station(stack) as gcs:
         assert gcs.set_mode(LOITER) == M.MAV_RESULT_ACCEPTED
         revoked = stack.wait_event(lambda e: e.event == "authority_revoked", 10.0, "the end of the authority")
         assert "LOITER" in revoked.detail and "not commanded by the service" in revoked.detail, revoked.detail
         assert client.state().status.authority == "revoked"
         time.sleep(3.0)  # 75 s of the vehicle's time: the users go on asking, the service goes on planning
         assert gcs.set_mode(LAND) == M.MAV_RESULT_ACCEPTED
-    finally:
-        gcs.close()
     landed = stack.wait_event(lambda e: e.event == "landed", 60.0, "the pilot's landing")
     assert "sortie 1" in landed.detail, landed.detail
     the_next_sortie_waits(stack)
@@ -110,18 +134,8 @@ def test_a_second_stations_mission_ends_the_authority_and_is_left_to_fly(stack: 
     vehicle, _ = flying(stack)
     client = stack.client
     assert client is not None
-    theirs = encode_path([HoverPoint(400.0, 100.0, 60.0, 2.0), HoverPoint(450.0, 50.0, 60.0, 2.0)], GeoOrigin(),
-                         "ardupilot")
-    gcs = GroundStation(f"udpout:127.0.0.1:{stack.mav_port}")
-    try:
-        gcs.wait_vehicle()
-        uploaded_at = time.time()
-        assert gcs.upload(theirs) == M.MAV_MISSION_ACCEPTED
-    finally:
-        gcs.close()
-    revoked = stack.wait_event(lambda e: e.event == "authority_revoked" and e.time_s >= uploaded_at, 20.0,
-                               "the end of the authority")
-    assert "not ours" in revoked.detail, revoked.detail
+    theirs = their_mission_ends_the_authority(stack, lambda gcs: encode_path(
+        [HoverPoint(400.0, 100.0, 60.0, 2.0), HoverPoint(450.0, 50.0, 60.0, 2.0)], GeoOrigin(), "ardupilot"))
     landed = stack.wait_event(lambda e: e.event == "landed", 90.0, "the landing at the end of their mission")
     assert "sortie 1" in landed.detail, landed.detail
     the_next_sortie_waits(stack)
@@ -136,7 +150,6 @@ def test_a_second_stations_mission_ends_the_authority_and_is_left_to_fly(stack: 
     assert status.authority == "none" and not status.armed, status
 
 
-
 @pytest.mark.timeout(180)
 def test_a_pilots_disarming_in_the_air_ends_the_authority_and_nothing_arms_again(stack: Stack) -> None:
     """The pilot's emergency stop (a forced disarming in the air, from a second station):
@@ -146,12 +159,8 @@ def test_a_pilots_disarming_in_the_air_ends_the_authority_and_nothing_arms_again
     vehicle, _ = flying(stack)
     client = stack.client
     assert client is not None
-    gcs = GroundStation(f"udpout:127.0.0.1:{stack.mav_port}")
-    try:
-        gcs.wait_vehicle()
+    with second_station(stack) as gcs:
         assert gcs.command(M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 21196) == M.MAV_RESULT_ACCEPTED
-    finally:
-        gcs.close()
     revoked = stack.wait_event(lambda e: e.event == "authority_revoked", 10.0, "the end of the authority")
     assert "disarmed (not commanded by the service)" in revoked.detail, revoked.detail
     stack.wait_event(lambda e: e.event == "landed", 30.0, "the fall's landing")
@@ -179,16 +188,6 @@ def test_a_second_stations_mission_of_the_same_length_ends_the_authority(
     read-back (here every 2 s), the check of the vehicle's track against the leg it flies
     and PX4's ``mission_id`` (each alone here) the service flew it as its own."""
     _, service = flying(stack, "--flavour", flavour, mavlink__backend=backend, mavlink__flavour=flavour, **settings)
-    gcs = GroundStation(f"udpout:127.0.0.1:{stack.mav_port}")
-    try:
-        gcs.wait_vehicle()
-        ours = gcs.download()
-        theirs = [replace(i, x=i.x + 5000) if i.seq > 0 and i.x else i for i in ours]
-        uploaded_at = time.time()
-        assert gcs.upload(theirs) == M.MAV_MISSION_ACCEPTED
-    finally:
-        gcs.close()
-    revoked = stack.wait_event(lambda e: e.event == "authority_revoked" and e.time_s >= uploaded_at, 20.0,
-                               "the end of the authority")
-    assert "not ours" in revoked.detail and f"{len(theirs)} items" in revoked.detail, revoked.detail
+    their_mission_ends_the_authority(stack, lambda gcs: [replace(i, x=i.x + 5000) if i.seq > 0 and i.x else i
+                                                         for i in gcs.download()])  # ours, moved
     stack.wait_log(service, found_by, 5.0)

@@ -4,7 +4,9 @@ and bounded retries, each in milliseconds (no processes, no sockets)."""
 
 from __future__ import annotations
 
+import copy
 import math
+import pickle
 from dataclasses import dataclass, field, replace
 from typing import get_args
 
@@ -18,6 +20,7 @@ from planner_service.service.sortie import effects as fx
 from planner_service.service.sortie import inputs as ins
 from planner_service.service.sortie.authority import Authority, next_sortie
 from protocol import Area, GeoOrigin
+from protocol.errors import MissionError
 from protocol.mission import NAV_RTL
 
 SCENARIO = preset("field")
@@ -57,6 +60,15 @@ def path(*points: PlannedPoint) -> PlannedPath:
 
 def rules(**kw: object) -> Rules:
     return Rules(SCENARIO, GeoOrigin(), Area(500.0, 120.0, 10.0), start_mission=True, **kw)  # type: ignore[arg-type]
+
+
+def test_the_rules_derive_the_autopilot_once_and_refuse_an_unknown_flavour() -> None:
+    px4 = rules(flavour="px4")
+    assert px4.autopilot is px4.autopilot and px4.autopilot.name == "px4"
+    assert replace(px4, flavour="ardupilot").autopilot.name == "ardupilot"  # derived again
+    assert copy.deepcopy(px4) == px4 and pickle.loads(pickle.dumps(px4)).autopilot.name == "px4"
+    with pytest.raises(MissionError, match="flavour"):
+        rules(flavour="apm")  # when the rules are made, not at the first step that reads it
 
 
 GROUND = VehicleSnapshot(connected=True, position_ok=True, xyz=(0.0, 0.0, 0.0), boot_s=1.0, landed_known=True,
@@ -104,7 +116,7 @@ def fly_to_first_point(world: FakeWorld) -> tuple[Run, fx.Upload]:
     out = run.feed(ins.Planned(plan.basis, path(point(3, 120.0, 200.0, "a", 1), point(7, 320.0, 200.0, "b", 2))))
     (up,) = only(out, fx.Upload)
     assert [i.seq for i in up.items] == [0, 1, 2, 3, 4] and up.current_seq is None, "a fresh vehicle is at 0"
-    out = run.feed(ins.Uploaded(up, 1))
+    out = run.feed(ins.Uploaded(up))
     assert only(out, fx.Command)[0].kind == "start"
     run.feed(ins.CommandDone(fx.Command("start")), armed=True, mode="AUTO")
     run.tick(airborne=True, seq=1, xyz=(0.0, 0.0, 50.0), boot_s=5.0)
@@ -133,7 +145,7 @@ def test_a_sortie_records_only_holds_the_vehicle_was_seen_at() -> None:
     assert (kept.command, kept.x, kept.y, kept.z, kept.param1) == (before.command, before.x, before.y, before.z,
                                                                    before.param1)
     assert [i.seq for i in up.items if i.current] == [2], "the item held stays the one flown (PX4 flies the mark)"
-    run.feed(ins.Uploaded(up, 2))
+    run.feed(ins.Uploaded(up))
     assert run.s.holds.watch.phase == "holding", "the hold goes on across the replacement"
     # Holds as long as the request needs, then the vehicle flies item 3.
     needed = run.s.holds.binding.needed_s
@@ -202,7 +214,7 @@ def test_a_hold_longer_than_needed_ends_once_the_next_decision_is_on_board() -> 
     run.tick(seq=2, boot_s=20.0 + needed + 1)
     assert not only(run.effects, fx.Command)[1:], "no early end before the replacement is uploaded"
     (up,) = only(run.feed(ins.Planned(plan.basis, path(point(9, 400.0, 300.0, "b", 2)))), fx.Upload)
-    out = run.feed(ins.Uploaded(up, 2))
+    out = run.feed(ins.Uploaded(up))
     out += run.tick(seq=2, boot_s=20.0 + needed + 2)
     (cmd,) = only(out, fx.Command)
     assert (cmd.kind, cmd.seq) == ("set_current", 3)
@@ -217,7 +229,7 @@ def test_a_hold_is_not_ended_early_without_the_authority_or_degraded(after: str)
     (plan,) = only(run.tick(seq=2, xyz=(120.0, 200.0, 100.0), boot_s=20.0), fx.MakePlan)
     needed = run.s.holds.binding.needed_s
     (up,) = only(run.feed(ins.Planned(plan.basis, path(point(9, 400.0, 300.0, "b", 2)))), fx.Upload)
-    run.feed(ins.Uploaded(up, 2))
+    run.feed(ins.Uploaded(up))
     if after == "the journal failed":
         run.feed(ins.PartFailed("the journal failed"))
     else:
@@ -239,13 +251,13 @@ def test_restart_read_back_and_a_lost_mission_resumed_from_where_it_is() -> None
     assert not only(out, fx.Upload)
     assert only(out, fx.ReadBack), "read back before anything else"
     assert run.s.authority.state == "revoked", "a restart ends the authority"
-    out = run.feed(ins.ReadBackDone((), 3))  # the mission is gone
+    out = run.feed(ins.ReadBackDone(()))  # the mission is gone
     assert run.s.onboard.must_upload and run.s.onboard.resume_pending
     (plan,) = only(out, fx.MakePlan)
     assert plan.basis.keep_through is None and plan.basis.reason == "the vehicle lost its mission"
     (up2,) = only(run.feed(ins.Planned(plan.basis, path(point(7, 320.0, 200.0, "b", 2)))), fx.Upload)
     assert up2.current_seq == 2, "a fresh mission in the air is flown from its first point"
-    out = run.feed(ins.Uploaded(up2, 4))
+    out = run.feed(ins.Uploaded(up2))
     assert not only(out, fx.Command), "the mission is on board; only the operator resumes it"
     (asked,) = [e.event for e in only(out, fx.Emit) if e.event.kind == "resume_needed"]
     assert "plan 2" in asked.detail and "LOITER" in asked.detail, asked.detail
@@ -254,7 +266,7 @@ def test_restart_read_back_and_a_lost_mission_resumed_from_where_it_is() -> None
     assert ok and run.s.authority.granted
     (plan,) = only(out, fx.MakePlan)  # from where the vehicle is now, then resumed
     (up3,) = only(run.feed(ins.Planned(plan.basis, path(point(7, 320.0, 200.0, "b", 2)))), fx.Upload)
-    (cmd,) = only(run.feed(ins.Uploaded(up3, 4)), fx.Command)
+    (cmd,) = only(run.feed(ins.Uploaded(up3)), fx.Command)
     assert (cmd.kind, cmd.seq) == ("resume", 2)
 
 
@@ -276,7 +288,7 @@ def test_a_link_gap_read_back_as_ours_keeps_the_hold() -> None:
     run.feed(ins.Restored("AUTO"))
     out = run.feed(ins.Planned(searching.basis, path(point(9, 400.0, 300.0, "b", 2))))
     (rb,) = only(out, fx.ReadBack)
-    out = run.feed(ins.ReadBackDone(up.items, 3))
+    out = run.feed(ins.ReadBackDone(up.items))
     assert run.s.onboard.known and run.s.holds.watch is not None and run.s.holds.watch.phase == "holding"
     # The decision dropped during the doubt is made again from the point.
     (plan,) = only(out, fx.MakePlan)
@@ -294,7 +306,7 @@ def test_holds_flown_while_in_doubt_are_judged_once_the_read_back_shows_our_miss
         run.tick(seq=2, xyz=(120.0, 200.0, 100.0), boot_s=float(t))
     run.tick(seq=3, xyz=(160.0, 200.0, 100.0), boot_s=82.0)  # and on to item 3
     assert not only(run.effects, fx.RecordService) and run.s.holds.watch.phase == "approaching"
-    out = run.feed(ins.ReadBackDone(up.items, 3))
+    out = run.feed(ins.ReadBackDone(up.items))
     (svc,) = only(out, fx.RecordService)
     assert (svc.user_id, svc.tasks, svc.hover_index) == ("a", 10, 3) and svc.held_s == pytest.approx(69.0)
     assert run.s.holds.watch is not None and run.s.holds.watch.seq == 3 and run.s.onboard.doubted == ()
@@ -309,7 +321,7 @@ def test_reports_in_doubt_are_judged_against_the_upload_that_went_through() -> N
     for t in range(11, 80):
         run.tick(seq=2, xyz=(120.0, 200.0, 100.0), boot_s=float(t))
     run.tick(seq=3, xyz=(160.0, 210.0, 100.0), boot_s=82.0)  # item 3: point 7 before, point 9 now
-    out = run.feed(ins.ReadBackDone(up.items, 3))  # the upload went through
+    out = run.feed(ins.ReadBackDone(up.items))  # the upload went through
     (svc,) = only(out, fx.RecordService)
     assert (svc.hover_index, svc.held_s) == (3, 69.0)
     watch = run.s.holds.watch
@@ -331,7 +343,7 @@ def test_holds_flown_while_an_upload_waits_for_its_ack_are_judged_against_the_mi
         run.tick(seq=3, xyz=(400.0, 300.0, 100.0), boot_s=float(t))
     run.tick(seq=4, xyz=(380.0, 280.0, 100.0), boot_s=131.0)
     assert not only(run.effects, fx.RecordService)
-    out = run.feed(ins.Uploaded(up, 2))
+    out = run.feed(ins.Uploaded(up))
     assert [(s.hover_index, s.user_id) for s in only(out, fx.RecordService)] == [(3, "a"), (9, "b")]
 
 
@@ -341,7 +353,7 @@ def test_reports_in_doubt_count_for_nothing_when_the_vehicle_holds_another_missi
     run.feed(ins.Restored("AUTO"))
     for t in range(10, 80):
         run.tick(seq=2, xyz=(120.0, 200.0, 100.0), boot_s=float(t))
-    out = run.feed(ins.ReadBackDone(up.items[:2], 3))  # not ours: nothing it flew is ours to record
+    out = run.feed(ins.ReadBackDone(up.items[:2]))  # not ours: nothing it flew is ours to record
     assert not only(out, fx.RecordService) and run.s.onboard.doubted == ()
 
 
@@ -356,7 +368,7 @@ def test_another_stations_mission_ends_the_authority_and_is_left_alone() -> None
     (rb,) = only(out, fx.ReadBack)
     assert "counts 3 mission items" in rb.why
     theirs = tuple(replace(i, x=i.x + 1000) for i in up.items[:4])
-    out = run.feed(ins.ReadBackDone(theirs, 3))
+    out = run.feed(ins.ReadBackDone(theirs))
     assert run.s.authority.state == "revoked" and "not ours" in run.s.authority.detail
     assert run.s.onboard.held is None and not run.s.onboard.must_upload and not run.s.onboard.resume_pending
     assert not only(out, fx.MakePlan) and not only(run.tick(seq=2, mission_total=3, boot_s=11.0), fx.MakePlan), \
@@ -367,7 +379,7 @@ def test_a_count_a_read_back_showed_to_be_ours_doubts_nothing_again() -> None:
     world = FakeWorld()
     run, up = fly_to_first_point(world)
     (rb,) = only(run.tick(seq=2, mission_total=99, boot_s=10.0), fx.ReadBack)
-    run.feed(ins.ReadBackDone(up.items, 3))  # ours after all (the autopilot counts otherwise)
+    run.feed(ins.ReadBackDone(up.items))  # ours after all (the autopilot counts otherwise)
     assert run.s.authority.granted and run.s.onboard.held is not None
     assert not only(run.tick(seq=2, mission_total=99, boot_s=11.0), fx.ReadBack)
 
@@ -399,7 +411,7 @@ def test_a_pilots_landing_ends_the_sortie_and_the_next_never_arms() -> None:
     out = run.feed(ins.RequestIn("c", 9))
     (plan,) = only(out, fx.MakePlan)
     (up,) = only(run.feed(ins.Planned(plan.basis, path(point(5, 200.0, 200.0, "c", 3)))), fx.Upload)
-    out = run.feed(ins.Uploaded(up, 5))
+    out = run.feed(ins.Uploaded(up))
     out += run.tick()
     assert not only(out, fx.Command), "no arming after a landing the service did not command"
     s, out, ok, reply = run.logic.operator(run.s, ins.OperatorAsked("start"), run.v, run.now)
@@ -419,7 +431,7 @@ def test_after_its_own_landing_the_next_sortie_waits_for_the_operator() -> None:
     (plan,) = only(run.feed(ins.SortieBegun(2)), fx.MakePlan)
     assert run.s.authority.state == "none"
     (up,) = only(run.feed(ins.Planned(plan.basis, path(point(5, 200.0, 200.0, "c", 3)))), fx.Upload)
-    out = run.feed(ins.Uploaded(up, 5)) + run.tick()
+    out = run.feed(ins.Uploaded(up)) + run.tick()
     assert not only(out, fx.Command), "no arming before the operator's start"
     s, out, ok, _ = run.logic.operator(run.s, ins.OperatorAsked("start"), run.v, run.now)
     assert ok and only(out, fx.Command)[0].kind == "start"
@@ -514,7 +526,7 @@ def test_unknown_battery_neither_plans_nor_arms() -> None:
     out = run.tick(battery_fraction=0.9, battery_source="model")
     (plan,) = only(out, fx.MakePlan)
     (up,) = only(run.feed(ins.Planned(plan.basis, path(point(3, 120.0, 200.0, "a", 1)))), fx.Upload)
-    out = run.feed(ins.Uploaded(up, 1))
+    out = run.feed(ins.Uploaded(up))
     assert not only(out, fx.Command)
     out = run.tick(battery_fraction=0.9, battery_source="autopilot")
     assert only(out, fx.Command)[0].kind == "start"
@@ -681,7 +693,7 @@ def test_a_user_done_early_ends_the_hold_but_not_the_physics() -> None:
     run, _ = fly_to_first_point(world)
     (plan,) = only(run.tick(seq=2, xyz=(120.0, 200.0, 100.0), boot_s=20.0), fx.MakePlan)
     (up,) = only(run.feed(ins.Planned(plan.basis, path(point(9, 400.0, 300.0, "b", 2)))), fx.Upload)
-    run.feed(ins.Uploaded(up, 2))
+    run.feed(ins.Uploaded(up))
     needed = run.s.holds.binding.needed_s
     run.tick(seq=2, boot_s=20.0 + needed / 4)
     out = run.feed(ins.RequestIn("a", 0))  # "nothing more to offload"
@@ -723,7 +735,7 @@ def _replacement_arriving_late(world: FakeWorld, then: PlannedPoint) -> tuple[Ru
     run.tick(seq=3, xyz=(200.0, 200.0, 100.0), boot_s=60.0)  # the autopilot's timer ended the hold
     run.tick(seq=3, xyz=(319.0, 200.0, 100.0), boot_s=70.0)
     assert not only(run.effects, fx.RecordService) and run.s.holds.watch.seq == 2, "kept until the upload's outcome"
-    out = run.feed(ins.Uploaded(up, 2))
+    out = run.feed(ins.Uploaded(up))
     assert [s.hover_index for s in only(out, fx.RecordService)] == [3]
     return run, out
 
@@ -764,7 +776,7 @@ def test_an_upload_failed_part_way_is_read_back_at_once_whatever_the_back_off() 
     assert run.s.schedule.retry_at > run.now, "the next plan still backs off"
     (read,) = only(out, fx.ReadBack)
     assert "failed part-way" in read.why
-    out = run.feed(ins.ReadBackDone(up.items, 3))
+    out = run.feed(ins.ReadBackDone(up.items))
     records = only(out, fx.RecordMission)
     assert [(r.plan_id, r.result) for r in records] == [(up.plan_id, "accepted")]
     # a read-back that fails is tried again after a wait
@@ -797,7 +809,7 @@ def test_nothing_is_planned_or_started_while_the_planner_warms_up() -> None:
     assert run.s.life.warming
     (plan,) = only(run.feed(ins.WarmedUp()), fx.MakePlan)
     (up,) = only(run.feed(ins.Planned(plan.basis, path(point(3, 120.0, 200.0, "a", 1)))), fx.Upload)
-    assert only(run.feed(ins.Uploaded(up, 1)), fx.Command)[0].kind == "start"
+    assert only(run.feed(ins.Uploaded(up)), fx.Command)[0].kind == "start"
 
 
 def test_a_disarming_after_the_mission_index_went_back_to_0_on_touching_down_is_the_landings() -> None:
@@ -841,7 +853,7 @@ def test_a_refused_command_and_a_failed_part_are_announced() -> None:
     run = Run(world)
     (plan,) = only(run.tick(), fx.MakePlan)
     (up,) = only(run.feed(ins.Planned(plan.basis, path(point(3, 120.0, 200.0, "a", 1)))), fx.Upload)
-    (start,) = only(run.feed(ins.Uploaded(up, 1)), fx.Command)
+    (start,) = only(run.feed(ins.Uploaded(up)), fx.Command)
     out = run.feed(ins.CommandNotDone(start, "MAV_RESULT_DENIED"))
     assert [(e.event.kind, e.event.detail) for e in only(out, fx.Emit)] == [("command_failed",
                                                                             "start: MAV_RESULT_DENIED")]
@@ -872,7 +884,7 @@ def fly_px4_home() -> Run:
     (plan,) = only(run.tick(mode="AUTO.LOITER"), fx.MakePlan)
     (up,) = only(run.feed(ins.Planned(plan.basis, path(point(3, 120.0, 200.0, "a", 1)))), fx.Upload)
     assert up.items[0].command != NAV_RTL and up.items[-1].command == NAV_RTL
-    run.feed(ins.Uploaded(up, 1))
+    run.feed(ins.Uploaded(up))
     run.feed(ins.CommandDone(fx.Command("start")), armed=True, mode="AUTO.MISSION")
     run.tick(airborne=True, seq=0, xyz=(0.0, 0.0, 50.0), boot_s=5.0)
     rtl = run.s.onboard.held.rtl_seq

@@ -23,11 +23,11 @@ def moved(items: tuple, dlat: int = 5000) -> tuple:
 
 def test_a_mission_id_not_ours_reads_back_and_a_same_length_mission_ends_the_authority() -> None:
     run, up = fly_to_first_point(FakeWorld())
-    run.feed(ins.Uploaded(up, 2, mission_id=OURS))  # the same plan again, now with the id PX4 gave it
+    run.feed(ins.Uploaded(up, mission_id=OURS))  # the same plan again, now with the id PX4 gave it
     assert not only(run.tick(seq=2, mission_total=len(up.items), mission_id=OURS, boot_s=9.0), fx.ReadBack)
     (rb,) = only(run.tick(seq=2, mission_total=len(up.items), mission_id=THEIRS, boot_s=10.0), fx.ReadBack)
     assert "0x1234abcd" in rb.why and "0x7d59a53b" in rb.why, rb.why
-    run.feed(ins.ReadBackDone(moved(up.items), 3, THEIRS))
+    run.feed(ins.ReadBackDone(moved(up.items), mission_id=THEIRS))
     assert run.s.authority.state == "revoked" and "not ours" in run.s.authority.detail
     assert run.s.onboard.held is None and not only(run.tick(boot_s=11.0), fx.MakePlan), "theirs is not replaced"
 
@@ -36,7 +36,7 @@ def test_an_id_the_link_did_not_learn_is_read_back_once_then_known() -> None:
     run, up = fly_to_first_point(FakeWorld())  # uploaded with id 0: the link saw no opaque_id
     (rb,) = only(run.tick(seq=2, mission_id=OURS, boot_s=9.0), fx.ReadBack)
     assert "not said" in rb.why
-    run.feed(ins.ReadBackDone(up.items, 3))
+    run.feed(ins.ReadBackDone(up.items))
     assert run.s.authority.granted and run.s.evidence.id_explained == OURS
     assert not only(run.tick(seq=2, mission_id=OURS, boot_s=10.0), fx.ReadBack)
     assert only(run.tick(seq=2, mission_id=THEIRS, boot_s=11.0), fx.ReadBack), "a new id is news again"
@@ -45,7 +45,7 @@ def test_an_id_the_link_did_not_learn_is_read_back_once_then_known() -> None:
 def test_the_read_backs_own_id_names_the_mission_held() -> None:
     run, up = fly_to_first_point(FakeWorld())
     run.tick(seq=2, mission_id=THEIRS, boot_s=9.0)  # stale, say
-    run.feed(ins.ReadBackDone(up.items, 3, OURS))  # MISSION_COUNT's opaque_id: ours
+    run.feed(ins.ReadBackDone(up.items, mission_id=OURS))  # MISSION_COUNT's opaque_id: ours
     assert run.s.evidence.mission_id == OURS and run.s.authority.granted
     assert only(run.tick(seq=2, mission_id=THEIRS, boot_s=10.0), fx.ReadBack)
 
@@ -55,7 +55,7 @@ def test_an_item_flown_that_our_mission_lacks_or_a_step_back_reads_back() -> Non
     assert not only(run.tick(seq=3, boot_s=9.0), fx.ReadBack), "forward is the mission's own order"
     (rb,) = only(run.tick(seq=2, boot_s=10.0), fx.ReadBack)
     assert "went back from item 3 to 2" in rb.why, rb.why
-    run.feed(ins.ReadBackDone(up.items, 3))  # ours after all: flown on
+    run.feed(ins.ReadBackDone(up.items))  # ours after all: flown on
     assert run.s.authority.granted and not only(run.tick(seq=2, boot_s=11.0), fx.ReadBack)
     (rb,) = only(run.tick(seq=len(up.items), boot_s=12.0), fx.ReadBack)
     assert f"flies item {len(up.items)}" in rb.why, rb.why
@@ -76,12 +76,12 @@ def test_the_mission_is_read_back_periodically_under_authority_and_a_changed_one
     run.now += interval
     (rb,) = only(run.tick(seq=2, boot_s=10.0), fx.ReadBack)
     assert "periodic" in rb.why
-    run.feed(ins.ReadBackDone(up.items, 3))
+    run.feed(ins.ReadBackDone(up.items))
     assert run.s.authority.granted and run.s.onboard.held is not None
     assert not only(run.tick(seq=2, boot_s=11.0), fx.ReadBack), "checked just now"
     run.now += interval
     assert only(run.tick(seq=2, boot_s=12.0), fx.ReadBack)
-    run.feed(ins.ReadBackDone(moved(up.items, 1), 4))  # one step of 1e-7 deg: not ours
+    run.feed(ins.ReadBackDone(moved(up.items, 1)))  # one step of 1e-7 deg: not ours
     assert run.s.authority.state == "revoked" and "not ours" in run.s.authority.detail
 
 
@@ -111,7 +111,7 @@ def test_a_vehicle_off_the_leg_it_flies_reads_the_mission_back() -> None:
         out = run2.tick(seq=2, xyz=(30.0 + 40.0 * (k + 1), 50.0 - 5.0 * (k + 1), 100.0), boot_s=t)
     (rb,) = only(out, fx.ReadBack)
     assert "m off its leg to point" in rb.why and "item 2" in rb.why, rb.why
-    run2.feed(ins.ReadBackDone(moved(up.items), 3))
+    run2.feed(ins.ReadBackDone(moved(up.items)))
     assert run2.s.authority.state == "revoked" and "not ours" in run2.s.authority.detail
 
 

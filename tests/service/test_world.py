@@ -58,7 +58,7 @@ def test_a_service_the_journal_refuses_is_served_and_announced_once(tmp_path: Pa
     # two points near a: the second finds a served, or finds nobody
     out = run.feed(ins.Planned(plan.basis, path(point(3, 120.0, 200.0, "a", a), point(4, 125.0, 205.0, "a", a))))
     (up,) = only(out, fx.Upload)
-    run.feed(ins.Uploaded(up, 1))
+    run.feed(ins.Uploaded(up))
     run.feed(ins.CommandDone(fx.Command("start")), armed=True, mode="AUTO")
     run.tick(airborne=True, seq=1, xyz=(0.0, 0.0, 50.0), boot_s=5.0)
     if fails:

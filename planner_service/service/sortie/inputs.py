@@ -93,7 +93,6 @@ class PlanFailed:
 @dataclass(frozen=True)
 class Uploaded:
     upload: Upload
-    generation: int
     upload_ms: float = 0.0
     mission_id: int = 0
     """The ``opaque_id`` of the MISSION_ACK that accepted it: the id MISSION_CURRENT names
@@ -113,7 +112,6 @@ class NotUploaded:
 @dataclass(frozen=True)
 class ReadBackDone:
     items: tuple[MissionItem, ...]
-    generation: int
     mission_id: int = 0
     """The ``opaque_id`` of the vehicle's MISSION_COUNT (PX4): the id of the mission read; 0:
     not said."""

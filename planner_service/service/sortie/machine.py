@@ -28,7 +28,7 @@ What it decides, in the order a sortie goes:
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field, fields, replace
 from typing import assert_never
 
 import numpy as np
@@ -93,16 +93,24 @@ class Rules:
     leg_tolerance_m: float = 30.0
     """How far (horizontally) the vehicle may be off the leg it flies to a point of ours
     before the mission is read back (``evidence.judge``); 0: not checked."""
+    autopilot: Autopilot = field(init=False, repr=False, compare=False)
+    """The configured autopilot's profile (``protocol.autopilot``), derived from ``flavour``
+    once, when the rules are made (read at every step; not a constructor argument): an
+    unknown flavour is refused then (``MissionError("flavour")``), not at the first use."""
+
+    def __post_init__(self) -> None:
+        # frozen: the derived field is set as the dataclass's own __init__ sets fields
+        object.__setattr__(self, "autopilot", autopilot_for(self.flavour))
+
+    def __reduce__(self) -> tuple[type, tuple[object, ...]]:
+        # copied or pickled as its arguments: the profile is derived again (it holds
+        # mapping proxies, which neither pickle nor deepcopy take)
+        return type(self), tuple(getattr(self, f.name) for f in fields(self) if f.init)
 
     @property
     def backoff(self) -> Backoff:
         """How failed plans, uploads and commands are retried (``schedule.Backoff``)."""
         return Backoff(self.max_failures, self.retry_s, self.max_retry_s)
-
-    @property
-    def autopilot(self) -> Autopilot:
-        """The configured autopilot's profile (``protocol.autopilot``)."""
-        return autopilot_for(self.flavour)
 
     @property
     def mode_names(self) -> dict[str, str]:
