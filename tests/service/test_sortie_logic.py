@@ -633,6 +633,31 @@ def test_a_restart_that_landed_the_vehicle_leaves_the_next_sortie_to_the_operato
     assert not run.s.authority.granted, run.s.authority
 
 
+def test_a_restart_seen_after_the_next_sortie_began_reads_back_our_last_mission_not_a_strangers() -> None:
+    # PX4 SITL restarted in a hold is back on the ground within a second, full battery: the
+    # landing ends sortie 1 and sortie 2 begins before the restart is recognised; the
+    # read-back then shows sortie 1's mission (PX4's dataman keeps it).
+    run, up = fly_to_first_point(FakeWorld())
+    run.feed(ins.OnGround("EXTENDED_SYS_STATE"), airborne=False, armed=False, boot_s=1.0)
+    (plan,) = only(run.feed(ins.SortieBegun(2)), fx.MakePlan)
+    run.feed(ins.Restarted("its clock went back"))
+    out = run.feed(ins.Planned(plan.basis, path(point(3, 120.0, 200.0, "a", 1))))  # stale: not uploaded
+    assert not only(out, fx.Upload) and only(out + run.tick(), fx.ReadBack)
+    out = run.feed(ins.ReadBackDone(up.items))
+    said = " ".join(e.text for e in only(out, fx.Log))
+    assert "plan 1 of the sortie before" in said and "another station" not in said, said
+    assert not [e for e in only(out, fx.Emit) if e.event.kind == "authority_revoked"]
+    assert run.s.onboard.held is None and run.s.onboard.doubt is None
+    # a mission no sortie of ours uploaded is still a stranger's
+    run2, up2 = fly_to_first_point(FakeWorld())
+    run2.feed(ins.OnGround("EXTENDED_SYS_STATE"), airborne=False, armed=False, boot_s=1.0)
+    (plan2,) = only(run2.feed(ins.SortieBegun(2)), fx.MakePlan)
+    run2.feed(ins.Restarted("its clock went back"))
+    run2.feed(ins.Planned(plan2.basis, path(point(3, 120.0, 200.0, "a", 1))))
+    out = run2.feed(ins.ReadBackDone(tuple(replace(i, x=i.x + 5000) if i.x else i for i in up2.items)))
+    assert "another station's" in " ".join(e.text for e in only(out, fx.Log))
+
+
 def test_a_service_started_with_the_vehicle_in_the_air_has_no_authority() -> None:
     world = FakeWorld()
     run = Run(world)

@@ -708,6 +708,10 @@ class SortieLogic:
                         holds=replace(s.holds, judged=frozenset()) if fresh else s.holds)
             # a restarted vehicle's reports were dropped (its holds were cut); else judged now
             return s if restarted else self._replay(s, v, out)
+        before = s.onboard.last_sorties(items, self.rules.flavour)  # type: ignore[arg-type]
+        if before is not None:
+            out += before[1]
+            return replace(s, onboard=before[0])
         s = self._abandon(replace(s, onboard=replace(s.onboard, doubted=())),
                           "the vehicle no longer holds our mission", out)
         foreign = s.onboard.foreign(len(items), self.rules.autopilot.home_slots)
@@ -951,7 +955,8 @@ class SortieLogic:
     def _begun(self, s: Sortie, number: int, out: list[fx.Effect]) -> Sortie:
         authority = s.life.next_authority or next_sortie(s.authority)
         out.append(fx.Emit(ev.SortieStarted(f"sortie {number}: authority {authority.state} ({authority.detail})")))
-        return Sortie(life=s.life.next_sortie(number), authority=authority, schedule=s.schedule.next_sortie())
+        return Sortie(life=s.life.next_sortie(number), authority=authority, schedule=s.schedule.next_sortie(),
+                      onboard=s.onboard.next_sortie())
 
 
 def marked_current(items: list[MissionItem], seq: int) -> list[MissionItem]:

@@ -42,6 +42,25 @@ class OnBoard:
     doubted: tuple[Sample, ...] = ()
     """The vehicle's reports while in doubt or an upload is in flight (``_replay``), at most
     ``MAX_DOUBTED``."""
+    last: HeldMission | None = None
+    """The mission the vehicle held when the sortie before ended: a read-back showing it
+    (a restart seen after the next sortie began, as PX4 SITL's is) shows ours, not
+    another station's."""
+
+    def next_sortie(self) -> OnBoard:
+        """What a new sortie knows of the mission on board: nothing of its own yet, and the
+        last sortie's mission, to know it again."""
+        return OnBoard(last=self.held or self.last)
+
+    def last_sorties(self, items: tuple[MissionItem, ...], flavour: Flavour) -> tuple[OnBoard, list[fx.Effect]] | None:
+        """A read-back that shows the last sortie's mission: nothing is held of this sortie's,
+        the doubt is resolved (None: it shows another)."""
+        last = self.last
+        if self.held is not None or last is None or not same_mission(items, last.items, flavour):  # type: ignore[arg-type]
+            return None
+        return (replace(self, doubt=None, restarted=False, doubted=()),
+                [fx.Log("info", f"{self.doubt}: the vehicle holds plan {last.plan_id} of the sortie before "
+                                f"(read back); this sortie's first plan replaces it")])
 
     def doubting(self, why: str) -> tuple[OnBoard, list[fx.Effect]]:
         """The vehicle may hold another mission: nothing it reports counts until it is read
