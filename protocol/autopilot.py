@@ -77,6 +77,18 @@ class Autopilot:
     item by itself: PX4 (seen on PX4 SITL: the new item 3 flown, no item marked current).
     ArduPilot restarts no return-to-launch, takeoff or land item on an upload: the command
     restarts it."""
+    unused_streams: Mapping[str, int]
+    """Messages the autopilot streams unasked that the service has no use for (name ->
+    message id), which the link stops on its own link (SET_MESSAGE_INTERVAL -1) on every
+    (re)connection: PX4's onboard link sends about 480 messages a second of its time
+    unasked (ATTITUDE 100 Hz, HIGHRES_IMU and ATTITUDE_QUATERNION 50 Hz, ...; PX4 SITL
+    1.18), and at PX4 SITL's speed 10 the link lost most mission replies and COMMAND_ACKs
+    under them (a download died at item 3 of 5). Rates are per link: another program on
+    the same link loses them too. ArduPilot streams nothing unasked (empty)."""
+    text_ids_from_zero: bool
+    """STATUSTEXT ids count from 0 at boot for every text, so the first text of a boot, when
+    chunked, is chunked under id 0: PX4 (its STATUSTEXT stream's counter; seen on PX4 SITL
+    1.18). ArduPilot gives id 0 to texts of one message only."""
     mav_autopilot: int
     """MAV_AUTOPILOT: its HEARTBEAT's ``autopilot``, a .plan's ``firmwareType``."""
     estimator_message: str
@@ -128,6 +140,7 @@ ARDUPILOT = Autopilot(
     arm_mode="GUIDED",
     home_slots=1, whole_second_holds=True, compacts_items=True, writes_items_as_they_arrive=True,
     return_item_mode=None, modes_after_landing=frozenset(), set_current_by_command=True, flies_changed_current_item=False,
+    unused_streams=MappingProxyType({}), text_ids_from_zero=False,
     mav_autopilot=M.MAV_AUTOPILOT_ARDUPILOTMEGA, estimator_message="EKF_STATUS_REPORT", estimator_msg_id=M.MAVLINK_MSG_ID_EKF_STATUS_REPORT,
     estimator_stream=M.MAV_DATA_STREAM_EXTRA3, estimator_unaided_flags=M.EKF_CONST_POS_MODE,
 )
@@ -143,6 +156,17 @@ PX4 = Autopilot(
     home_slots=0, whole_second_holds=False, compacts_items=False, writes_items_as_they_arrive=False,
     return_item_mode="AUTO.RTL", modes_after_landing=frozenset({"AUTO.MISSION", "AUTO.LOITER"}),
     set_current_by_command=False, flies_changed_current_item=True,
+    # PX4 SITL 1.18's onboard link, unasked, above 1 Hz of its time, that the link does not read
+    # (ESC_INFO 290 and ESC_STATUS 291 are in no dialect pymavlink ships).
+    unused_streams=MappingProxyType({
+        "ATTITUDE": M.MAVLINK_MSG_ID_ATTITUDE, "ATTITUDE_QUATERNION": M.MAVLINK_MSG_ID_ATTITUDE_QUATERNION,
+        "HIGHRES_IMU": M.MAVLINK_MSG_ID_HIGHRES_IMU, "LOCAL_POSITION_NED": M.MAVLINK_MSG_ID_LOCAL_POSITION_NED,
+        "ODOMETRY": M.MAVLINK_MSG_ID_ODOMETRY, "ALTITUDE": M.MAVLINK_MSG_ID_ALTITUDE,
+        "DISTANCE_SENSOR": M.MAVLINK_MSG_ID_DISTANCE_SENSOR, "ESC_INFO": 290, "ESC_STATUS": 291,
+        "ATTITUDE_TARGET": M.MAVLINK_MSG_ID_ATTITUDE_TARGET,
+        "POSITION_TARGET_LOCAL_NED": M.MAVLINK_MSG_ID_POSITION_TARGET_LOCAL_NED,
+        "SERVO_OUTPUT_RAW": M.MAVLINK_MSG_ID_SERVO_OUTPUT_RAW, "VFR_HUD": M.MAVLINK_MSG_ID_VFR_HUD}),
+    text_ids_from_zero=True,
     mav_autopilot=M.MAV_AUTOPILOT_PX4, estimator_message="ESTIMATOR_STATUS", estimator_msg_id=M.MAVLINK_MSG_ID_ESTIMATOR_STATUS, estimator_stream=None,
     estimator_unaided_flags=0,
 )

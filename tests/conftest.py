@@ -70,8 +70,9 @@ def sitl_ready(sitl: Sitl) -> Sitl:
 @pytest.fixture
 def make_px4(tmp_path: Path) -> Iterator[Callable[..., Px4]]:
     """A factory of PX4 SITLs (tests/support/px4.py; keyword arguments go to ``Px4``, e.g.
-    ``params``), each started in its own folder and instance and stopped at the end;
-    skipped where PX4 SITL is missing."""
+    ``params``; ``start=False``: not started yet, for a test that listens before PX4's
+    first second), each in its own folder and instance and stopped at the end; skipped
+    where PX4 SITL is missing."""
     root = px4_support.px4_root()
     if root is None:
         pytest.skip(px4_support.skip_reason())
@@ -80,9 +81,11 @@ def make_px4(tmp_path: Path) -> Iterator[Callable[..., Px4]]:
     def make(**options: Any) -> Px4:
         folder = tmp_path / f"px4-{len(started)}"
         folder.mkdir()
+        start = options.pop("start", True)
         p = Px4(root, folder, options.pop("instance", None) or px4_support.free_instance(), **options)
         started.append(p)
-        p.start()
+        if start:
+            p.start()
         return p
 
     try:

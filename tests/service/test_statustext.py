@@ -33,3 +33,17 @@ def test_a_lost_middle_chunk_is_marked_where_it_was() -> None:
     texts = StatusTexts()
     texts.feed("a" * 50, 6, 3, 0, now=0.0)
     assert texts.feed("end", 6, 3, 2, now=0.1) == [("a" * 50 + CUT + "end" + CUT, 6)]
+
+
+def test_px4s_first_text_of_a_boot_chunked_under_id_0_is_joined() -> None:
+    """PX4 numbers texts from 0 at boot: its first, when long, comes as id 0, chunks 0 and 1
+    (PX4 SITL 1.18, an arm refused in its first second)."""
+    first = "Arming denied: Resolve system health failures firs"
+    texts = StatusTexts(id_zero_chunks=True)
+    assert texts.feed(first, 2, 0, 0, now=0.0) == []
+    assert texts.feed("t\t", 2, 0, 1, now=0.01) == [(first + "t", 2)]
+    assert texts.feed("Preflight Fail: no heading reference", 2, 1, 0, now=0.1) == [
+        ("Preflight Fail: no heading reference", 2)]
+    assert texts.feed("short, id 0", 6, 0, 0, now=0.2) == [("short, id 0", 6)]  # one message: at once
+    # ArduPilot's id 0 is always one message, given out at once even when 50 characters long.
+    assert StatusTexts().feed(first, 2, 0, 0, now=0.0) == [(first, 2)]

@@ -54,7 +54,7 @@ from .extensions import (MISSION_ACK_ID_OFFSET, MISSION_COUNT_ID_OFFSET, MISSION
                          extension_u32)
 from .reports import Begin, Pass, ReportSequencer  # noqa: E402
 from .rtt import RetryTimer  # noqa: E402
-from .streams import INTERVAL_CMD, Request  # noqa: E402
+from .streams import INTERVAL_CMD, QUIET_INTERVAL_US, Request  # noqa: E402
 from .upload import MissionDownload, MissionUpload, cancel_message  # noqa: E402
 
 M = mavutil.mavlink
@@ -221,16 +221,18 @@ class PymavlinkLink(VehicleLink):
                 self._to_loop(self._on_opened)
             try:
                 msg = conn.recv_match(blocking=True, timeout=0.05)
+                batch = [msg, *_buffered(conn)] if msg is not None else []
             except Exception as err:  # noqa: BLE001 - a closed socket, a vanished serial device, a pymavlink bug
                 self._conn = None
                 _close_quietly(conn)
                 self._to_loop(self._on_broken, f"{type(err).__name__}: {err}")
                 self._stop.wait(backoff)
                 continue
-            if msg is None or msg.get_type() == "BAD_DATA" or self._stop.is_set():
-                continue
-            if not self._to_loop(self._on_message, msg):
-                return
+            for msg in batch:
+                if msg.get_type() == "BAD_DATA" or self._stop.is_set():
+                    continue
+                if not self._to_loop(self._on_message, msg):
+                    return
 
     def _to_loop(self, fn: Callable[..., None], *args: Any) -> bool:
         try:
@@ -325,7 +327,10 @@ class PymavlinkLink(VehicleLink):
         for request in requests:
             spec = request.spec
             try:
-                if request.kind == "interval":
+                if request.kind == "quiet":
+                    result = await self._command_result(INTERVAL_CMD, spec.msg_id, QUIET_INTERVAL_US, retries=1)
+                    log.debug("%s: stopped (%s)", spec.name, result)
+                elif request.kind == "interval":
                     result = await self._command_result(INTERVAL_CMD, spec.msg_id, spec.interval_s * 1e6,
                                                         retries=STREAM_RETRIES)
                     if result != "MAV_RESULT_ACCEPTED":
@@ -394,7 +399,8 @@ class PymavlinkLink(VehicleLink):
         telemetry; the one before is passed on too, since the points it completed just
         before a new mission replaced it are services all the same."""
         if msg.get_type() == "MISSION_ITEM_REACHED":
-            self.on_event(Reached(int(msg.seq), mission))
+            if self.state.new_reach(mission, int(msg.seq)):
+                self.on_event(Reached(int(msg.seq), mission))
             return
         raw = int(getattr(msg, "total", 0) or 0)
         # MAVLink: 0 when the autopilot does not say, UINT16_MAX when it has no mission.
@@ -618,6 +624,18 @@ class PymavlinkLink(VehicleLink):
         if result == "NO_ANSWER":
             raise LinkError(what, f"NO_ANSWER after {self.settings.retries} tries{self.signing_hint()}")
         raise LinkError(what, result + await self._refusal_texts(sent_at))
+
+
+def _buffered(conn: Any) -> list[Any]:
+    """The messages already in pymavlink's parse buffer. Over UDP pymavlink reads one
+    datagram and parses one message from it per call; PX4 packs several messages into
+    each datagram, so without this the rest waited behind every later datagram and the
+    backlog grew for as long as PX4 kept sending (seconds behind on PX4 SITL at speed 10:
+    mission replies late, PX4's mission protocol timing out)."""
+    out = []
+    while (msg := conn.mav.parse_char(b"")) is not None:
+        out.append(msg)
+    return out
 
 
 def _close_quietly(conn: Any) -> None:

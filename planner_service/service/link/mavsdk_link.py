@@ -44,7 +44,7 @@ from protocol import MissionItem
 from ..errors import LinkError
 from .base import CURRENT_WAIT_S, LinkSettings, VehicleLink
 from .events import Current, LinkEvent, Reached
-from .streams import INTERVAL_CMD, Request
+from .streams import INTERVAL_CMD, QUIET_INTERVAL_US, Request
 
 _log = logging.getLogger("mavsdk")
 log = logging.getLogger(__name__)
@@ -208,7 +208,8 @@ class MavsdkLink(VehicleLink):
 
     def _report(self, name: str, msg: Any) -> None:
         if name == "MISSION_ITEM_REACHED":
-            self.on_event(Reached(int(msg.seq), self.generation))
+            if self.state.new_reach(self.generation, int(msg.seq)):
+                self.on_event(Reached(int(msg.seq), self.generation))
             return
         raw = int(getattr(msg, "total", 0) or 0)
         total = -1 if raw == 0 else 0 if raw == 0xFFFF else raw
@@ -255,6 +256,10 @@ class MavsdkLink(VehicleLink):
         for request in requests:
             spec = request.spec
             results = [request]
+            if request.kind == "quiet":
+                log.debug("%s: stopped (%s)", spec.name,
+                          await self._command_result(INTERVAL_CMD, spec.msg_id, QUIET_INTERVAL_US))
+                continue
             if request.kind == "interval":
                 result = await self._command_result(INTERVAL_CMD, spec.msg_id, spec.interval_s * 1e6)
                 if result != "MAV_RESULT_ACCEPTED":

@@ -27,7 +27,7 @@ from protocol.autopilot import Autopilot, autopilot_for, autopilot_name
 
 from .modes import mode_name
 from .statustext import StatusTexts
-from .streams import Request, Streams, stream_plan
+from .streams import Request, Streams, quiet_plan, stream_plan
 from .telemetry import (ClockRate, ClockWatch, PositionInputs, Telemetry, assess_position, battery_fraction,
                         derived_airborne, energy_used_j)
 
@@ -59,7 +59,7 @@ class VehicleState:
         self.link_timeout_s = link_timeout_s
         self.telemetry = Telemetry()
         self.autopilot: tuple[int, int] | None = None
-        self.streams = Streams(stream_plan(self.profile), clock)
+        self.streams = Streams(stream_plan(self.profile), clock, quiet_plan(self.profile))
         self.estimator = self.profile.estimator_message
         self.request_streams: Callable[[], None] = lambda: None
         """Set by the backend: ask for every stream again (after a restart or a gap)."""
@@ -68,7 +68,7 @@ class VehicleState:
         self.texts: deque[tuple[float, int, str]] = deque(maxlen=32)
         self.wrong_autopilot = ""
         """Why the first autopilot heard was not taken: another autopilot than configured."""
-        self._texts = StatusTexts()
+        self._texts = StatusTexts(id_zero_chunks=self.profile.text_ids_from_zero)
         self.untrusted = 0
         """Messages dropped because they did not come from the autopilot."""
         self._clock_watch = ClockWatch()
@@ -81,6 +81,7 @@ class VehicleState:
         self._lost = False
         self._missing_said: tuple[str, ...] = ()
         self._derived_said = False
+        self._last_reached: tuple[int, int] | None = None
 
     # --- trust ----------------------------------------------------------------------------
     def trusted(self, system: int, component: int) -> bool:
@@ -96,6 +97,18 @@ class VehicleState:
     def set_progress(self, seq: int, total: int, mission_id: int = 0) -> None:
         """The mission item flown, the mission's size and id, as the backend's reports say."""
         self._set(mission_seq=seq, mission_total=total, mission_id=mission_id)
+
+    def new_reach(self, mission: int, seq: int) -> bool:
+        """A MISSION_ITEM_REACHED of item ``seq`` of ``mission`` (a generation): False when it
+        repeats the last one. PX4 sends each up to 11 times, then 10 more at 1 Hz (seen on
+        PX4 SITL 1.18); only another item in between makes the same one news again (a
+        mission flown again from an earlier item). The repeats carry the seq alone: those
+        straddling an upload's ACK are sorted to the missions on either side (``reports``), so
+        a repeat is the last seq reached whatever mission it is put to."""
+        if self._last_reached is not None and self._last_reached[1] == seq:
+            return False
+        self._last_reached = (mission, seq)
+        return True
 
     # --- link liveness ----------------------------------------------------------------------
     def heard(self) -> None:

@@ -14,6 +14,11 @@ by an autopilot that accepted others is unavailable at once (it knows the comman
 not have that message); one refused by an autopilot that accepted nothing (it may not know
 the command) is given ``UNAVAILABLE_AFTER_S`` to come by the fallback.
 
+What an autopilot streams unasked that the service does not read (the profile's
+``unused_streams``: PX4's onboard link, hundreds of messages a second) is stopped first, with
+SET_MESSAGE_INTERVAL -1 (a "quiet" request, its answer not waited on twice): under that
+flood the link lost mission replies and COMMAND_ACKs on PX4 SITL at speed 10.
+
 ``Streams`` is the bookkeeping only (no I/O): it returns the requests to send and is told
 of acknowledgements and arrivals.
 """
@@ -34,6 +39,8 @@ MISSING_AFTER_S = 2.0
 UNAVAILABLE_AFTER_S = 2.0
 """Wall seconds after a refusal and its fallback before the message is taken as unavailable."""
 REFUSALS = frozenset({"MAV_RESULT_DENIED", "MAV_RESULT_UNSUPPORTED", "MAV_RESULT_FAILED"})
+QUIET_INTERVAL_US = -1.0
+"""SET_MESSAGE_INTERVAL's interval that stops a message."""
 REREQUEST_S = 5.0
 """Missing messages are asked for again this often (a lost request or a reset autopilot)."""
 
@@ -47,6 +54,12 @@ class StreamSpec:
     msg_id: int
     interval_s: float
     group: int | None = None
+
+
+def quiet_plan(flavour: str | Autopilot) -> tuple[StreamSpec, ...]:
+    """The messages the link stops: streamed unasked, of no use to the service."""
+    return tuple(StreamSpec(name, msg_id, QUIET_INTERVAL_US / 1e6)
+                 for name, msg_id in autopilot_for(flavour).unused_streams.items())
 
 
 def stream_plan(flavour: str | Autopilot) -> tuple[StreamSpec, ...]:
@@ -87,8 +100,10 @@ class _State:
 
 
 class Streams:
-    def __init__(self, plan: tuple[StreamSpec, ...], clock: Callable[[], float] = time.monotonic) -> None:
+    def __init__(self, plan: tuple[StreamSpec, ...], clock: Callable[[], float] = time.monotonic,
+                 quiet: tuple[StreamSpec, ...] = ()) -> None:
         self.plan = plan
+        self.quiet = quiet
         self.clock = clock
         self.by_name = {s.name: s for s in plan}
         self._by_id = {s.msg_id: s for s in plan}
@@ -96,11 +111,12 @@ class Streams:
         self._last_request = -REREQUEST_S
 
     def begin(self) -> list[Request]:
-        """On (re)connect or a restart: ask for everything again, forgetting refusals."""
+        """On (re)connect or a restart: stop what is not used, then ask for everything again,
+        forgetting refusals."""
         now = self.clock()
         self._last_request = now
         self._state = {s.name: _State(requested_at=now) for s in self.plan}
-        return [Request("interval", s) for s in self.plan]
+        return [Request("quiet", s) for s in self.quiet] + [Request("interval", s) for s in self.plan]
 
     def on_interval_result(self, name: str, result: str) -> list[Request]:
         """The COMMAND_ACK of a SET_MESSAGE_INTERVAL ("MAV_RESULT_ACCEPTED", another result
