@@ -293,3 +293,25 @@ def test_walk_speeds_are_checked_as_parsed(text: str, why: str | None) -> None:
     else:
         with pytest.raises(argparse.ArgumentTypeError, match=re.escape(why)):  # the message names the value
             walk_speeds(text)
+
+
+def test_a_stop_asked_while_the_users_process_finishes_never_kills_it(python_env: dict[str, str], python: str) -> None:
+    # test_sortie_px4's whole MAVSDK sortie: the users stopped by themselves (the sortie was
+    # over) and the harness's SIGINT came while the interpreter finalised: exit status -2.
+    import signal
+    import subprocess
+    import time
+
+    from planner_service.harness.processes import free_port
+
+    endpoint = f"tcp/127.0.0.1:{free_port()}"  # nobody there: the users wait until stopped
+    for _ in range(3):
+        proc = subprocess.Popen([python, "-m", "sim_bridge", "users", "--count", "1", "--connect", endpoint],
+                                env=python_env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+        assert proc.stderr is not None
+        proc.stderr.readline()  # "1 users waiting for the service": its handlers are installed
+        deadline = time.monotonic() + 30.0
+        while proc.poll() is None and time.monotonic() < deadline:
+            proc.send_signal(signal.SIGINT)  # the first stops it; the rest land while it exits
+            time.sleep(0.002)
+        assert proc.wait(5.0) == 0
