@@ -13,6 +13,7 @@ from __future__ import annotations
 import asyncio
 import logging
 import math
+import socket
 import time
 from collections import Counter
 from typing import Any, Callable
@@ -259,3 +260,45 @@ def test_px4_killed_and_restarted_in_the_air(make_px4: Callable[..., Px4], backe
     assert any("the autopilot restarted" in m for m in said), said
     print(f"\n{backend}: PX4 up again {figures['restart_s']:.2f} s after the kill, the restart and a position seen "
           f"{figures['seen_s']:.2f} s after it; link lost meanwhile: {bool(figures['lost'])}")
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_upload_and_read_back_over_a_lossy_link(make_px4: Callable[..., Px4], backend: str, tmp_path: Any) -> None:
+    """Through ``sim_bridge lossy-proxy`` (a fifth of the datagrams dropped each way, some
+    duplicated, delayed and reordered) to PX4's onboard port, which answers whoever spoke to it
+    first: a 20-point mission goes up in full and reads back as sent, PX4 names it by its CRC32,
+    and the link does not take the losses for a lost autopilot. At speed 1: PX4 times its
+    own mission transfers in its simulated time, so at speed 10 it gives up a transfer after a
+    tenth of a real vehicle's wait (MAVSDK's download then fails with PX4's "Mission sync
+    timeout")."""
+    from planner_service.harness.processes import Child, free_port
+
+    px4 = make_px4(speed=1)
+    port = free_port(socket.SOCK_DGRAM)
+    proxy = Child("sim_bridge", ["lossy-proxy", "--listen", f"127.0.0.1:{port}", "--forward",
+                                 f"127.0.0.1:{14580 + px4.instance}", "--drop", "0.2", "--dup", "0.05",
+                                 "--delay-ms", "20", "--seed", "3"], tmp_path / "proxy.log")
+    points = [HoverPoint(20.0 * (k % 5), 25.0 * (k // 5), ALT_M, 5.0) for k in range(20)]
+    items = encode_path(points, ORIGIN, "px4")
+    try:
+        proxy.wait_ready("lossy proxy")
+
+        async def run() -> tuple[list[Any], int, int]:
+            events = Recorder()
+            link = open_link(backend, LinkSettings(f"udpout:127.0.0.1:{port}", "px4", item_timeout_s=0.5, retries=10,
+                                                   link_timeout_s=3.0), events)
+            await link.connect(20.0)
+            try:
+                await link.upload(items)
+                held = await link.download()
+                return held, link.mission_id, len(events.of(Lost))
+            finally:
+                await link.close()
+
+        held, mission_id, lost = asyncio.run(run())
+    finally:
+        assert proxy.stop() == 0, proxy.log()[-2000:]
+    assert same_mission(held, items, "px4"), (len(held), len(items))
+    assert mission_id == px4_mission_id(items)
+    assert lost == 0
+    print(f"\n{backend} over a lossy link to PX4: {len(items)} items up and read back; mission_id {mission_id}")
