@@ -216,3 +216,12 @@ def test_bad_fleet_parameters_name_the_field() -> None:
         env.due
     with pytest.raises(FleetError, match="arrivals_every_s"):
         env.reset(options={"arrivals_every_s": 55})
+
+
+def test_the_fleet_preset_is_field_with_users_ample_for_five() -> None:
+    fleet, field = preset("fleet"), preset("field")
+    assert (fleet.num_users, fleet.num_hover_points, fleet.name) == (60, 40, "fleet")
+    assert fleet.replace(name="field", num_users=10, num_hover_points=20) == field
+    env = FleetEnv(fleet, Fleet(uavs=5))
+    env.reset(seed=0)
+    assert len(env.hover_points[0]) == 40 and env.state.users.shape == (60, 3)
