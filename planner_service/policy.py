@@ -9,6 +9,7 @@ from typing import Callable, Protocol
 import numpy as np
 
 from .model import SortieEnv
+from .model.fleet import FleetEnv
 
 
 @dataclass(frozen=True)
@@ -46,3 +47,18 @@ class PolicySpec:
 
 
 Factory = Callable[[PolicySpec, np.random.Generator], Policy]
+
+
+class FleetPolicy(Protocol):
+    """A fleet's planner: one decision at a time, for the UAV whose turn it is
+    (``env.due``). ``begin`` runs once per sortie after ``env.reset``; ``decide`` picks
+    a point among ``env.action_mask(env.due)``, its ``line`` the points it expects to fly
+    after (the second is published to the others as its intent), and must not change
+    ``env``. Each UAV's own planner is a ``Policy`` on a view of its own
+    (``FleetEnv.view``), so every single-UAV planner plans a UAV of a fleet unchanged."""
+
+    name: str
+
+    def begin(self, env: FleetEnv) -> None: ...
+
+    def decide(self, env: FleetEnv) -> Decision: ...

@@ -36,6 +36,22 @@ def test_plan_json_summary(python, python_env):
     assert summary["fairness_violations"] == 0 and summary["energy_violation"] is False
 
 
+def test_plan_a_fleet(python, python_env):
+    out = run(python, python_env, "-m", "planner_service", "plan", "--preset", "fleet", "--uavs", "3", "--algo",
+              "claims", "--iterations", "100", "--seed", "2", "--json").stdout
+    summary = json.loads(out)
+    assert (summary["algo"], summary["base"], summary["uavs"], summary["preset"]) == ("claims", "mcts", 3, "fleet")
+    per_uav, fleet = summary["per_uav"], summary["fleet"]
+    assert [u["uav"] for u in per_uav] == [0, 1, 2]
+    assert fleet["throughput_tasks_per_interval"] == sum(u["throughput_tasks_per_interval"] for u in per_uav)
+    assert fleet["total_tasks"] == sum(u["total_tasks"] for u in per_uav)
+    assert fleet["double_services"] == fleet["double_holds"] == fleet["fairness_violations"] == 0
+    assert [u["scenario"]["altitude_m"] for u in per_uav] == [100.0, 110.0, 120.0]
+    text = run(python, python_env, "-m", "planner_service", "plan", "--preset", "fleet", "--uavs", "2",
+               "--iterations", "50").stdout
+    assert "independent (mcts per UAV) on fleet, 2 UAVs" in text and "double services   0, double holds 0" in text
+
+
 def test_plan_override_and_bad_override(python, python_env):
     out = run(python, python_env, "-m", "planner_service", "plan", "--algo", "random", "--seed", "1",
               "--set", "speed_mps=10", "--json").stdout

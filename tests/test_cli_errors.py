@@ -56,6 +56,11 @@ CASES: list[tuple[str, tuple[str, ...], str]] = [
     (PS, ("operator", "start", "--reason", "x" * 300), "--reason: 300 characters; at most 256"),
     (PS, ("operator", "watch", "--refresh", "-1"), "argument --refresh: -1 is not positive"),
     (PS, ("plan", "--iterations", "many"), "argument --iterations: invalid int value: 'many'"),
+    (PS, ("plan", "--uavs", "0"), "--uavs: uavs: must lie in (0, 16], got 0"),
+    (PS, ("plan", "--uavs", "2", "--layer-m", "-1"), "--layer-m: layer_m: must not be negative, got -1"),
+    (PS, ("plan", "--uavs", "2", "--algo", "mcts"), "--algo mcts plans one UAV; with --uavs choose from ['claims', "
+                                                    "'independent']"),
+    (PS, ("plan", "--algo", "claims"), "--algo claims plans a fleet: give --uavs N"),
     (PS, ("demo", "--users", "0"), "argument --users: 0 is not at least 1"),
     (PS, ("fly",), "argument COMMAND: invalid choice: 'fly'"),
     (SB, ("vehicle", "--mavlink", "bogus:1"), "argument --mavlink: 'bogus:1' is not udpin:HOST:PORT"),
