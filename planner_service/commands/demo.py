@@ -3,8 +3,8 @@ service on loopback, one sortie flown with the stub's speed-up. Progress (served
 battery, throughput) on the terminal; summary.json, trajectory.png and mission.plan (the
 first complete mission, QGroundControl format) in --out, with the logs and the journal.
 With --mavlink URL no stub is started: the service flies the autopilot there (ArduCopter
-SITL: README, "Flying ArduCopter SITL"). Every process it starts is stopped, also on error
-or Ctrl-C."""
+SITL, PX4 SITL: README, "Flying ArduCopter SITL or PX4 SITL"). Every process it starts is
+stopped, also on error or Ctrl-C."""
 
 from __future__ import annotations
 
