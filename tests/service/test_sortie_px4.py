@@ -24,7 +24,6 @@ from __future__ import annotations
 import json
 import math
 import time
-import tomllib
 from dataclasses import replace
 from pathlib import Path
 from typing import Callable
@@ -39,8 +38,9 @@ from planner_service.service.sortie import item_from_dict
 from protocol.autopilot import PX4
 from protocol.mission import max_points
 from sim_bridge.vehicle.mission_id import px4_mission_id
-from tests.support.autopilot_sortie import (BUDGET_MS, SEED, check_requests_and_missions, decisions, event_at,
-                                            logged_at, offline, service_log)
+from tests.support.autopilot_sortie import BUDGET_MS, check_requests_and_missions, decisions, event_at
+from tests.support.autopilot_sortie import fly as fly_with
+from tests.support.autopilot_sortie import logged_at, offline, service_log
 from tests.support.gcs import M, GroundStation
 from tests.support.px4 import PARAMS, Px4, free_instance, read_params
 from tests.support.stack import Stack
@@ -51,7 +51,6 @@ pytestmark = [pytest.mark.sitl, pytest.mark.timeout(300)]
 REPO = Path(__file__).resolve().parents[2]
 CONFIG = REPO / "docs" / "sitl-px4.toml"
 SPEED = 10
-USERS = 10
 BACKENDS = ["pymavlink", "mavsdk"]
 TOLERANCE_S = 1.0
 """A hold is judged from GLOBAL_POSITION_INT (0.1 s apart in PX4's clock on both links) and
@@ -76,18 +75,7 @@ def quad(make_px4: Callable[..., Px4], kernels: None) -> Px4:
 
 def fly(stack: Stack, px4: Px4, backend: str, **settings: str) -> ServiceConfig:
     """docs/sitl-px4.toml's service on PX4's onboard link and the simulated users, started."""
-    with open(CONFIG, "rb") as handle:
-        raw = tomllib.load(handle)
-    overrides: dict[str, str] = {}
-    for section, values in raw.items():
-        for key, value in values.items():
-            overrides[f"{section}__{key}"] = str(value).lower() if isinstance(value, bool) else str(value)
-    overrides.update(mavlink__url=px4.url, mavlink__backend=backend, planner__min_requests=str(USERS),
-                     planner__budget_ms=str(BUDGET_MS), planner__seed=str(SEED), **settings)
-    stack.service(**overrides)
-    config = load_config(stack.tmp / "planner.toml")
-    stack.users("--count", str(USERS), "--speedup", str(SPEED), "--seed", str(SEED), *config.scenario_arguments())
-    return config
+    return fly_with(stack, CONFIG, px4.url, backend, SPEED, **settings)
 
 
 def stop_all(stack: Stack, px4: Px4) -> None:

@@ -34,7 +34,6 @@ from __future__ import annotations
 import math
 import re
 import time
-import tomllib
 from contextlib import contextmanager
 from dataclasses import replace
 from pathlib import Path
@@ -50,8 +49,9 @@ from protocol.mission import max_points
 from tests.support.gcs import M, GroundStation
 from tests.support.sitl import Sitl, free_instance, read_dataflash
 from tests.support.stack import Stack
-from tests.support.autopilot_sortie import (BUDGET_MS, SEED, check_requests_and_missions, decisions, event_at,
-                                            logged_at, offline, service_log)
+from tests.support.autopilot_sortie import BUDGET_MS, check_requests_and_missions, decisions, event_at
+from tests.support.autopilot_sortie import fly as fly_with
+from tests.support.autopilot_sortie import logged_at, offline, service_log
 from tests.support.truth import false_services, recorded_services, sitl_track
 
 pytestmark = [pytest.mark.sitl, pytest.mark.timeout(300)]
@@ -62,7 +62,6 @@ PARAMS = REPO / "docs" / "sitl-copter.parm"
 INSTANCES = range(30, 40)
 """SITL instance numbers of these tests (ports 6060..6153)."""
 SPEEDUP = 10
-USERS = 10
 BACKENDS = ["pymavlink", "mavsdk"]
 TOLERANCE_S = 1.0
 """A hold is judged from GLOBAL_POSITION_INT and the log's POS, each 0.1 s apart in the
@@ -93,18 +92,7 @@ def copter(make_sitl: Callable[..., Sitl], kernels: None) -> Sitl:
 
 def fly(stack: Stack, sitl: Sitl, backend: str, **settings: str) -> ServiceConfig:
     """docs/sitl-copter.toml's service on SITL's SERIAL1 and the simulated users, started."""
-    with open(CONFIG, "rb") as handle:
-        raw = tomllib.load(handle)
-    overrides: dict[str, str] = {}
-    for section, values in raw.items():
-        for key, value in values.items():
-            overrides[f"{section}__{key}"] = str(value).lower() if isinstance(value, bool) else str(value)
-    overrides.update(mavlink__url=sitl.url(1), mavlink__backend=backend, planner__min_requests=str(USERS),
-                     planner__budget_ms=str(BUDGET_MS), planner__seed=str(SEED), **settings)
-    stack.service(**overrides)
-    config = load_config(stack.tmp / "planner.toml")
-    stack.users("--count", str(USERS), "--speedup", str(SPEEDUP), "--seed", str(SEED), *config.scenario_arguments())
-    return config
+    return fly_with(stack, CONFIG, sitl.url(1), backend, SPEEDUP, **settings)
 
 
 @contextmanager

@@ -6,8 +6,10 @@ from __future__ import annotations
 
 import json
 import re
+import tomllib
 from collections import Counter
 from datetime import datetime
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -15,7 +17,7 @@ import numpy as np
 from planner_service.model import Scenario
 from planner_service.model.fairness import fairness_violations
 from planner_service.policy import PolicySpec
-from planner_service.service.config import ServiceConfig
+from planner_service.service.config import ServiceConfig, load_config
 from planner_service.service.sortie import item_from_dict
 from planner_service.sortie import run_sortie
 from protocol import validate_mission
@@ -26,6 +28,25 @@ LOG_TIME = re.compile(r"^(\d{4}-\d\d-\d\d \d\d:\d\d:\d\d,\d{3}) ")
 SEED = 1
 BUDGET_MS = 100.0
 """The planner's budget per decision (tests/service/stack.py's), offline too."""
+USERS = 10
+
+
+def fly(stack: Stack, config_file: Path, url: str, backend: str, speedup: float, **settings: str) -> ServiceConfig:
+    """The service of ``config_file`` (docs/sitl-*.toml) on the autopilot at ``url`` and the
+    simulated users at its speed-up, started; only the link, the backend and the first
+    plan's size (every user) are set here, besides ``settings``."""
+    with open(config_file, "rb") as handle:
+        raw = tomllib.load(handle)
+    overrides: dict[str, str] = {}
+    for section, values in raw.items():
+        for key, value in values.items():
+            overrides[f"{section}__{key}"] = str(value).lower() if isinstance(value, bool) else str(value)
+    overrides.update(mavlink__url=url, mavlink__backend=backend, planner__min_requests=str(USERS),
+                     planner__budget_ms=str(BUDGET_MS), planner__seed=str(SEED), **settings)
+    stack.service(**overrides)
+    config = load_config(stack.tmp / "planner.toml")
+    stack.users("--count", str(USERS), "--speedup", str(speedup), "--seed", str(SEED), *config.scenario_arguments())
+    return config
 
 
 def service_log(stack: Stack) -> str:

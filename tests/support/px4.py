@@ -45,7 +45,7 @@ from pymavlink import mavutil  # noqa: E402
 from planner_service.harness.processes import tied_to_parent  # noqa: E402
 from planner_service.service.link.extensions import MISSION_CURRENT_ID_OFFSET, extension_u32  # noqa: E402
 from protocol.geodesy import GeoOrigin  # noqa: E402
-from tests.support.sitl import port_is_free, reserve  # noqa: E402
+from tests.support.sitl import end_group, port_is_free, reserve  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[2]
 ENV = "PX4_SITL"
@@ -226,18 +226,7 @@ class Px4:
 
     def kill(self, sig: int = signal.SIGKILL) -> None:
         """End the autopilot as a crash or power loss would (SIGKILL) or cleanly (SIGTERM)."""
-        proc = self.proc
-        if proc is None or proc.poll() is not None:
-            return
-        try:
-            os.killpg(proc.pid, sig)
-        except ProcessLookupError:
-            return
-        try:
-            proc.wait(10.0)
-        except subprocess.TimeoutExpired:
-            os.killpg(proc.pid, signal.SIGKILL)
-            proc.wait(5.0)
+        end_group(self.proc, sig, wait_s=10.0)
 
     def restart(self) -> None:
         """Kill it and start it again in the same folder (its parameters and mission kept)."""

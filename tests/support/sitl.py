@@ -177,18 +177,7 @@ class Sitl:
 
     def kill(self, sig: int = signal.SIGKILL) -> None:
         """End the autopilot as a crash or power loss would (SIGKILL) or cleanly (SIGTERM)."""
-        proc = self.proc
-        if proc is None or proc.poll() is not None:
-            return
-        try:
-            os.killpg(proc.pid, sig)
-        except ProcessLookupError:
-            return
-        try:
-            proc.wait(5.0)
-        except subprocess.TimeoutExpired:
-            os.killpg(proc.pid, signal.SIGKILL)
-            proc.wait(5.0)
+        end_group(self.proc, sig)
 
     def restart(self) -> None:
         """Kill it and start it again in the same folder (same parameters, logs appended)."""
@@ -316,6 +305,22 @@ class PtyBridge:
                 os.close(fd)
             except OSError:
                 pass
+
+
+def end_group(proc: subprocess.Popen[bytes] | None, sig: int, wait_s: float = 5.0) -> None:
+    """Send ``sig`` to ``proc``'s process group (started with a session of its own) and wait;
+    SIGKILL to the group if it lingers. Nothing if it is not running."""
+    if proc is None or proc.poll() is not None:
+        return
+    try:
+        os.killpg(proc.pid, sig)
+    except ProcessLookupError:
+        return
+    try:
+        proc.wait(wait_s)
+    except subprocess.TimeoutExpired:
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait(5.0)
 
 
 def _closed() -> None:
