@@ -4,7 +4,7 @@ UAV (``sortie.summarize``), and the fleet's figures over them."""
 from __future__ import annotations
 
 import time
-from typing import Any
+from typing import Any, Iterable
 
 import numpy as np
 
@@ -75,16 +75,16 @@ def run_fleet_sortie(scenario: Scenario, fleet: Fleet, algo: str, seed: int, spe
         "preset": scenario.name, "seed": seed, "iterations": spec.iterations, "budget_ms": spec.budget_ms,
         "wall_s": wall, "decision_ms_median": float(np.median(every) * 1e3) if every else 0.0,
         "fleet": fleet_figures(scenario, per_uav, events, getattr(policy, "blocked", 0)),
-        "messages": message_figures(policy),
+        "messages": message_figures(getattr(policy, "message_bytes", ())),
         "per_uav": per_uav, "events": events, "scenario": scenario.as_dict(),
     }
 
 
-def message_figures(policy: object) -> dict[str, Any]:
-    """What a fleet planner's UAVs sent one another: a planner that sends messages keeps the
-    size in bytes of each it sent in ``message_bytes`` (a list); one without sends none, and
-    its figures are 0."""
-    sizes = [int(b) for b in getattr(policy, "message_bytes", ())]
+def message_figures(message_bytes: Iterable[int]) -> dict[str, Any]:
+    """What a fleet planner's UAVs sent one another, from the size in bytes of each message (a
+    planner that sends messages keeps them in its ``message_bytes``; one without sends none,
+    and its figures are 0)."""
+    sizes = [int(b) for b in message_bytes]
     return {"sent": len(sizes), "bytes_median": float(np.median(sizes)) if sizes else 0.0,
             "bytes_max": max(sizes, default=0), "bytes_total": int(sum(sizes))}
 
