@@ -22,7 +22,7 @@ ALLOWED: dict[str, set[str] | None] = {
     REGISTRY: {SETTINGS, MODEL, POLICY, MCTS, BASELINES},
     SORTIE: {SETTINGS, MODEL, POLICY, REGISTRY},
     "planner_service.fleet": {SETTINGS, MODEL, POLICY, REGISTRY, SORTIE},
-    "planner_service.experiments": {SETTINGS, MODEL, POLICY, MCTS, SORTIE},
+    "planner_service.experiments": {SETTINGS, MODEL, POLICY, MCTS, SORTIE, "planner_service.fleet"},
     SERVICE: {"protocol", SETTINGS, MODEL, POLICY, MCTS},
     HARNESS: {"protocol", SETTINGS, MODEL, POLICY, SORTIE, SERVICE},
     "planner_service.bench": EVERYTHING,

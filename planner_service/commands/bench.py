@@ -1,6 +1,7 @@
 """Performance figures: mcts decision latency (median, p99) and playouts per second at the
 paper's size (K=20, I=10) and larger, with a plain pure-Python reference timed in the same
-run so the speed-up is a ratio. Figures, not pass/fail: run it on a quiet machine."""
+run so the speed-up is a ratio; with --fleet, the fleet planners' decision time per UAV and
+message size. Figures, not pass/fail: run it on a quiet machine."""
 
 from __future__ import annotations
 
@@ -44,6 +45,10 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--algos", default="mcts,greedy,random", help="algorithms with --flight (default mcts,greedy,random)")
     parser.add_argument("--speedup", type=float, default=25.0, help="the stub's speed-up with --flight (default 25)")
     parser.add_argument("--budget-ms", type=float, default=150.0, help="planner budget with --flight (default 150)")
+    parser.add_argument("--fleet", action="store_true",
+                        help="instead: every fleet planner's decision time per UAV (median, p95) and message size "
+                             "for N = 3 and 5 at K=20/I=10 and K=200/I=1000, --iterations per decision "
+                             "(--decisions each, default 30; with --quick the paper's size only, 10 decisions)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -53,6 +58,8 @@ def run(args: argparse.Namespace) -> int:
         return _run_link(args)
     if args.flight:
         return _run_flight(args)
+    if args.fleet:
+        return _run_fleet(args)
     from ..bench.run import SIZES, format_table, run_bench
 
     if (args.decisions is not None and args.decisions < 1) or args.iterations < 1 or args.reference_decisions < 0:
@@ -62,6 +69,19 @@ def run(args: argparse.Namespace) -> int:
     results = run_bench(args.decisions, args.iterations, args.reference_decisions, sizes,
                         progress=lambda msg: print(msg, file=sys.stderr, flush=True))
     print(json.dumps(results, indent=1) if args.json else format_table(results))
+    return 0
+
+
+def _run_fleet(args: argparse.Namespace) -> int:
+    from ..bench.fleet import SIZES, format_fleet, run_fleet_bench
+
+    decisions = args.decisions if args.decisions is not None else (10 if args.quick else 30)
+    if decisions < 1 or args.iterations < 1:
+        print("error: --decisions and --iterations must be at least 1", file=sys.stderr)
+        return 2
+    results = run_fleet_bench(decisions, args.iterations, SIZES[:1] if args.quick else SIZES,
+                              progress=lambda msg: print(msg, file=sys.stderr, flush=True))
+    print(json.dumps(results, indent=1) if args.json else format_fleet(results))
     return 0
 
 

@@ -8,8 +8,12 @@ import sys
 from ..model import PRESETS, Scenario, ScenarioError, preset
 
 
-def add_scenario_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--preset", default="paper", choices=sorted(PRESETS), help="scenario preset (default: paper)")
+def add_scenario_arguments(parser: argparse.ArgumentParser, default: str | None = "paper",
+                           default_help: str = "paper") -> None:
+    """``--preset`` (``default``: None when the command picks it, ``default_help`` saying how)
+    and ``--set``."""
+    parser.add_argument("--preset", default=default, choices=sorted(PRESETS),
+                        help=f"scenario preset (default: {default_help})")
     parser.add_argument(
         "--set", dest="overrides", action="append", default=[], metavar="NAME=VALUE",
         help="override a scenario field, e.g. --set speed_mps=10 (repeatable; see docs/MODEL.md)",

@@ -10,16 +10,21 @@ from __future__ import annotations
 
 import multiprocessing
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
-from typing import Iterable
+from typing import Any, Callable, Iterable
 
 from .errors import ExperimentError
-from .jobs import Job, Record, run_job, warm_up
+from .jobs import Record, run_job, warm_up
 from .progress import Progress
 
 
-def run_jobs(jobs: Iterable[Job], workers: int, cache: dict[Job, Record] | None = None,
-             progress: Progress | None = None) -> dict[Job, Record]:
+def run_jobs(jobs: Iterable[Any], workers: int, cache: dict[Any, Record] | None = None,
+             progress: Progress | None = None, run: Callable[[Any], Record] = run_job,
+             warm: Callable[[], None] = warm_up) -> dict[Any, Record]:
     """Run every job not yet in ``cache`` and return the cache (job -> record).
+
+    A job is a ``Job`` flown by ``run_job`` unless ``run`` says otherwise (the fleet's jobs:
+    any hashable, picklable value with ``describe()`` and ``cost_estimate_s()``, and a
+    top-level ``run`` so that it pickles to a worker); ``warm`` runs once per worker.
 
     ``workers`` <= 1 runs in this process (no pool); otherwise that many processes.
     The longest jobs start first; jobs of equal cost keep their given order, so that
@@ -35,19 +40,19 @@ def run_jobs(jobs: Iterable[Job], workers: int, cache: dict[Job, Record] | None 
     if not todo:
         return cache
     if workers <= 1:
-        warm_up()
+        warm()
         for job in todo:
-            cache[job] = _run(job)
+            cache[job] = _run(run, job)
             if progress is not None:
                 progress.update(weight=job.cost_estimate_s())
         return cache
     ctx = multiprocessing.get_context("spawn")
-    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=warm_up) as pool:
+    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=warm) as pool:
         # Keep only a few jobs queued per worker so the order above is the order they run.
         pending: dict = {}
         queue = iter(todo)
         for job in queue:
-            pending[pool.submit(_run, job)] = job
+            pending[pool.submit(_run, run, job)] = job
             if len(pending) >= 2 * workers:
                 break
         while pending:
@@ -59,13 +64,13 @@ def run_jobs(jobs: Iterable[Job], workers: int, cache: dict[Job, Record] | None 
                     progress.update(weight=job.cost_estimate_s())
                 nxt = next(queue, None)
                 if nxt is not None:
-                    pending[pool.submit(_run, nxt)] = nxt
+                    pending[pool.submit(_run, run, nxt)] = nxt
     return cache
 
 
-def _run(job: Job) -> Record:
+def _run(run: Callable[[Any], Record], job: Any) -> Record:
     try:
-        return run_job(job)
+        return run(job)
     except Exception as err:  # name the sortie that failed; the pool would only say "error"
         raise ExperimentError(f"{job.describe()}: {type(err).__name__}: {err}") from err
 

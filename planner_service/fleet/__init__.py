@@ -8,8 +8,9 @@ their plans in its playouts) and ``joint`` (one search over the joint action, th
 where it is tractable): issue 26's second half; ``LATER`` names them.
 """
 
-from .policies import FLEET_PLANNERS, LATER, ClaimsFleet, IndependentFleet, fleet_algorithms, make_fleet_policy
-from .sortie import fleet_streams, run_fleet_sortie
+from .policies import (FLEET_PLANNERS, LATER, ClaimsFleet, IndependentFleet, MessageLink, fleet_algorithms,
+                       make_fleet_policy, takes_link)
+from .sortie import fleet_streams, message_figures, run_fleet_sortie
 
-__all__ = ["FLEET_PLANNERS", "LATER", "ClaimsFleet", "IndependentFleet", "fleet_algorithms", "fleet_streams",
-           "make_fleet_policy", "run_fleet_sortie"]
+__all__ = ["FLEET_PLANNERS", "LATER", "ClaimsFleet", "IndependentFleet", "MessageLink", "fleet_algorithms",
+           "fleet_streams", "make_fleet_policy", "message_figures", "run_fleet_sortie", "takes_link"]

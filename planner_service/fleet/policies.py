@@ -4,6 +4,8 @@ with today's planner; what differs is the view each is given."""
 
 from __future__ import annotations
 
+import inspect
+from dataclasses import dataclass
 from typing import Callable
 
 import numpy as np
@@ -109,11 +111,44 @@ def fleet_algorithms() -> list[str]:
     return sorted(FLEET_PLANNERS)
 
 
-def make_fleet_policy(name: str, base: str, spec: PolicySpec, rngs: list[np.random.Generator]) -> FleetPolicy:
-    """The fleet planner ``name`` with ``base`` as each UAV's planner, one generator per UAV."""
-    if name in LATER:
+@dataclass(frozen=True)
+class MessageLink:
+    """How the messages between a fleet's UAVs fare, for the planners that send some
+    (``takes_link``): each message is lost with probability ``loss``, and the one a UAV
+    reads is ``late_intervals`` of its sender's intervals old (0: the latest)."""
+
+    loss: float = 0.0
+    """Probability that a message is lost, in [0, 1)."""
+    late_intervals: int = 0
+    """How many of the sender's intervals old the message a UAV reads is (0: fresh)."""
+
+    def __post_init__(self) -> None:
+        if not 0.0 <= self.loss < 1.0:
+            raise ValueError(f"message loss must be in [0, 1), got {self.loss}")
+        if self.late_intervals < 0:
+            raise ValueError(f"late_intervals must be at least 0, got {self.late_intervals}")
+
+
+def takes_link(name: str) -> bool:
+    """Whether fleet planner ``name`` sends messages whose loss and lateness can be set: its
+    factory takes a keyword ``link`` (a ``MessageLink``). The experiments read this, so a
+    message-passing planner added to ``FLEET_PLANNERS`` is swept without other edits."""
+    if name not in FLEET_PLANNERS:
+        raise ValueError(f"unknown fleet planner {name!r}; choose from {fleet_algorithms()}")
+    return "link" in inspect.signature(FLEET_PLANNERS[name]).parameters
+
+
+def make_fleet_policy(name: str, base: str, spec: PolicySpec, rngs: list[np.random.Generator],
+                      link: MessageLink | None = None) -> FleetPolicy:
+    """The fleet planner ``name`` with ``base`` as each UAV's planner, one generator per UAV;
+    ``link`` for a planner that sends messages (``takes_link``), refused by the others."""
+    if name in LATER and name not in FLEET_PLANNERS:
         raise ValueError(f"fleet planner {name!r} is not built yet (issue 26, second half); choose from "
                          f"{fleet_algorithms()}")
     if name not in FLEET_PLANNERS:
         raise ValueError(f"unknown fleet planner {name!r}; choose from {fleet_algorithms()}")
-    return FLEET_PLANNERS[name](base, spec, rngs)
+    if link is None:
+        return FLEET_PLANNERS[name](base, spec, rngs)
+    if not takes_link(name):
+        raise ValueError(f"fleet planner {name!r} sends no messages: a message link (loss, lateness) does not apply")
+    return FLEET_PLANNERS[name](base, spec, rngs, link=link)  # type: ignore[call-arg]

@@ -4,7 +4,7 @@ UAV (``sortie.summarize``), and the fleet's figures over them."""
 from __future__ import annotations
 
 import time
-from typing import Any
+from typing import Any, Iterable
 
 import numpy as np
 
@@ -15,7 +15,7 @@ from ..model.fleet.audit import Hold, overlaps
 from ..model.interval import NO_USER
 from ..policy import PolicySpec
 from ..sortie import summarize
-from .policies import intent_of, make_fleet_policy
+from .policies import MessageLink, intent_of, make_fleet_policy
 
 FLEET_ONLY = ("uav", "start_s", "end_s", "ended")
 """Keys of a fleet step's record that a single UAV's trace does not have."""
@@ -30,16 +30,19 @@ def fleet_streams(seed: int, uavs: int) -> tuple[np.random.Generator, list[np.ra
 
 
 def run_fleet_sortie(scenario: Scenario, fleet: Fleet, algo: str, seed: int, spec: PolicySpec | None = None,
-                     base: str = "mcts", options: dict[str, Any] | None = None) -> dict[str, Any]:
-    """Fly one fleet sortie with fleet planner ``algo`` (each UAV's planner ``base``) and
-    return its summary: ``per_uav`` (each UAV's ``plan --json`` summary, its ``holds``
-    [start_s, end_s] beside it) and ``fleet`` (the fleet's figures, ``fleet_figures``)."""
+                     base: str = "mcts", options: dict[str, Any] | None = None,
+                     link: MessageLink | None = None) -> dict[str, Any]:
+    """Fly one fleet sortie with fleet planner ``algo`` (each UAV's planner ``base``; ``link``
+    the messages' loss and lateness, for a planner that sends some) and return its summary:
+    ``per_uav`` (each UAV's ``plan --json`` summary, its ``holds`` [start_s, end_s] beside
+    it), ``fleet`` (the fleet's figures, ``fleet_figures``) and ``messages``
+    (``message_figures``)."""
     spec = spec or PolicySpec()
     world_rng, planner_rngs = fleet_streams(seed, fleet.uavs)
     env = FleetEnv(scenario, fleet)
     env.rng = world_rng
     env.reset(options=options)
-    policy = make_fleet_policy(algo, base, spec, planner_rngs)
+    policy = make_fleet_policy(algo, base, spec, planner_rngs, link)
     traces: list[list[dict[str, Any]]] = [[] for _ in range(fleet.uavs)]
     holds: list[list[list[float]]] = [[] for _ in range(fleet.uavs)]
     decision_s: list[list[float]] = [[] for _ in range(fleet.uavs)]
@@ -72,8 +75,18 @@ def run_fleet_sortie(scenario: Scenario, fleet: Fleet, algo: str, seed: int, spe
         "preset": scenario.name, "seed": seed, "iterations": spec.iterations, "budget_ms": spec.budget_ms,
         "wall_s": wall, "decision_ms_median": float(np.median(every) * 1e3) if every else 0.0,
         "fleet": fleet_figures(scenario, per_uav, events, getattr(policy, "blocked", 0)),
+        "messages": message_figures(getattr(policy, "message_bytes", ())),
         "per_uav": per_uav, "events": events, "scenario": scenario.as_dict(),
     }
+
+
+def message_figures(message_bytes: Iterable[int]) -> dict[str, Any]:
+    """What a fleet planner's UAVs sent one another, from the size in bytes of each message (a
+    planner that sends messages keeps them in its ``message_bytes``; one without sends none,
+    and its figures are 0)."""
+    sizes = [int(b) for b in message_bytes]
+    return {"sent": len(sizes), "bytes_median": float(np.median(sizes)) if sizes else 0.0,
+            "bytes_max": max(sizes, default=0), "bytes_total": int(sum(sizes))}
 
 
 def fleet_figures(scenario: Scenario, per_uav: list[dict[str, Any]], events: list[dict[str, Any]],
