@@ -134,15 +134,21 @@ def test_three_sorties_in_a_row(stack: Stack) -> None:
     # known) until the operator gives it; sortie 3 begins without (the configuration's is
     # for a process's first sortie) and waits for the operator's start: nothing flies
     stack.wait_log(third, "authority ended: revoked: the service started with the vehicle in the air", 30.0)
-    assert stack.operator("start", "the vehicle is seen flying our mission").accepted
+    reply = stack.operator("start", "the vehicle is seen flying our mission")
+    assert reply.accepted, reply
     wait_sortie(stack, 2, True, 60.0)
     wait_sortie(stack, 3, False, 30.0)
     begun = stack.wait_event(started(3), 10.0, "sortie 3's start")
-    assert "authority none" in begun.detail, begun
-    armings = vehicle.log().count("armed at t=")
-    time.sleep(2.0)  # with the authority, the service arms within a second of its plan
-    assert vehicle.log().count("armed at t=") == armings, "armed in sortie 3 before the operator's start"
-    assert stack.operator("start", "sortie 3").accepted
+    if "sortie 3 begins" in reply.message:
+        # Sortie 2's mission had landed while the service restarted (a loaded machine): a
+        # start given between sorties is the next sortie's, as the operator was told.
+        assert "authority operator (given by the operator" in begun.detail, begun
+    else:
+        assert "authority none" in begun.detail, begun
+        armings = vehicle.log().count("armed at t=")
+        time.sleep(2.0)  # with the authority, the service arms within a second of its plan
+        assert vehicle.log().count("armed at t=") == armings, "armed in sortie 3 before the operator's start"
+        assert stack.operator("start", "sortie 3").accepted
     wait_sortie(stack, 3, True, 60.0)
     assert third.stop() == 0
 

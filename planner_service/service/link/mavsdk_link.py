@@ -48,7 +48,12 @@ from .streams import INTERVAL_CMD, QUIET_INTERVAL_US, Request
 
 _log = logging.getLogger("mavsdk")
 log = logging.getLogger(__name__)
-RETRYABLE = {MissionRawResult.BUSY, MissionRawResult.TIMEOUT, MissionRawResult.ERROR}
+RETRYABLE = {MissionRawResult.BUSY, MissionRawResult.TIMEOUT, MissionRawResult.ERROR,
+             MissionRawResult.INVALID_SEQUENCE}
+"""Upload results worth a whole new upload (MISSION_COUNT restarts the transfer). An
+INVALID_SEQUENCE ack is the autopilot saying an item came out of turn (a repeat that crossed
+its next request: ArduPilot sends it and goes on, MAVSDK ends the upload there), seen on
+ArduCopter SITL at x10 over a serial line on a loaded machine."""
 REPORTS = frozenset({"MISSION_CURRENT", "MISSION_ITEM_REACHED"})
 REFUSAL_TEXT_WAIT_S = 0.3
 STALE_REPORT_S = 2.0
