@@ -25,7 +25,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
     add_scenario_arguments(parser)
     parser.add_argument("--algo", default=None, choices=algorithms() + fleet_algorithms(),
                         help="planner (default: mcts; with --uavs a fleet planner, default independent: "
-                             "independent, claims or dec-mcts, each UAV planned by --base)")
+                             "independent, claims, dec-mcts (each UAV planned by --base) or joint)")
     parser.add_argument("--uavs", type=int, default=None, metavar="N",
                         help="fly a fleet of N UAVs over the same users (1-16); a fleet of 1 is the sortie without it")
     parser.add_argument("--base", default="mcts", choices=BASES,

@@ -2,17 +2,18 @@
 on a view of its own (``FleetEnv.view``), coordinated or not by what the others intend.
 
 Built: ``independent`` (the baseline: each UAV blind to the others), ``claims`` (each
-UAV leaves out what the others have committed to) and ``dec-mcts`` (each UAV samples the
+UAV leaves out what the others have committed to), ``dec-mcts`` (each UAV samples the
 others' published distributions over their plans in its futures: ``dec_mcts.py``, its
-messages ``messages.py``). Not built yet, and refused by name: ``joint`` (one search over
-the joint action, the reference where it is tractable); ``LATER`` names it.
+messages ``messages.py``) and ``joint`` (one search over the whole fleet's plan, the
+reference where K^N is small: ``joint.py``).
 """
 
 from .dec_mcts import DecMctsConfig, DecMctsFleet
+from .joint import MAX_JOINT_ACTIONS, JointFleet
 from .messages import MessageError, PlanMessage, decode
 from .policies import FLEET_PLANNERS, LATER, ClaimsFleet, IndependentFleet, fleet_algorithms, make_fleet_policy
 from .sortie import fleet_streams, run_fleet_sortie
 
-__all__ = ["FLEET_PLANNERS", "LATER", "ClaimsFleet", "DecMctsConfig", "DecMctsFleet", "IndependentFleet", "MessageError",
-           "PlanMessage", "decode", "fleet_algorithms", "fleet_streams",
-           "make_fleet_policy", "run_fleet_sortie"]
+__all__ = ["FLEET_PLANNERS", "LATER", "MAX_JOINT_ACTIONS", "ClaimsFleet", "DecMctsConfig", "DecMctsFleet",
+           "IndependentFleet", "JointFleet", "MessageError", "PlanMessage", "decode", "fleet_algorithms",
+           "fleet_streams", "make_fleet_policy", "run_fleet_sortie"]
