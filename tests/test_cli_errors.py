@@ -59,7 +59,11 @@ CASES: list[tuple[str, tuple[str, ...], str]] = [
     (PS, ("plan", "--uavs", "0"), "--uavs: uavs: must lie in (0, 16], got 0"),
     (PS, ("plan", "--uavs", "2", "--layer-m", "-1"), "--layer-m: layer_m: must not be negative, got -1"),
     (PS, ("plan", "--uavs", "2", "--algo", "mcts"), "--algo mcts plans one UAV; with --uavs choose from ['claims', "
-                                                    "'independent']"),
+                                                    "'dec-mcts', 'independent', 'joint']"),
+    (PS, ("plan", "--uavs", "2", "--algo", "dec-mcts", "--msg-drop", "2"), "--msg-drop: drop must lie in [0, 1], "
+                                                                           "got 2.0"),
+    (PS, ("plan", "--uavs", "2", "--algo", "claims", "--msg-age", "1"), "--msg-drop and --msg-age are dec-mcts's "
+                                                                        "messages: give --algo dec-mcts"),
     (PS, ("plan", "--algo", "claims"), "--algo claims plans a fleet: give --uavs N"),
     (PS, ("demo", "--users", "0"), "argument --users: 0 is not at least 1"),
     (PS, ("fly",), "argument COMMAND: invalid choice: 'fly'"),

@@ -17,6 +17,7 @@ from typing import Any, Callable
 import numpy as np
 
 from ..fleet import fleet_algorithms, fleet_streams, make_fleet_policy, message_figures
+from ..fleet.sortie import sent_sizes
 from ..fleet.policies import intent_of
 from ..model import HAVE_NUMBA, Scenario
 from ..model.fleet import Fleet, FleetEnv
@@ -51,7 +52,7 @@ def time_fleet_decisions(scenario: Scenario, uavs: int, algo: str, iterations: i
             decision = policy.decide(env)
             seconds.append(time.perf_counter() - start)
             env.step(decision.action, intent_of(decision))
-        sent += list(getattr(policy, "message_bytes", ()))
+        sent += sent_sizes(policy)
         seed += 1
     messages = message_figures(sent)
     return {"decisions": len(seconds), "median_ms": float(np.median(seconds) * 1e3),

@@ -25,7 +25,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
     add_scenario_arguments(parser)
     parser.add_argument("--algo", default=None, choices=algorithms() + fleet_algorithms(),
                         help="planner (default: mcts; with --uavs a fleet planner, default independent: "
-                             "independent or claims, each UAV planned by --base)")
+                             "independent, claims, dec-mcts (each UAV planned by --base) or joint)")
     parser.add_argument("--uavs", type=int, default=None, metavar="N",
                         help="fly a fleet of N UAVs over the same users (1-16); a fleet of 1 is the sortie without it")
     parser.add_argument("--base", default="mcts", choices=BASES,
@@ -36,6 +36,11 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--base-step-m", type=float, default=Fleet.base_step_m,
                         help="with --uavs: UAV j's base lies j * this many metres east of the scenario's "
                              f"(default: {Fleet.base_step_m:g}, one ground station)")
+    parser.add_argument("--msg-drop", type=float, default=None, metavar="P",
+                        help="with --algo dec-mcts: probability that a UAV's message misses a given other UAV "
+                             "(default: 0)")
+    parser.add_argument("--msg-age", type=int, default=None, metavar="N",
+                        help="with --algo dec-mcts: messages arrive N of the sender's intervals late (default: 0)")
     parser.add_argument("--iterations", type=int, default=None,
                         help="MCTS iterations per decision, or training episodes for ql/dqn (default: 1000, "
                              "or no limit when --budget-ms is given)")
@@ -89,15 +94,20 @@ def _run_fleet(args: argparse.Namespace, scenario: Scenario, spec: PolicySpec) -
         print(f"error: --algo {algo} plans one UAV; with --uavs choose from {fleet_algorithms()} "
               f"(each UAV's own planner: --base)", file=sys.stderr)
         return 2
+    settings = {k: v for k, v in (("drop", args.msg_drop), ("age", args.msg_age)) if v is not None}
+    if settings and algo != "dec-mcts":
+        print("error: --msg-drop and --msg-age are dec-mcts's messages: give --algo dec-mcts", file=sys.stderr)
+        return 2
     try:
         fleet = Fleet(uavs=args.uavs, layer_m=args.layer_m, base_step_m=args.base_step_m)
-        summary = run_fleet_sortie(scenario, fleet, algo, args.seed, spec, base=args.base)
+        summary = run_fleet_sortie(scenario, fleet, algo, args.seed, spec, base=args.base, settings=settings)
     except ScenarioError as err:
         option = {"uavs": "--uavs", "layer_m": "--layer-m", "base_step_m": "--base-step-m"}.get(err.field)
         print(f"error: {option + ': ' if option else ''}{err}", file=sys.stderr)
         return 2
     except ValueError as err:
-        print(f"error: {err}", file=sys.stderr)
+        option = next((o for k, o in (("drop", "--msg-drop"), ("age", "--msg-age")) if str(err).startswith(k)), None)
+        print(f"error: {option + ': ' if option else ''}{err}", file=sys.stderr)
         return 2
     if args.json:
         json.dump(summary, sys.stdout, indent=1)
@@ -125,4 +135,6 @@ def _print_fleet(summary: dict[str, Any], scenario: Scenario) -> None:
           f"{f['fairness_violations']}")
     print(f"  double services   {f['double_services']}, double holds {f['double_holds']}, blocked choices "
           f"{f['blocked_choices']}")
+    if "messages" in f:
+        print(f"  messages          {f['messages']}, at most {f['message_bytes_max']} bytes")
     print(f"  wall time         {summary['wall_s']:.3f} s")

@@ -6,56 +6,17 @@ from __future__ import annotations
 
 import inspect
 from dataclasses import dataclass
-from typing import Callable
+from typing import Any, Callable
 
 import numpy as np
 
 from ..model.fleet import FleetEnv
-from ..model.interval import AT_BASE
-from ..policy import Decision, FleetPolicy, Policy, PolicySpec
-from ..registry import make_policy
+from ..policy import Decision, FleetPolicy, PolicySpec
+from .dec_mcts import DecMctsConfig, DecMctsFleet
+from .joint import JointFleet
+from .per_uav import BASES, PerUav, intent_of
 
-BASES = ("mcts", "mcts-paper", "ts-mcts", "greedy", "random")
-"""Single-UAV planners a fleet's UAV may use: those whose ``begin`` leaves the environment
-alone (``ql`` and ``dqn`` train on theirs, which for a UAV of a fleet is a view)."""
-
-
-def intent_of(decision: Decision) -> int:
-    """The point a decision says its UAV flies to after this one (the second of its line),
-    or ``AT_BASE`` when its line stops at the first."""
-    return int(decision.line[1]) if len(decision.line) > 1 else AT_BASE
-
-
-class _PerUav:
-    """One single-UAV planner per UAV, and the one rule both fleet planners share: a
-    choice the fleet does not allow (a point another UAV holds, a point whose only users
-    another UAV serves) is replaced by the allowed point of largest q (11) under the
-    fleet's rules, and counted (``blocked``)."""
-
-    name = "per-uav"
-
-    def __init__(self, base: str, spec: PolicySpec, rngs: list[np.random.Generator]) -> None:
-        if base not in BASES:
-            raise ValueError(f"unknown planner for a fleet's UAV {base!r}; choose from {list(BASES)}")
-        self.base = base
-        self.policies: list[Policy] = [make_policy(base, spec, rng) for rng in rngs]
-        self.blocked = 0
-
-    def _legal(self, env: FleetEnv, j: int, decision: Decision | None) -> Decision:
-        """``decision`` if the fleet allows it, else the fallback (None: the UAV's view
-        allowed nothing, though the fleet allows something: a point whose nearest user
-        another UAV serves may be within budget with the next nearest)."""
-        if decision is not None and env.action_mask(j)[decision.action]:
-            return decision
-        self.blocked += 1
-        action = int(np.argmax(env.action_values(j)))
-        if decision is None:
-            return Decision(action, (action,), extra={"blocked": None})
-        return Decision(action, (action,), decision.iterations, decision.wall_s,
-                        {**decision.extra, "blocked": decision.action})
-
-
-class IndependentFleet(_PerUav):
+class IndependentFleet(PerUav):
     """``independent``: each UAV plans on its blind view (``FleetEnv.view``): it knows its
     own record and the users, not where the others are or whom they serve. The baseline."""
 
@@ -68,10 +29,10 @@ class IndependentFleet(_PerUav):
     def decide(self, env: FleetEnv) -> Decision:
         j = env.due
         view = env.view(j)
-        return self._legal(env, j, self.policies[j].decide(view) if view.action_mask().any() else None)
+        return self.legal(env, j, self.policies[j].decide(view) if view.action_mask().any() else None)
 
 
-class ClaimsFleet(_PerUav):
+class ClaimsFleet(PerUav):
     """``claims``: each UAV plans on a view without what the others have committed to
     (``FleetEnv.claims_view``: the points they hold or fly to next, the users they serve).
     A UAV's planner is rebuilt when the claimed points change (its points are renumbered:
@@ -94,16 +55,31 @@ class ClaimsFleet(_PerUav):
             self.policies[j].begin(view)
             self._keep[j] = keep
         if not view.action_mask().any():
-            return self._legal(env, j, None)
+            return self.legal(env, j, None)
         d = self.policies[j].decide(view)
         mapped = Decision(int(keep[d.action]), tuple(int(keep[a]) for a in d.line), d.iterations, d.wall_s, d.extra)
-        return self._legal(env, j, mapped)
+        return self.legal(env, j, mapped)
 
 
-FleetFactory = Callable[[str, PolicySpec, list[np.random.Generator]], FleetPolicy]
-FLEET_PLANNERS: dict[str, FleetFactory] = {"independent": IndependentFleet, "claims": ClaimsFleet}
-LATER = ("dec-mcts", "joint")
-"""Fleet planners of issue 26 not built yet (its second half)."""
+def _dec_mcts(base: str, spec: PolicySpec, rngs: list[np.random.Generator], **settings: Any) -> FleetPolicy:
+    return DecMctsFleet(base, spec, rngs, DecMctsConfig(**settings))
+
+
+def _plain(cls: type) -> "FleetFactory":
+    def make(base: str, spec: PolicySpec, rngs: list[np.random.Generator], **settings: Any) -> FleetPolicy:
+        if settings:
+            raise ValueError(f"fleet planner {cls.name!r} takes no settings, got {sorted(settings)}")
+        return cls(base, spec, rngs)
+    return make
+
+
+FleetFactory = Callable[..., FleetPolicy]
+"""(base, spec, rngs, **settings) -> FleetPolicy; settings are the planner's own
+(``dec-mcts``: ``DecMctsConfig``'s fields, e.g. ``drop`` and ``age`` of its messages)."""
+FLEET_PLANNERS: dict[str, FleetFactory] = {"independent": _plain(IndependentFleet), "claims": _plain(ClaimsFleet),
+                                           "dec-mcts": _dec_mcts, "joint": _plain(JointFleet)}
+LATER: tuple[str, ...] = ()
+"""Fleet planners named by issue 26 and not built yet: none now."""
 
 
 def fleet_algorithms() -> list[str]:
@@ -129,26 +105,43 @@ class MessageLink:
             raise ValueError(f"late_intervals must be at least 0, got {self.late_intervals}")
 
 
+MESSAGE_PLANNERS = frozenset({"dec-mcts"})
+"""The fleet planners whose UAVs send one another messages (their settings ``drop``, ``age``)."""
+
+
 def takes_link(name: str) -> bool:
-    """Whether fleet planner ``name`` sends messages whose loss and lateness can be set: its
-    factory takes a keyword ``link`` (a ``MessageLink``). The experiments read this, so a
-    message-passing planner added to ``FLEET_PLANNERS`` is swept without other edits."""
+    """Whether fleet planner ``name`` sends messages whose loss and lateness can be set (a
+    ``MessageLink``): the experiments read this, so a message-passing planner is swept
+    without other edits. A factory may also take the link itself (keyword ``link``)."""
     if name not in FLEET_PLANNERS:
         raise ValueError(f"unknown fleet planner {name!r}; choose from {fleet_algorithms()}")
-    return "link" in inspect.signature(FLEET_PLANNERS[name]).parameters
+    return name in MESSAGE_PLANNERS or "link" in inspect.signature(FLEET_PLANNERS[name]).parameters
 
 
 def make_fleet_policy(name: str, base: str, spec: PolicySpec, rngs: list[np.random.Generator],
-                      link: MessageLink | None = None) -> FleetPolicy:
-    """The fleet planner ``name`` with ``base`` as each UAV's planner, one generator per UAV;
-    ``link`` for a planner that sends messages (``takes_link``), refused by the others."""
-    if name in LATER and name not in FLEET_PLANNERS:
+                      link: MessageLink | None = None, **settings: Any) -> FleetPolicy:
+    """The fleet planner ``name`` with ``base`` as each UAV's planner, one generator per UAV,
+    its own ``settings`` (``FleetFactory``), and ``link`` for a planner that sends messages
+    (``takes_link``; refused by the others): its loss and lateness are the planner's ``drop``
+    and ``age``."""
+    if name in LATER:
         raise ValueError(f"fleet planner {name!r} is not built yet (issue 26, second half); choose from "
                          f"{fleet_algorithms()}")
     if name not in FLEET_PLANNERS:
         raise ValueError(f"unknown fleet planner {name!r}; choose from {fleet_algorithms()}")
-    if link is None:
-        return FLEET_PLANNERS[name](base, spec, rngs)
-    if not takes_link(name):
-        raise ValueError(f"fleet planner {name!r} sends no messages: a message link (loss, lateness) does not apply")
-    return FLEET_PLANNERS[name](base, spec, rngs, link=link)  # type: ignore[call-arg]
+    factory = FLEET_PLANNERS[name]
+    if link is not None:
+        if not takes_link(name):
+            raise ValueError(f"fleet planner {name!r} sends no messages: a message link (loss, lateness) does not apply")
+        if "link" in inspect.signature(factory).parameters:
+            settings["link"] = link
+        else:
+            settings.update(drop=link.loss, age=link.late_intervals)
+    try:
+        return factory(base, spec, rngs, **settings)
+    except TypeError as err:  # a setting the planner does not have
+        raise ValueError(f"fleet planner {name!r}: {err}") from None
+
+
+__all__ = ["BASES", "FLEET_PLANNERS", "LATER", "MESSAGE_PLANNERS", "ClaimsFleet", "FleetFactory", "IndependentFleet",
+           "MessageLink", "fleet_algorithms", "intent_of", "make_fleet_policy", "takes_link"]

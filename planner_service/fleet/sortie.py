@@ -31,18 +31,19 @@ def fleet_streams(seed: int, uavs: int) -> tuple[np.random.Generator, list[np.ra
 
 def run_fleet_sortie(scenario: Scenario, fleet: Fleet, algo: str, seed: int, spec: PolicySpec | None = None,
                      base: str = "mcts", options: dict[str, Any] | None = None,
-                     link: MessageLink | None = None) -> dict[str, Any]:
-    """Fly one fleet sortie with fleet planner ``algo`` (each UAV's planner ``base``; ``link``
-    the messages' loss and lateness, for a planner that sends some) and return its summary:
-    ``per_uav`` (each UAV's ``plan --json`` summary, its ``holds`` [start_s, end_s] beside
-    it), ``fleet`` (the fleet's figures, ``fleet_figures``) and ``messages``
-    (``message_figures``)."""
+                     settings: dict[str, Any] | None = None, link: MessageLink | None = None) -> dict[str, Any]:
+    """Fly one fleet sortie with fleet planner ``algo`` (each UAV's planner ``base``) and
+    return its summary: ``per_uav`` (each UAV's ``plan --json`` summary, its ``holds``
+    [start_s, end_s] beside it) and ``fleet`` (the fleet's figures, ``fleet_figures``).
+    ``settings``: the fleet planner's own (``policies.FleetFactory``); ``link``: the
+    messages' loss and lateness, for a planner that sends some. ``messages``: what the UAVs
+    sent one another (``message_figures``); ``dec-mcts`` also adds its counts to ``fleet``."""
     spec = spec or PolicySpec()
     world_rng, planner_rngs = fleet_streams(seed, fleet.uavs)
     env = FleetEnv(scenario, fleet)
     env.rng = world_rng
     env.reset(options=options)
-    policy = make_fleet_policy(algo, base, spec, planner_rngs, link)
+    policy = make_fleet_policy(algo, base, spec, planner_rngs, link, **(settings or {}))
     traces: list[list[dict[str, Any]]] = [[] for _ in range(fleet.uavs)]
     holds: list[list[list[float]]] = [[] for _ in range(fleet.uavs)]
     decision_s: list[list[float]] = [[] for _ in range(fleet.uavs)]
@@ -70,20 +71,34 @@ def run_fleet_sortie(scenario: Scenario, fleet: Fleet, algo: str, seed: int, spe
                        uav=j, holds=holds[j], ended=env.ended.get(j))
         per_uav.append(summary)
     every = [s for d in decision_s for s in d]
+    figures = fleet_figures(scenario, per_uav, events, getattr(policy, "blocked", 0))
+    link = getattr(policy, "link", None)
+    if link is not None:
+        sizes = link.sizes
+        figures.update(messages=len(sizes), message_bytes_max=max(sizes, default=0),
+                       message_bytes_mean=float(np.mean(sizes)) if sizes else 0.0)
     return {
         "algo": algo, "base": base, "uavs": fleet.uavs, "layer_m": fleet.layer_m, "base_step_m": fleet.base_step_m,
         "preset": scenario.name, "seed": seed, "iterations": spec.iterations, "budget_ms": spec.budget_ms,
         "wall_s": wall, "decision_ms_median": float(np.median(every) * 1e3) if every else 0.0,
-        "fleet": fleet_figures(scenario, per_uav, events, getattr(policy, "blocked", 0)),
-        "messages": message_figures(getattr(policy, "message_bytes", ())),
+        "fleet": figures, "settings": dict(settings or {}),
+        "messages": message_figures(sent_sizes(policy)),
         "per_uav": per_uav, "events": events, "scenario": scenario.as_dict(),
     }
 
 
+def sent_sizes(policy: object) -> list[int]:
+    """The size in bytes of every message a fleet planner's UAVs sent (none: empty): its
+    ``message_bytes``, or its simulated link's (``dec-mcts``)."""
+    sizes = getattr(policy, "message_bytes", None)
+    if sizes is None:
+        sizes = getattr(getattr(policy, "link", None), "sizes", ())
+    return [int(b) for b in sizes]
+
+
 def message_figures(message_bytes: Iterable[int]) -> dict[str, Any]:
-    """What a fleet planner's UAVs sent one another, from the size in bytes of each message (a
-    planner that sends messages keeps them in its ``message_bytes``; one without sends none,
-    and its figures are 0)."""
+    """What a fleet planner's UAVs sent one another, from the size in bytes of each message
+    (0 for a planner that sends none)."""
     sizes = [int(b) for b in message_bytes]
     return {"sent": len(sizes), "bytes_median": float(np.median(sizes)) if sizes else 0.0,
             "bytes_max": max(sizes, default=0), "bytes_total": int(sum(sizes))}

@@ -20,6 +20,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import asdict, dataclass
+from typing import Callable
 
 import numpy as np
 
@@ -114,6 +115,10 @@ class MctsPlanner:
         iteration draws its own and the confirmation plays ``paired_fresh``."""
         self.tree = self._new_tree()
         self._expect: tuple[int, int] | None = None  # (interval, hover index) after our move
+        self.shape_futures: Callable[[np.ndarray, np.ndarray], None] | None = None
+        """Called on every set of futures a decision draws, moves (S, H, I, 3) and news
+        (S, H, I), before they are indexed, to change them in place: a fleet's ``dec-mcts``
+        writes there what the other UAVs' sampled plans take from the users. None: as drawn."""
 
     def _new_tree(self) -> Tree:
         return Tree.empty(len(self.hover_points), (self.config.iterations or 1024) + 1)
@@ -213,6 +218,8 @@ class MctsPlanner:
         moves = np.empty((count, horizon, num_users, 3))
         news = np.empty((count, horizon, num_users), dtype=np.int64)
         draw_futures(self.params, moves, news, self.rng)
+        if self.shape_futures is not None and count:
+            self.shape_futures(moves, news)
         return index_of(scene, root, moves, news, self.tables, values)
 
     def _paired_fresh(self, scene: Scene, root: World, values: RootValues, settings: SearchSettings, first: int,

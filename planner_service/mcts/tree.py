@@ -113,6 +113,18 @@ class Tree:
             node = child
         return line
 
+    def lines_below(self, action: int, k: int, depth: int) -> tuple[list[list[int]], np.ndarray, float]:
+        """What the root's child for ``action`` expects next: its k most visited children
+        (ties: the higher mean), each with the principal line below it, cut to ``depth``
+        actions; their mean values (k,); and the child's visits. Empty if it was never tried."""
+        child = self.children[ROOT_INDEX, action]
+        if child == UNVISITED:
+            return [], np.zeros(0), 0.0
+        kids = [int(c) for c in self.children[child] if c != UNVISITED and self.visits[c] > 0]
+        kids = sorted(kids, key=lambda c: (-self.visits[c], -self.mean_value(c)))[:k]
+        lines = [[int(self.action[c]), *self.principal_line(c, depth - 1)] for c in kids]
+        return lines, np.array([self.mean_value(c) for c in kids]), float(self.visits[child])
+
     def subtree(self, new_root: int, decay: float = 1.0) -> "Tree":
         """A compact copy of the subtree under ``new_root``, which becomes node 0.
 

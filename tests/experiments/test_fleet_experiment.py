@@ -9,12 +9,13 @@ import json
 import math
 import subprocess
 
+import numpy as np
 import pytest
 
 from planner_service.experiments.fleet import FleetConfig, fleet_jobs, jain_index, mean_se, verdict
-from planner_service.fleet import policies
-from planner_service.fleet import MessageLink, make_fleet_policy, takes_link
+from planner_service.fleet import MessageLink, make_fleet_policy, policies, takes_link
 from planner_service.model import preset
+from planner_service.policy import PolicySpec
 
 
 def test_mean_se_and_verdict_by_hand():
@@ -40,16 +41,10 @@ class _Talker:
         self.link = link
 
 
-def test_jobs_follow_the_registry(monkeypatch):
+def test_jobs_follow_the_registry(monkeypatch: pytest.MonkeyPatch) -> None:
     cfg = FleetConfig(preset("fleet"), uavs=(1, 2, 3, 4), seeds=(0, 1), iterations=5, joint_max_uavs=2)
-    assert [j.algo for j in fleet_jobs(cfg) if j.record_paths] == ["independent", "claims"]
-    assert not any(j.link for j in fleet_jobs(cfg))  # nothing takes a link yet
-    assert len(fleet_jobs(cfg)) == 4 * 2 * 2 + 2
-
-    monkeypatch.setitem(policies.FLEET_PLANNERS, "dec-mcts", _Talker)
-    monkeypatch.setitem(policies.FLEET_PLANNERS, "joint", policies.IndependentFleet)
-    assert takes_link("dec-mcts") and not takes_link("claims")
     assert cfg.planners() == ["independent", "claims", "dec-mcts", "joint"]
+    assert takes_link("dec-mcts") and not takes_link("claims") and not takes_link("joint")
     assert cfg.links() == [(0.0, 0), (0.2, 0), (0.5, 0), (0.0, 1), (0.0, 2), (0.0, 3)]
     jobs = fleet_jobs(cfg)
     plain = [j for j in jobs if j.link is None and not j.record_paths]
@@ -61,8 +56,14 @@ def test_jobs_follow_the_registry(monkeypatch):
     # paths at N = 3, where joint (N <= 2 here) does not fly
     assert [j.algo for j in jobs if j.record_paths] == ["independent", "claims", "dec-mcts"]
 
-    rngs = []
-    assert make_fleet_policy("dec-mcts", "mcts", None, rngs, MessageLink(0.2, 1)).link == MessageLink(0.2, 1)
+    rngs = [np.random.default_rng(k) for k in range(2)]
+    # dec-mcts takes the link as its own settings (drop, age)
+    config = make_fleet_policy("dec-mcts", "mcts", PolicySpec(iterations=5), rngs, MessageLink(0.2, 1)).config
+    assert (config.drop, config.age) == (0.2, 1)
+    # a planner whose factory takes the link itself gets it as it is
+    monkeypatch.setitem(policies.FLEET_PLANNERS, "talker", _Talker)
+    assert takes_link("talker")
+    assert make_fleet_policy("talker", "mcts", None, rngs, MessageLink(0.2, 1)).link == MessageLink(0.2, 1)
     with pytest.raises(ValueError, match="sends no messages"):
         make_fleet_policy("claims", "mcts", None, rngs, MessageLink(0.2))
 
@@ -88,26 +89,28 @@ def test_fleet_quick_writes_csv_png_and_json(python, python_env, tmp_path):
         assert (out / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     with open(out / "fleet.csv") as f:
         rows = list(csv.DictReader(f))
-    assert [(r["uavs"], r["planner"]) for r in rows] == [("1", "claims"), ("1", "independent"),
-                                                          ("2", "claims"), ("2", "independent")]
-    one = [r for r in rows if r["uavs"] == "1"]
+    planners = ["claims", "dec-mcts", "independent", "joint"]
+    assert sorted({(r["uavs"], r["planner"]) for r in rows}) == [(n, p) for n in ("1", "2") for p in planners]
+    one = [r for r in rows if r["uavs"] == "1" and r["planner"] in ("claims", "independent")]
     assert one[0]["throughput_tasks_per_interval"] == one[1]["throughput_tasks_per_interval"]  # a fleet of one
     for r in rows:
-        assert r["seeds"] == "2" and r["message_bytes_max"] == "0"
-        assert len(r["per_uav_throughput"].split(";")) == int(r["uavs"])
+        assert r["seeds"] == "2" and len(r["per_uav_throughput"].split(";")) == int(r["uavs"])
+        assert (0 < int(r["message_bytes_max"]) < 2048) if r["planner"] == "dec-mcts" else r["message_bytes_max"] == "0"
         assert 0 < float(r["jain_index"]) <= 1 and float(r["throughput_tasks_per_interval"]) > 0
-    two = {r["planner"]: float(r["throughput_tasks_per_interval"]) for r in rows if r["uavs"] == "2"}
+    two = {r["planner"]: float(r["throughput_tasks_per_interval"]) for r in rows
+           if r["uavs"] == "2" and r["planner"] in ("claims", "independent")}
     assert all(v > 1.5 * float(one[0]["throughput_tasks_per_interval"]) for v in two.values())
 
     summary = json.loads((out / "fleet.json").read_text())
     assert summary["preset"] == "fleet" and summary["uavs"] == [1, 2] and summary["seeds"] == [0, 1]
-    assert summary["planners"] == ["independent", "claims"] and summary["quick"]
+    assert summary["planners"] == ["independent", "claims", "dec-mcts", "joint"] and summary["quick"]
     d = summary["against_independent"]["claims"]["N=1"]["throughput_tasks_per_interval"]
     assert d["mean"] == 0 and d["n"] == 2 and d["verdict"] == "within noise"
     assert summary["violations"] == {"double_services": 0, "double_holds": 0, "fairness_violations": 0}
-    assert any("joint" in n for n in summary["notes"]) and any("skipped" in n for n in summary["notes"])
-    assert len(summary["paths"]["claims"]["paths"]) == 2  # N = 2 (3 not flown): a path per UAV
-    assert summary["run"]["commit"] and summary["run"]["sorties"] == 4 * 2 + 2
+    assert any("joint" in n for n in summary["notes"])
+    assert all(len(summary["paths"][p]["paths"]) == 2 for p in planners)  # N = 2 (3 not flown): a path per UAV
+    # 2 seeds x 2 fleet sizes x 4 planners, dec-mcts's 6 message links at N = 2, a paths sortie per planner
+    assert summary["run"]["commit"] and summary["run"]["sorties"] == 2 * 2 * 4 + 6 * 2 + 4
 
 
 @pytest.mark.parametrize("args, needle", [

@@ -30,9 +30,10 @@ def test_messages_are_counted_and_joint_is_skipped_beyond_its_size(monkeypatch):
     assert 0 < row["median_ms"] <= row["p95_ms"]
     res = run_fleet_bench(2, 5, sizes=((20, 10),), uavs=(3, 5))
     got = {(r["algo"], r["N"]) for r in res["rows"]}
-    assert got == {(a, n) for a in ("claims", "independent", "talker") for n in (3, 5)} | {("joint", 3)}
+    assert got == {(a, n) for a in ("claims", "dec-mcts", "independent", "talker") for n in (3, 5)} | {("joint", 3)}
     assert res["skipped"] == ["joint at N=5, K=20: beyond JOINT_MAX_UAVS=3"]
-    assert all(r["message_bytes_max"] == 0 for r in res["rows"] if r["algo"] != "talker")
+    assert all(r["message_bytes_max"] == 0 for r in res["rows"] if r["algo"] not in ("talker", "dec-mcts"))
+    assert all(0 < r["message_bytes_max"] < 2048 for r in res["rows"] if r["algo"] == "dec-mcts")
 
 
 def test_bench_fleet_quick_json(python, python_env):
@@ -43,6 +44,8 @@ def test_bench_fleet_quick_json(python, python_env):
     res = json.loads(proc.stdout)
     assert res["iterations"] == 20 and res["target_ms"] == 150.0 and res["target_message_bytes"] == 2048
     assert [(r["algo"], r["N"], r["K"], r["I"]) for r in res["rows"]] == [  # the paper's size only
-        ("claims", 3, 20, 10), ("independent", 3, 20, 10), ("claims", 5, 20, 10), ("independent", 5, 20, 10)]
+        ("claims", 3, 20, 10), ("dec-mcts", 3, 20, 10), ("independent", 3, 20, 10), ("joint", 3, 20, 10),
+        ("claims", 5, 20, 10), ("dec-mcts", 5, 20, 10), ("independent", 5, 20, 10)]
     for r in res["rows"]:
-        assert r["decisions"] == 3 and 0 < r["median_ms"] <= r["p95_ms"] and r["message_bytes_max"] == 0
+        assert r["decisions"] == 3 and 0 < r["median_ms"] <= r["p95_ms"]
+        assert (0 < r["message_bytes_max"] < 2048) if r["algo"] == "dec-mcts" else r["message_bytes_max"] == 0

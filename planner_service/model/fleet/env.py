@@ -242,12 +242,20 @@ class FleetEnv:
         point, if the others claimed it, is not in the view: it is then at no point of it
         (``AT_BASE``), which changes nothing but that it may not stay (it may not anyway)."""
         st = self._require_state()
+        return self.partial_view(j, claimed_points(st, j), busy_users(st, j))
+
+    def partial_view(self, j: int, points: list[int], users: list[int]) -> tuple[SortieEnv, np.ndarray]:
+        """UAV ``j``'s view without hovering points ``points`` and with nothing to offload
+        for ``users`` (what it believes the others hold and serve: ``claims_view`` takes
+        the fleet's own record, ``dec-mcts`` what the others' messages said). Returns the
+        view and ``keep`` (K',), as ``claims_view`` does."""
+        st = self._require_state()
         env = self._claims_views[j]
-        keep = np.setdiff1d(np.arange(self.num_actions), claimed_points(st, j))
+        keep = np.setdiff1d(np.arange(self.num_actions), np.asarray(points, dtype=np.int64))
         env.hover_points = self.hover_points[j][keep]
         env.rng = np.random.default_rng(0)  # a view's chance is not the world's
         state = st.sortie_state(j)
-        state.tasks = visible_tasks(st, j)
+        state.tasks[np.asarray(users, dtype=np.int64)] = 0
         where = np.flatnonzero(keep == state.hover_index)
         state.hover_index = int(where[0]) if len(where) else AT_BASE
         env.state = state
