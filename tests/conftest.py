@@ -16,13 +16,6 @@ from tests.support.sitl import Sitl, free_instance, sitl_binary, skip_reason
 REPO = Path(__file__).resolve().parent.parent
 
 
-def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
-    """The real autopilots' tests first (marker ``sitl``: whole sorties of a minute each), so
-    that `make test`'s two processes (whole files each, ``--dist loadfile``) do not end with
-    one of them alone on a long SITL file while the other idles; otherwise the order stays."""
-    items.sort(key=lambda item: item.get_closest_marker("sitl") is None)
-
-
 @pytest.fixture
 def python_env() -> dict[str, str]:
     """Environment for subprocesses running this checkout's packages."""
