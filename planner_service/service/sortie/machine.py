@@ -701,11 +701,14 @@ class SortieLogic:
     def _read_back(self, s: Sortie, items: tuple, v: ins.VehicleSnapshot, out: list[fx.Effect]) -> Sortie:
         candidate = s.onboard.matching(items, self.rules.flavour)  # type: ignore[arg-type]
         if candidate is not None:
-            restarted, fresh = s.onboard.restarted, candidate is not s.onboard.held
+            restarted, before = s.onboard.restarted, s.onboard.held
             onboard, said = s.onboard.confirmed(candidate, v.airborne)
             out += said
+            # The upload that went through kept the points before its first new one: a hold
+            # there already judged is not judged again (recorded twice, found on a lossy link)
+            judged = frozenset(q for q in s.holds.judged if _same_point(before, candidate, q))
             s = replace(s, onboard=onboard, evidence=s.evidence.explained(),
-                        holds=replace(s.holds, judged=frozenset()) if fresh else s.holds)
+                        holds=replace(s.holds, judged=judged) if candidate is not before else s.holds)
             # a restarted vehicle's reports were dropped (its holds were cut); else judged now
             return s if restarted else self._replay(s, v, out)
         before = s.onboard.last_sorties(items, self.rules.flavour)  # type: ignore[arg-type]
