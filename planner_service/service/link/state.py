@@ -71,6 +71,8 @@ class VehicleState:
         self._texts = StatusTexts(id_zero_chunks=self.profile.text_ids_from_zero)
         self.untrusted = 0
         """Messages dropped because they did not come from the autopilot."""
+        self.disarms = 0
+        """Disarmings seen (a start stops if one comes between its steps)."""
         self._clock_watch = ClockWatch()
         self._clock_rate = ClockRate()
         self._pos = PositionInputs(estimator_name=self.estimator,
@@ -96,6 +98,9 @@ class VehicleState:
 
     def set_progress(self, seq: int, total: int, mission_id: int = 0) -> None:
         """The mission item flown, the mission's size and id, as the backend's reports say."""
+        t = self.telemetry
+        if (seq, total, mission_id) != (t.mission_seq, t.mission_total, t.mission_id):
+            log.debug("vehicle: mission item %d of %d (mission id %d)", seq, total, mission_id)
         self._set(mission_seq=seq, mission_total=total, mission_id=mission_id)
 
     def new_reach(self, mission: int, seq: int) -> bool:
@@ -199,10 +204,13 @@ class VehicleState:
         if old_mode and mode != old_mode:
             expected = self._expected_mode
             commanded = expected is not None and expected[0] == mode and self.clock() <= expected[1]
+            log.info("vehicle: mode %s (was %s; %s)", mode, old_mode, _by(commanded))
             self.emit(ModeChanged(mode, commanded))
         if not first and armed != was_armed:
             expected = self._expected_armed
             commanded = expected is not None and expected[0] == armed and self.clock() <= expected[1]
+            log.info("vehicle: %s (%s)", "armed" if armed else "disarmed", _by(commanded))
+            self.disarms += not armed
             self.emit(ArmedChanged(armed, commanded))
         self._derive_landed()
         return True
@@ -320,6 +328,8 @@ class VehicleState:
     def _landed(self, airborne: bool, source: str) -> None:
         was = self.telemetry.airborne
         self._set(airborne=airborne, landed_known=True, landed_source=source)
+        if was != airborne:
+            log.info("vehicle: %s (%s)", "in the air" if airborne else "on the ground", source)
         if was and not airborne:
             self.emit(OnGround(source))
 
@@ -346,6 +356,10 @@ class VehicleState:
         self.on_restart()
         self.emit(Restarted(detail))
         self.request_streams()
+
+
+def _by(commanded: bool) -> str:
+    return "asked by the service" if commanded else "not asked by the service"
 
 
 def _replace(p: PositionInputs, **changes: Any) -> PositionInputs:
