@@ -19,6 +19,7 @@ from planner_service.service.sortie import Rules, Sortie, SortieLogic, VehicleSn
 from planner_service.service.sortie import effects as fx
 from planner_service.service.sortie import inputs as ins
 from planner_service.service.sortie.authority import Authority, next_sortie
+from planner_service.service.sortie.machine import RETURN_ITEM_S
 from protocol import Area, GeoOrigin
 from protocol.errors import MissionError
 from protocol.mission import NAV_RTL
@@ -901,8 +902,8 @@ def test_a_landing_away_from_the_missions_return_ends_the_authority() -> None:
     assert run2.s.authority.granted and run2.s.life.over is not None
 
 
-def fly_px4_home() -> Run:
-    """A PX4 sortie flown to its mission's return item, where PX4 hands over to AUTO.RTL."""
+def fly_px4_to_last_point() -> tuple[Run, FakeWorld]:
+    """A PX4 sortie of one point, flown in AUTO.MISSION, the vehicle at its point's item."""
     world = FakeWorld()
     world.ask("a", 120.0, 200.0, 10, 1)
     run = Run(world, rules(flavour="px4"))
@@ -912,6 +913,13 @@ def fly_px4_home() -> Run:
     run.feed(ins.Uploaded(up))
     run.feed(ins.CommandDone(fx.Command("start")), armed=True, mode="AUTO.MISSION")
     run.tick(airborne=True, seq=0, xyz=(0.0, 0.0, 50.0), boot_s=5.0)
+    run.tick(seq=run.s.onboard.held.rtl_seq - 1, xyz=(120.0, 200.0, 100.0), boot_s=50.0)
+    return run, world
+
+
+def fly_px4_home() -> Run:
+    """A PX4 sortie flown to its mission's return item, where PX4 hands over to AUTO.RTL."""
+    run, world = fly_px4_to_last_point()
     rtl = run.s.onboard.held.rtl_seq
     run.tick(seq=rtl, xyz=(120.0, 200.0, 100.0), boot_s=60.0)
     world.ask("b", 320.0, 200.0, 12, 2)
@@ -921,6 +929,50 @@ def fly_px4_home() -> Run:
     run.feed(ins.ModeChanged("AUTO.RTL", commanded=False), mode="AUTO.RTL")
     assert run.s.authority.granted, "the mission's own return item"
     return run
+
+
+def test_px4s_return_mode_before_its_return_item_is_reported_is_its_own_once_the_item_shows() -> None:
+    # MAVSDK on PX4 SITL: the heartbeat showing AUTO.RTL came 80 ms before the MISSION_CURRENT
+    # showing the return item (one sortie in three)
+    run, _ = fly_px4_to_last_point()
+    rtl = run.s.onboard.held.rtl_seq
+    out = run.feed(ins.ModeChanged("AUTO.RTL", commanded=False), mode="AUTO.RTL")
+    assert run.s.authority.granted and run.s.authority.expected_mode == "AUTO.MISSION", "not judged yet"
+    assert not only(out, fx.Emit)
+    out = run.tick()
+    assert not [e for e in out if isinstance(e, (fx.MakePlan, fx.Upload, fx.Command, fx.ReadBack))]
+    out = run.tick(seq=rtl)
+    assert run.s.authority.granted and run.s.authority.expected_mode == "AUTO.RTL"
+    assert "returning" in [e.event.kind for e in only(out, fx.Emit)]
+    run.feed(ins.OnGround("EXTENDED_SYS_STATE"), airborne=False, xyz=(0.0, 0.0, 0.1))
+    run.feed(ins.ArmedChanged(False, commanded=False), armed=False)
+    assert run.s.authority.granted and run.s.life.over == "the vehicle landed"
+
+
+def test_a_return_mode_the_return_item_does_not_follow_is_somebodys() -> None:
+    run, _ = fly_px4_to_last_point()  # a station's Return at the last point: the mission stays at its item
+    run.feed(ins.ModeChanged("AUTO.RTL", commanded=False), mode="AUTO.RTL")
+    run.now += RETURN_ITEM_S - 0.2
+    run.tick()
+    assert run.s.authority.granted
+    run.now += 0.2
+    out = run.tick()
+    assert run.s.authority.state == "revoked" and "did not show its mission's return item" in run.s.authority.detail
+    assert "authority_revoked" in [e.event.kind for e in only(out, fx.Emit)]
+
+
+def test_a_return_mode_left_before_its_return_item_shows_is_somebodys() -> None:
+    run, _ = fly_px4_to_last_point()
+    run.feed(ins.ModeChanged("AUTO.RTL", commanded=False), mode="AUTO.RTL")
+    run.feed(ins.ModeChanged("AUTO.MISSION", commanded=False), mode="AUTO.MISSION")  # back to the mode expected
+    assert run.s.authority.state == "revoked", "switched to Return and back: not the autopilot's own"
+
+
+def test_a_return_mode_away_from_the_last_item_is_judged_at_once() -> None:
+    run, _ = fly_px4_to_last_point()
+    run.tick(seq=run.s.onboard.held.rtl_seq - 2)
+    run.feed(ins.ModeChanged("AUTO.RTL", commanded=False), mode="AUTO.RTL")
+    assert run.s.authority.state == "revoked"
 
 
 def test_px4s_way_back_to_its_mission_mode_after_the_returns_landing_is_its_own() -> None:

@@ -43,6 +43,9 @@ class Life:
     disarmed_at: float | None = None
     """When a disarming on the service's own return, not yet reported landed, was seen
     (``_disarm_check``)."""
+    return_seen_at: float | None = None
+    """When the autopilot's switch to the return mode of the held mission's return item was
+    seen before its MISSION_CURRENT showed that item (``_return_check``)."""
     homing: bool = False
     """The vehicle was seen on the service's own way home (``_homing``)."""
     degraded: str | None = None

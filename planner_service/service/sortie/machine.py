@@ -61,6 +61,11 @@ CONTROL_LATENCY_S = 0.1
 """Wall seconds from a hold's position report to the vehicle obeying the command that ends
 it (a tick of the loop and a command's round trip): that much more hovering, in vehicle time,
 is planned at each point."""
+RETURN_ITEM_S = 2.0
+"""Wall seconds a switch to the return item's mode (PX4's AUTO.RTL), seen while the vehicle
+flies the item before its mission's return, waits for MISSION_CURRENT to show the return
+item (PX4 sends the two in either order: on SITL at x10 the heartbeat came 80 ms first in
+one sortie of three) before it is taken as nobody's."""
 DISARM_LANDING_S = 2.0
 """Wall seconds a disarming on the service's own return waits for the landing's report (it
 may follow the heartbeat showing the disarming) before it is taken as nobody's."""
@@ -251,6 +256,7 @@ class SortieLogic:
         s = replace(s, life=life)
         out += begin + lapsed
         s = self._watch(s, v, out)
+        s = self._return_check(s, v, now, out)
         s = self._homing(s, v)
         s = self._disarm_check(s, v, now, out)
         s = self._check_mission(s, v, now, out)
@@ -258,8 +264,9 @@ class SortieLogic:
         return self._next(s, v, now, out)
 
     def _next(self, s: Sortie, v: ins.VehicleSnapshot, now: float, out: list[fx.Effect]) -> Sortie:
-        """Start whatever is due and not running: a read-back, a plan, a command."""
-        if s.life.over is not None or s.life.degraded is not None:
+        """Start whatever is due and not running: a read-back, a plan, a command (none while a
+        switch of mode awaits its judgement: whose it is decides whether the service may)."""
+        if s.life.over is not None or s.life.degraded is not None or s.life.return_seen_at is not None:
             return s
         if s.schedule.busy == "" and s.onboard.doubt is not None and v.connected and now >= s.schedule.readback_at:
             out.append(fx.ReadBack(s.onboard.doubt))
@@ -738,7 +745,10 @@ class SortieLogic:
 
     def _mode(self, s: Sortie, v: ins.VehicleSnapshot, mode: str, commanded: bool, now: float,
               out: list[fx.Effect]) -> Sortie:
+        s = self._return_check(s, v, now, out)  # a change after the one awaiting its item is judged too
         held = s.onboard.held
+        if self._return_item_due(s, v, mode, commanded):
+            return replace(s, life=replace(s.life, return_seen_at=now))
         mission_return = (held is not None and v.seq == held.rtl_seq and mode in RETURNING_MODES)
         a = self.rules.autopilot
         # PX4 goes back to an earlier mode once the landing of the service's return disarms it
@@ -752,6 +762,33 @@ class SortieLogic:
         if mode in RETURNING_MODES:
             out.append(fx.Emit(ev.Returning(f"mode {mode}")))
         return replace(s, authority=authority)
+
+    def _return_item_due(self, s: Sortie, v: ins.VehicleSnapshot, mode: str, commanded: bool) -> bool:
+        """A switch not commanded to the autopilot's mode for a mission's return item, while the
+        vehicle flies the service's mission in the mode expected, at the item before its return:
+        the autopilot's own if MISSION_CURRENT shows the return item within ``RETURN_ITEM_S``."""
+        held, a = s.onboard.held, self.rules.autopilot
+        return (not commanded and s.authority.granted and held is not None and a.return_item_mode == mode
+                and v.armed and s.authority.expected_mode in MISSION_MODES and v.seq == held.rtl_seq - 1)
+
+    def _return_check(self, s: Sortie, v: ins.VehicleSnapshot, now: float, out: list[fx.Effect]) -> Sortie:
+        """Judge a switch awaiting its return item (``_return_item_due``): the mission's own
+        return once MISSION_CURRENT shows the item in that mode; nobody's if the mode changes
+        again, or the item is not shown within ``RETURN_ITEM_S``."""
+        since = s.life.return_seen_at
+        if since is None:
+            return s
+        held, mode = s.onboard.held, self.rules.autopilot.return_item_mode
+        if held is not None and v.mode == mode and v.seq == held.rtl_seq:
+            authority = s.authority.on_mode(v.mode, armed=True, mission_return=True)
+            out.append(fx.Emit(ev.Returning(f"mode {v.mode}")))
+            return replace(s, authority=authority, life=replace(s.life, return_seen_at=None))
+        if v.mode == mode and now - since < RETURN_ITEM_S:
+            return s
+        s = replace(s, life=replace(s.life, return_seen_at=None))
+        return self._revoke(s, f"mode changed to {mode} (not commanded by the service) and the vehicle did not "
+                               f"show its mission's return item (item {held.rtl_seq if held else '?'}, it shows "
+                               f"{v.seq}, in {v.mode or 'mode unknown'}) within {RETURN_ITEM_S:g} s", out)
 
     def _on_return(self, s: Sortie, v: ins.VehicleSnapshot) -> bool:
         """The vehicle flies the service's own way home: its mission's return item, or the
