@@ -372,9 +372,9 @@ class Service:
         try:
             match cmd.kind:
                 case "start":
-                    await self.link.start()
+                    await self.link.start(self._may_go_on)
                 case "resume":
-                    await self.link.resume()
+                    await self.link.resume(self._may_go_on)
                 case "return":
                     await self.link.return_to_launch()
                 case "hold":
@@ -386,6 +386,12 @@ class Service:
         except LinkError as err:
             return ins.CommandNotDone(cmd, str(err))
         return ins.CommandDone(cmd)
+
+    def _may_go_on(self) -> str | None:
+        """Asked between a command's steps: the authority may have ended meanwhile (the pilot,
+        the autopilot's own disarming), and then nothing more is sent."""
+        authority = self.state.authority
+        return None if authority.granted else f"the authority ended ({authority.detail})"
 
     def _record_service(self, e: fx.RecordService) -> None:
         battery_j = (self._vehicle().battery_fraction or 0.0) * self.scenario.battery_j

@@ -303,3 +303,46 @@ def test_upload_and_read_back_over_a_lossy_link(make_px4: Callable[..., Px4], ba
     assert mission_id == px4_mission_id(items)
     assert lost == 0
     print(f"\n{backend} over a lossy link to PX4: {len(items)} items up and read back; mission_id {mission_id}")
+
+
+def test_a_start_goes_no_further_once_the_authority_ends_or_the_autopilot_disarms(
+        make_px4: Callable[..., Px4]) -> None:
+    """A start stops between its steps: when ``proceed`` gives a reason (the service's
+    authority ended meanwhile) nothing more is sent; when the autopilot disarmed itself
+    between the arming and MISSION_START (PX4's preflight disarm, 10 s of its time: on a
+    loaded machine at x10 a start's steps took longer, seen in a whole sortie with MAVSDK),
+    MISSION_START is not sent, which on PX4 would arm the vehicle again by itself. Either way
+    PX4 never takes off. One backend: the steps are the link's base class, shared."""
+    px4 = make_px4(speed=SPEED)
+    px4.wait_ready()
+
+    async def run() -> tuple[LinkError, LinkError]:
+        link = link_for(px4, "mavsdk", Recorder())
+        await link.connect(15.0)
+        try:
+            await until("a position", lambda: link.telemetry.position_ok, 30.0, link)
+            await link.upload(encode_path([HoverPoint(30.0, 0.0, ALT_M, 5.0)], ORIGIN, "px4"))
+            with pytest.raises(LinkError, match="stopped between its steps: the pilot took it") as stopped:
+                await link.start(lambda: "the pilot took it")
+            assert link.telemetry.armed and link.telemetry.mode == "AUTO.LOITER", link.telemetry  # nothing after
+            await until("PX4's own preflight disarm", lambda: not link.telemetry.armed, 30.0, link)
+
+            set_mode = link._set_mode
+
+            async def slow_set_mode(name: str) -> None:  # a slow link: past PX4's preflight disarm
+                await asyncio.sleep(2.5)
+                await set_mode(name)
+
+            link._set_mode = slow_set_mode  # type: ignore[method-assign]
+            since = time.monotonic()
+            with pytest.raises(LinkError, match="disarmed meanwhile") as disarmed:
+                await link.start()
+            await asyncio.sleep(1.5)
+            assert not link.telemetry.armed and not link.telemetry.airborne, link.telemetry
+            assert not [t for at, t in list(px4.texts) if at >= since and "mission start" in t.lower()], px4.texts
+            return stopped.value, disarmed.value
+        finally:
+            await link.close()
+
+    stopped, disarmed = asyncio.run(run())
+    print(f"\n{stopped}\n{disarmed}")

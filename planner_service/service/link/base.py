@@ -39,6 +39,23 @@ CURRENT_WAIT_S = 2.0
 """Wall seconds to wait for a MISSION_CURRENT after an upload or a set_current (the link
 asks for it at 2 Hz of vehicle time) before asking again."""
 
+ARMED_SEEN_S = 3.0
+"""Wall seconds an accepted arming waits for the heartbeat showing it (1 Hz at speed 1)."""
+
+Proceed = Callable[[], "str | None"]
+"""Asked between the steps of a command: None to go on, else why to stop."""
+
+
+def _always() -> str | None:
+    return None
+
+
+def _go_on(proceed: Proceed, operation: str) -> None:
+    """``LinkError`` naming ``operation`` and why, if ``proceed`` gives a reason to stop."""
+    why = proceed()
+    if why is not None:
+        raise LinkError(operation, f"stopped between its steps: {why}")
+
 
 @dataclass
 class LinkSettings:
@@ -134,11 +151,13 @@ class VehicleLink(abc.ABC):
         """The mission the autopilot holds (``generation`` grows: later reports are about
         it)."""
 
-    async def start(self) -> None:
+    async def start(self, proceed: Proceed = _always) -> None:
         """Arm and fly the mission from its start (the operator allowed it). Only with a
         position (``telemetry.position_ok``); a refused arm or mode change leaves the
         vehicle disarmed (disarmed again if it was armed and is still on the ground) and
-        raises ``LinkError`` naming the autopilot's refusal."""
+        raises ``LinkError`` naming the autopilot's refusal. ``proceed`` is asked before each
+        step after the first: a reason from it stops the start where it is, nothing more
+        sent (the service's authority ended meanwhile: the vehicle is someone else's)."""
         t = self.telemetry
         self._check_link("start()")
         if not t.position_ok:
@@ -147,13 +166,26 @@ class VehicleLink(abc.ABC):
         try:
             if self.profile.arm_mode is not None and t.mode != self.profile.arm_mode:
                 await self._set_mode(self.profile.arm_mode)  # ArduCopter refuses to arm in AUTO
+                _go_on(proceed, "start()")
+            disarms = self.state.disarms
             await self._arm(True)
             armed_here = True
-            await self._resume()
+            await self._armed_seen("start()")
+            await self._resume(proceed, "start()", disarms)
         except LinkError as err:
-            if (armed_here or self.telemetry.armed) and not was_armed:
+            if (armed_here or self.telemetry.armed) and not was_armed and proceed() is None:
                 await self._disarm_on_ground(err)
             raise
+
+    async def _armed_seen(self, operation: str) -> None:
+        """Wait for the heartbeat showing the arming the autopilot accepted: the steps after
+        it check that the vehicle is still armed (PX4's MISSION_START would arm it again)."""
+        deadline = time.monotonic() + ARMED_SEEN_S
+        while not self.telemetry.armed:
+            if time.monotonic() > deadline:
+                raise LinkError(operation, f"the arming was accepted but no heartbeat showed it within "
+                                           f"{ARMED_SEEN_S:g} s")
+            await asyncio.sleep(0.02)
 
     async def _disarm_on_ground(self, why: LinkError) -> None:
         """A start that failed after arming must not leave motors armed on the ground."""
@@ -185,15 +217,23 @@ class VehicleLink(abc.ABC):
         self.state.expect_armed(armed)
         await self.command(M.MAV_CMD_COMPONENT_ARM_DISARM, 1 if armed else 0, what="arm()" if armed else "disarm()")
 
-    async def resume(self) -> None:
+    async def resume(self, proceed: Proceed = _always) -> None:
         """Fly the mission held from its current item again, already armed and airborne
         (mode AUTO / AUTO.MISSION and MISSION_START): after the autopilot restarted in the
-        air."""
+        air. ``proceed`` as for ``start``."""
         self._check_link("resume()")
-        await self._resume()
+        await self._resume(proceed, "resume()", self.state.disarms)
 
-    async def _resume(self) -> None:
+    async def _resume(self, proceed: Proceed, operation: str, disarms: int) -> None:
+        _go_on(proceed, operation)
         await self._set_mode(self.profile.mission_mode)
+        _go_on(proceed, operation)
+        if self.state.disarms != disarms or not self.telemetry.armed:
+            # PX4's MISSION_START arms a disarmed vehicle by itself: after the autopilot's
+            # own disarming (PX4's preflight disarm, ArduCopter's DISARM_DELAY) nothing the
+            # operator allowed is left to start.
+            raise LinkError(operation, "the vehicle was disarmed meanwhile (the autopilot's own disarming, or "
+                                       "someone's): the mission is not started")
         await self.command(M.MAV_CMD_MISSION_START, 0, 0, what="start_mission()")
 
     async def return_to_launch(self) -> None:
