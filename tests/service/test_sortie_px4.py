@@ -51,15 +51,7 @@ pytestmark = [pytest.mark.sitl, pytest.mark.timeout(300)]
 REPO = Path(__file__).resolve().parents[2]
 CONFIG = REPO / "docs" / "sitl-px4.toml"
 SPEED = 10
-BACKENDS = [pytest.param("pymavlink", marks=pytest.mark.slow), pytest.param("mavsdk", marks=pytest.mark.slow)]
-"""MAVSDK's whole sortie on PX4 is out of `make test` (marker ``slow``: run it with ``-m slow``)
-until an open defect it found is fixed: in 1 clean-clone run of 4 the landing's disarming
-on PX4 was taken for nobody's ("revoked: the vehicle was disarmed (not commanded by the
-service)"), a false revocation at the end of a good sortie; the safe direction (the service
-stops commanding), but wrong. It passed in the 3 other runs. The MAVSDK link on PX4 stays in
-`make test` (test_link_px4.py). The pymavlink whole sortie failed too in a check after the
-last clean-clone run (its reason not read before the session ended): both are under ``slow``
-until looked at; PX4's restart, pilot and second-station sorties stay in `make test`."""
+BACKENDS = ["pymavlink", "mavsdk"]
 TOLERANCE_S = 1.0
 """A hold is judged from GLOBAL_POSITION_INT (0.1 s apart in PX4's clock on both links) and
 recorded whole when it came within 0.5 s of what the request needs (sortie/machine.py)."""
