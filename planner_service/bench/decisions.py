@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import hashlib
 import time
 from dataclasses import dataclass
 from typing import Callable
@@ -48,6 +49,13 @@ class Timing:
     @property
     def playouts_per_s(self) -> float:
         return float(np.sum(self.iterations) / np.sum(self.seconds))
+
+    @property
+    def digest(self) -> str:
+        """What was decided (each action and its iterations), as 12 hex digits: the same
+        digest before and after a change to the planner's code means the same decisions on
+        the same machine (a different CPU may round differently)."""
+        return hashlib.sha256(repr(list(zip(self.actions, self.iterations))).encode()).hexdigest()[:12]
 
 
 def time_decisions(states: list[SortieState], decide: Callable[[int, SortieState], Decision]) -> Timing:

@@ -70,7 +70,7 @@ def run_bench(decisions: int | None, iterations: int, reference_decisions: int, 
         fast = fast_timing(scenario, hover_points, states, config, seeds)
         row: dict[str, Any] = {
             "K": k, "I": i, "decisions": count, "median_ms": fast.median_ms, "p99_ms": fast.p99_ms,
-            "playouts_per_s": fast.playouts_per_s,
+            "playouts_per_s": fast.playouts_per_s, "decisions_digest": fast.digest,
         }
         if (k, i) == SIZES[0] and reference_decisions > 0:
             n = min(reference_decisions, count)
@@ -91,11 +91,11 @@ def run_bench(decisions: int | None, iterations: int, reference_decisions: int, 
 def format_table(results: dict[str, Any]) -> str:
     lines = [
         f"mcts decision latency, {results['iterations']} iterations per decision (numba: {results['numba']})",
-        f"{'K':>5} {'I':>6} {'decisions':>9} {'median ms':>10} {'p99 ms':>9} {'playouts/s':>11}",
+        f"{'K':>5} {'I':>6} {'decisions':>9} {'median ms':>10} {'p99 ms':>9} {'playouts/s':>11}  decisions' digest",
     ]
     for row in results["sizes"]:
         lines.append(f"{row['K']:>5} {row['I']:>6} {row['decisions']:>9} {row['median_ms']:>10.2f} "
-                     f"{row['p99_ms']:>9.2f} {row['playouts_per_s']:>11.0f}")
+                     f"{row['p99_ms']:>9.2f} {row['playouts_per_s']:>11.0f}  {row['decisions_digest']}")
         ref = row.get("reference")
         if ref:
             lines.append(f"{'reference':>12} {ref['decisions']:>9} {ref['median_ms']:>10.2f} {ref['p99_ms']:>9.2f} "
