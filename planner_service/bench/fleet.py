@@ -1,8 +1,8 @@
 """``bench --fleet``: a fleet planner's decision time per UAV and the size of the messages its
 UAVs send, for N = 3 and 5 at the paper's size and at K = 200 points / I = 1000 users.
 
-Every planner of the fleet registry is timed (``joint`` only up to ``JOINT_MAX_UAVS``: its
-search is over K^N joint actions). A decision is timed as a sortie asks for it (the UAV whose
+Every planner of the fleet registry is timed (``joint`` only up to ``JOINT_MAX_UAVS`` and
+where its search over K^N joint actions fits: ``fleet.joint_fits``). A decision is timed as a sortie asks for it (the UAV whose
 interval ends first decides, on the states the fleet meets), so the time includes what the
 planner does between decisions of one UAV (``claims`` rebuilding its tree when the others'
 claims change). Message sizes are what the planner reports (``message_bytes``); 0 for a
@@ -16,7 +16,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-from ..fleet import fleet_algorithms, fleet_streams, make_fleet_policy, message_figures
+from ..fleet import MAX_JOINT_ACTIONS, fleet_algorithms, fleet_streams, joint_fits, make_fleet_policy, message_figures
 from ..fleet.sortie import sent_sizes
 from ..fleet.policies import intent_of
 from ..model import HAVE_NUMBA, Scenario
@@ -75,6 +75,10 @@ def run_fleet_bench(decisions: int, iterations: int, sizes=SIZES, uavs=UAVS,
             for algo in algos:
                 if algo == "joint" and n > JOINT_MAX_UAVS:
                     results["skipped"].append(f"joint at N={n}, K={k}: beyond JOINT_MAX_UAVS={JOINT_MAX_UAVS}")
+                    continue
+                if algo == "joint" and not joint_fits(k, n):
+                    results["skipped"].append(f"joint at N={n}, K={k}: K^N = {k ** n} joint actions, beyond "
+                                              f"{MAX_JOINT_ACTIONS}")
                     continue
                 if progress:
                     progress(f"{algo} N={n} K={k} I={i}: {decisions} decisions")

@@ -9,7 +9,7 @@ reference where K^N is small: ``joint.py``).
 """
 
 from .dec_mcts import DecMctsConfig, DecMctsFleet
-from .joint import MAX_JOINT_ACTIONS, JointFleet
+from .joint import MAX_JOINT_ACTIONS, JointFleet, joint_fits
 from .messages import MessageError, PlanMessage, decode
 from .policies import (FLEET_PLANNERS, LATER, MESSAGE_PLANNERS, ClaimsFleet, IndependentFleet, MessageLink,
                        fleet_algorithms, make_fleet_policy, takes_link)
@@ -17,5 +17,5 @@ from .sortie import fleet_streams, message_figures, run_fleet_sortie
 
 __all__ = ["FLEET_PLANNERS", "LATER", "MAX_JOINT_ACTIONS", "MESSAGE_PLANNERS", "ClaimsFleet", "DecMctsConfig",
            "DecMctsFleet", "IndependentFleet", "JointFleet", "MessageError", "MessageLink", "PlanMessage", "decode",
-           "fleet_algorithms", "fleet_streams", "make_fleet_policy", "message_figures", "run_fleet_sortie",
-           "takes_link"]
+           "fleet_algorithms", "fleet_streams", "joint_fits", "make_fleet_policy", "message_figures",
+           "run_fleet_sortie", "takes_link"]

@@ -33,6 +33,12 @@ C = 1.0
 """UCT constant on min-max normalised values (``mcts``'s default)."""
 
 
+
+def joint_fits(points: int, uavs: int) -> bool:
+    """``joint`` searches a fleet of ``uavs`` over ``points`` hovering points: K^N joint
+    actions at most ``MAX_JOINT_ACTIONS`` (it refuses more)."""
+    return points ** uavs <= MAX_JOINT_ACTIONS
+
 class _Node:
     __slots__ = ("children", "visits", "value")
 
@@ -61,7 +67,7 @@ class JointFleet(PerUav):
 
     def begin(self, env: FleetEnv) -> None:
         size = env.num_actions ** env.num_uavs
-        if size > MAX_JOINT_ACTIONS:
+        if not joint_fits(env.num_actions, env.num_uavs):
             raise ValueError(f"joint searches K^N = {env.num_actions}^{env.num_uavs} = {size} joint actions, more "
                              f"than {MAX_JOINT_ACTIONS}: use fewer UAVs or hovering points (or dec-mcts)")
         self._model = FleetEnv(env.scenario, env.fleet)
@@ -141,4 +147,4 @@ def _own_line(node: _Node, j: int, depth: int = 16) -> list[int]:
     return line
 
 
-__all__ = ["JointFleet", "MAX_JOINT_ACTIONS"]
+__all__ = ["JointFleet", "MAX_JOINT_ACTIONS", "joint_fits"]

@@ -55,6 +55,10 @@ def test_jobs_follow_the_registry(monkeypatch: pytest.MonkeyPatch) -> None:
     assert len(linked) == 6 * 2
     # paths at N = 3, where joint (N <= 2 here) does not fly
     assert [j.algo for j in jobs if j.record_paths] == ["independent", "claims", "dec-mcts"]
+    # the default joint_max_uavs (3) on the fleet preset: 40^3 joint actions do not fit (joint
+    # refuses them; flying it stopped the whole experiment)
+    default = FleetConfig(preset("fleet"), uavs=(1, 2, 3), seeds=(0,), iterations=5)
+    assert sorted({j.uavs for j in fleet_jobs(default) if j.algo == "joint"}) == [1, 2]
 
     rngs = [np.random.default_rng(k) for k in range(2)]
     # dec-mcts takes the link as its own settings (drop, age)

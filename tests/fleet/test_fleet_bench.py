@@ -36,6 +36,13 @@ def test_messages_are_counted_and_joint_is_skipped_beyond_its_size(monkeypatch):
     assert all(0 < r["message_bytes_max"] < 2048 for r in res["rows"] if r["algo"] == "dec-mcts")
 
 
+def test_joint_is_skipped_where_its_search_does_not_fit():
+    # K = 40 at N = 3: 64 000 joint actions; joint refuses them (it stopped the whole bench)
+    res = run_fleet_bench(2, 5, sizes=((40, 10),), uavs=(3,))
+    assert "joint" not in {r["algo"] for r in res["rows"]} and {r["algo"] for r in res["rows"]}
+    assert res["skipped"] == ["joint at N=3, K=40: K^N = 64000 joint actions, beyond 10000"]
+
+
 def test_bench_fleet_quick_json(python, python_env):
     proc = subprocess.run([python, "-m", "planner_service", "bench", "--fleet", "--quick", "--json",
                            "--decisions", "3", "--iterations", "20"],

@@ -9,6 +9,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
+from ...fleet import MAX_JOINT_ACTIONS
 from .design import BASELINE, REFERENCE, FleetConfig
 from .jobs import FLEET_METRICS, FleetJob, Record
 
@@ -152,7 +153,10 @@ class FleetResults:
         if REFERENCE not in self.cfg.planners():
             notes.append(f"'{REFERENCE}' is not in the fleet planner registry yet: no comparison with it.")
         else:
-            notes.append(f"'{REFERENCE}' flown only up to N = {self.cfg.joint_max_uavs} (--joint-max-uavs).")
+            flown = [n for n in self.cfg.uavs if self.cfg.flies(REFERENCE, n)]
+            notes.append(f"'{REFERENCE}' flown at N = {flown}: up to {self.cfg.joint_max_uavs} (--joint-max-uavs) "
+                         f"and where K^N = {self.cfg.base.num_hover_points}^N joint actions fit "
+                         f"({MAX_JOINT_ACTIONS}).")
         if not self.cfg.link_planners():
             notes.append("No registered fleet planner takes a message link (loss, lateness) yet: the robustness "
                          "sweep (loss 0/20/50 %, late 1-3 intervals) was skipped.")

@@ -1,8 +1,9 @@
 """What the fleet experiment flies: its parameters (full and --quick forms) and its jobs.
 
 Every planner in the fleet registry is flown (``fleet_algorithms``), so planners added to it
-appear without edits here; ``joint`` only up to ``joint_max_uavs`` UAVs (one search over
-K^N joint actions: 40 points and 3 UAVs are already 64,000); the message link swept only
+appear without edits here; ``joint`` only up to ``joint_max_uavs`` UAVs and where its search
+fits (one search over K^N joint actions, at most ``MAX_JOINT_ACTIONS``: 40 points and 3 UAVs
+are already 64,000); the message link swept only
 for planners that take one (``fleet.takes_link``).
 """
 
@@ -10,7 +11,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from ...fleet import fleet_algorithms, takes_link
+from ...fleet import fleet_algorithms, joint_fits, takes_link
 from ...model import Scenario
 from .jobs import FleetJob
 
@@ -62,7 +63,8 @@ class FleetConfig:
         return [BASELINE] + [a for a in fleet_algorithms() if a != BASELINE]
 
     def flies(self, algo: str, n: int) -> bool:
-        return algo != REFERENCE or n <= self.joint_max_uavs
+        """``joint`` only up to ``joint_max_uavs`` and where its search fits (K^N)."""
+        return algo != REFERENCE or (n <= self.joint_max_uavs and joint_fits(self.base.num_hover_points, n))
 
     def link_planners(self) -> list[str]:
         """Planners whose messages' loss and lateness can be set."""
