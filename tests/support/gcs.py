@@ -11,7 +11,7 @@ os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavutil  # noqa: E402
 
 from protocol.geodesy import GeoOrigin  # noqa: E402
-from protocol.mission import HoverPoint, MissionItem, encode_path  # noqa: E402
+from protocol.mission import HoverPoint, MissionItem, encode_path, same_mission  # noqa: E402
 from protocol.signing import Signer  # noqa: E402
 from sim_bridge.vehicle.stored_items import ardupilot_stored  # noqa: E402
 
@@ -57,6 +57,8 @@ class GroundStation:
         self.timeout_s = timeout_s
         self.retries = retries
         self.target = (1, 1)
+        self.flavour = "ardupilot"
+        """The vehicle's autopilot, from its HEARTBEAT (``wait_vehicle``)."""
         self.seen: list[Any] = []
         """Every message received, in order (for assertions on telemetry)."""
 
@@ -88,6 +90,7 @@ class GroundStation:
             hb = self.recv(["HEARTBEAT"], 0.2)
             if hb is not None:
                 self.target = (hb.get_srcSystem(), hb.get_srcComponent())
+                self.flavour = "px4" if hb.autopilot == M.MAV_AUTOPILOT_PX4 else "ardupilot"
                 return hb
         raise GcsError("no heartbeat from the vehicle")
 
@@ -108,11 +111,16 @@ class GroundStation:
 
     # --- mission protocol ---------------------------------------------------------------------
     def upload(self, items: Sequence[MissionItem]) -> int:
-        """Upload ``items``; returns the MISSION_ACK result. Retries on silence."""
+        """Upload ``items``; returns the MISSION_ACK result. Retries on silence. Where the
+        last item had to be sent again (its ACK lost, or the item) and the answer is not
+        ACCEPTED, the outcome is not known from the answer: ArduPilot answers an item after
+        the upload ended with MAV_MISSION_ERROR whether or not it took the mission. The
+        mission is then read back: ACCEPTED if the vehicle holds ``items``."""
         sys_id, comp_id = self.target
         count = len(items)
         self.conn.mav.mission_count_send(sys_id, comp_id, count, M.MAV_MISSION_TYPE_MISSION)
         last_sent: int | None = None
+        last_again = False
         silent = 0
         while silent <= self.retries:
             msg = self.recv(["MISSION_REQUEST_INT", "MISSION_REQUEST", "MISSION_ACK"], self.timeout_s)
@@ -122,6 +130,7 @@ class GroundStation:
                     self.conn.mav.mission_count_send(sys_id, comp_id, count, M.MAV_MISSION_TYPE_MISSION)
                 else:
                     self.conn.mav.send(items[last_sent].to_message(sys_id, comp_id))
+                    last_again = last_sent == count - 1
                 continue
             if msg.get_type() == "MISSION_ACK":
                 if last_sent is None and msg.type == M.MAV_MISSION_ACCEPTED and count:
@@ -130,6 +139,8 @@ class GroundStation:
                     # ArduPilot's answer to an item sent twice (our repeat crossed its
                     # request): the upload goes on (MissionItemProtocol::handle_mission_item).
                     continue
+                if last_again and msg.type != M.MAV_MISSION_ACCEPTED:
+                    return M.MAV_MISSION_ACCEPTED if same_mission(self.download(), items, self.flavour) else int(msg.type)
                 return int(msg.type)
             if not 0 <= msg.seq < count:
                 raise GcsError(f"vehicle requested item {msg.seq} of {count}")
