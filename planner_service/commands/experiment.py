@@ -53,7 +53,8 @@ def configure(parser: argparse.ArgumentParser) -> None:
                        help=f"mcts iterations per UAV decision (default {FULL_ITERATIONS}; {QUICK_ITERATIONS} "
                             f"with --quick); seeds default {FULL_FLEET_SEEDS} ({QUICK_FLEET_SEEDS} with --quick)")
     fleet.add_argument("--joint-max-uavs", type=int, default=None,
-                       help="fly the joint planner (where registered) up to this N (default 3: K^N joint actions)")
+                       help="fly the joint planner (where registered) up to this N (default 3) and where its "
+                            "K^N joint actions fit (at most 10000)")
     add_scenario_arguments(parser, default=None, default_help="paper; fleet for the fleet experiment")
 
 
