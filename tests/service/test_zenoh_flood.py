@@ -150,13 +150,21 @@ def test_flood_gets_an_answer_for_every_query_and_bounded_memory(stack: Stack) -
     (pending,) = stack.rows("SELECT COUNT(*) FROM requests WHERE status = 'pending'")[0]
     assert pending <= MAX_PENDING
 
-    # and right after, a normal client is served: a repeated user replaces its request, state
-    # answers. The flood has just emptied the requests/s bucket: a client retries on busy.
+    # and right after, a normal client is served: a user whose request holds one of the pending
+    # places replaces it (always taken, the bound full or not), state answers. A flood user
+    # served nothing yet holds one (one of the repeated users may hold none: its last request
+    # served, or one the fairness rule leaves out, and then the full bound refuses it, as it
+    # should: a clean-clone run). The flood has just emptied the requests/s bucket: a client
+    # retries on busy.
+    holders = stack.rows("SELECT user_id FROM requests WHERE status = 'pending' AND user_id LIKE 'flood-%' "
+                         "AND user_id NOT IN (SELECT user_id FROM services) ORDER BY request_id")
+    assert holders, "no flood user holds a pending place"
+    user = holders[0][0]
     t1 = time.perf_counter()
     busy = 0
     while True:
         try:
-            ack = client.submit("rep-1", 120.0, 130.0, 6, timeout_s=5.0)
+            ack = client.submit(user, 120.0, 130.0, 6, timeout_s=5.0)
             break
         except ClientError as err:
             assert err.busy and busy < 20, err

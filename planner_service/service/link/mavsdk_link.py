@@ -28,7 +28,7 @@ import json
 import logging
 import time
 from types import SimpleNamespace
-from typing import Any, Callable, Sequence
+from typing import Any, Awaitable, Callable, Sequence, TypeVar
 
 from mavsdk import log_subscribe
 from mavsdk.asyncio import ComponentType, Configuration, Mavsdk
@@ -48,12 +48,17 @@ from .streams import INTERVAL_CMD, QUIET_INTERVAL_US, Request
 
 _log = logging.getLogger("mavsdk")
 log = logging.getLogger(__name__)
+T = TypeVar("T")
 RETRYABLE = {MissionRawResult.BUSY, MissionRawResult.TIMEOUT, MissionRawResult.ERROR,
              MissionRawResult.INVALID_SEQUENCE}
-"""Upload results worth a whole new upload (MISSION_COUNT restarts the transfer). An
+"""Transfer results worth a whole new transfer (MISSION_COUNT or MISSION_REQUEST_LIST restarts it). An
 INVALID_SEQUENCE ack is the autopilot saying an item came out of turn (a repeat that crossed
 its next request: ArduPilot sends it and goes on, MAVSDK ends the upload there), seen on
 ArduCopter SITL at x10 over a serial line on a loaded machine."""
+BUSY_TRANSFER_WAIT_S = 5.5
+"""Wall seconds before a transfer refused as busy is tried again: PX4 drops a transfer its
+partner abandoned 5 s after it last heard from it (MAVLINK_MISSION_PROTOCOL_TIMEOUT_DEFAULT,
+in its own time: at speed 1 wall seconds, less at speed 10) and refuses a new one until then."""
 REPORTS = frozenset({"MISSION_CURRENT", "MISSION_ITEM_REACHED"})
 REFUSAL_TEXT_WAIT_S = 0.3
 STALE_REPORT_S = 2.0
@@ -335,22 +340,12 @@ class MavsdkLink(VehicleLink):
         raw = [raw_item(i) for i in items]
         async with self._upload_lock:
             self._check_link("upload_mission()")
-            last: MissionRawError | None = None
-            accepted = False
-            for _ in range(self.settings.retries):
+
+            async def send() -> None:
                 self.mission_id = 0
                 self._ack_seen.clear()
-                try:
-                    await self._raw.upload_mission(raw)
-                except MissionRawError as err:
-                    last = err
-                    if err.result not in RETRYABLE:
-                        break
-                    continue
-                accepted = True
-                break
-            if not accepted:
-                raise LinkError("upload_mission()", _name(last.result) if last is not None else "UNKNOWN")
+                await self._raw.upload_mission(raw)
+            await self._transfer("upload_mission()", send)
             try:
                 await asyncio.wait_for(self._ack_seen.wait(), ACK_WAIT_S)
             except TimeoutError:
@@ -361,6 +356,30 @@ class MavsdkLink(VehicleLink):
             self.state.set_progress(0, len(raw))
             if current_seq is not None:
                 await self._ensure_current(current_seq, wait_for_report=True, restart=restart_current)
+
+    async def _transfer(self, what: str, run: Callable[[], Awaitable[T]]) -> T:
+        """A whole MAVSDK mission transfer, begun again (up to ``retries`` times) where it ended
+        in a result worth another try: MAVSDK gives an item a few tries only, and over a lossy
+        link (a fifth of the datagrams lost each way) a 20-item download on PX4 SITL ended in
+        TIMEOUT now and then; the protocol restarts cleanly from MISSION_COUNT or
+        MISSION_REQUEST_LIST. After a try that failed, a PROTOCOL_ERROR is taken for that try's
+        echo (PX4 still in the abandoned transfer answers the new one MAV_MISSION_ERROR, "WPM:
+        REJ. CMD: Busy", which MAVSDK reports so) and is tried again after PX4 has dropped the
+        abandoned one; as a first answer it ends the transfer."""
+        last: MissionRawError | None = None
+        for _ in range(self.settings.retries):
+            self._check_link(what)  # a lost link is not retried into: it is lost
+            try:
+                return await run()
+            except MissionRawError as err:
+                echo = last is not None and err.result == MissionRawResult.PROTOCOL_ERROR
+                last = err
+                if err.result not in RETRYABLE and not echo:
+                    break
+                log.info("link: %s ended %s; trying it again", what, _name(err.result))
+                if echo:
+                    await asyncio.sleep(BUSY_TRANSFER_WAIT_S)
+        raise LinkError(what, _name(last.result) if last is not None else "UNKNOWN")
 
     async def set_current(self, seq: int) -> None:
         async with self._upload_lock:
@@ -399,10 +418,10 @@ class MavsdkLink(VehicleLink):
             self._check_link("download_mission()")
             self.mission_id = 0
             try:
-                raw = await self._raw.download_mission()
-            except MissionRawError as err:
-                if err.result != MissionRawResult.NO_MISSION_AVAILABLE:
-                    raise LinkError("download_mission()", _name(err.result)) from None
+                raw = await self._transfer("download_mission()", self._raw.download_mission)
+            except LinkError as err:
+                if err.result != _name(MissionRawResult.NO_MISSION_AVAILABLE):
+                    raise
                 raw = []  # the vehicle holds none
             self.generation += 1
             self._expect_total, self._current = len(raw), None
