@@ -14,6 +14,7 @@ from collections import deque
 from dataclasses import dataclass, field
 
 from protocol import Event, PendingRequest, Plan, Status
+from protocol.messages import FleetMember
 from protocol.text import printable
 
 MAX_POINTS_SHOWN = 8
@@ -35,6 +36,9 @@ class WatchView:
     """Why ``pending`` is not known ("" when it is)."""
     alive: bool | None = None
     """The service's liveliness token: seen, gone, or not yet known."""
+    fleet: dict[str, FleetMember | None] = field(default_factory=dict)
+    """The fleet's members alive under the prefix and their layers (None: not read yet);
+    empty for a lone UAV."""
 
 
 def _t(text: object, limit: int = 80) -> str:
@@ -52,6 +56,7 @@ def render(view: WatchView, now: float) -> list[str]:
     lines = [f"{_t(view.vehicle, 64)}: service {alive}; {age}"]
     if view.status is not None:
         lines += status_lines(view.status)
+    lines += _fleet_lines(view)
     lines += _plan_lines(view.plan)
     lines += _pending_lines(view)
     lines.append("events" if view.events else "events     none yet")
@@ -81,6 +86,19 @@ def status_lines(s: Status) -> list[str]:
     if s.degraded:
         lines.append(f"DEGRADED   {_t(s.degraded, 160)}")
     return lines
+
+
+def _fleet_lines(view: WatchView) -> list[str]:
+    """One line for the fleet's members (none for a lone UAV): vehicle, layer, this one."""
+    if not view.fleet:
+        return []
+    this = view.vehicle.rsplit("/", 1)[-1]
+
+    def one(vehicle: str, m: FleetMember | None) -> str:
+        layer = "layer unknown" if m is None else f"{m.layer_m:g} m"
+        return f"{_t(vehicle, 64)} {layer}" + (" (this)" if vehicle == this else "")
+    return [f"fleet      {len(view.fleet)} member{'s' if len(view.fleet) != 1 else ''}: "
+            + ", ".join(one(v, m) for v, m in sorted(view.fleet.items()))]
 
 
 def _plan_lines(plan: Plan | None) -> list[str]:

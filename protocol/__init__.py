@@ -3,7 +3,7 @@
 from .area import Area
 from .errors import MissionError, ProtocolError, SigningError
 from .geodesy import GeoOrigin, global_to_local, local_to_global
-from .keys import DEFAULT_PREFIX, Keys, check_user_id
+from .keys import DEFAULT_PREFIX, FleetKeys, Keys, check_user_id
 from .messages import (
     MAX_PAYLOAD_BYTES, SCHEMA_VERSION, ErrorReply, Event, Plan, PlanPoint, PendingRequest, State,
     Status, TaskAck, TaskRequest, UserPlace, decode, decode_reply, decode_request, encode,
@@ -22,7 +22,7 @@ from .text import printable
 
 __all__ = [
     "ARDUPILOT", "Autopilot", "PROFILES", "PX4", "autopilot_for", "Area", "DEFAULT_PREFIX", "ErrorReply", "Event", "FLAVOURS", "Flavour", "GeoOrigin",
-    "HoverPoint", "Keys", "MAX_PAYLOAD_BYTES", "MissionError", "MissionItem", "MissionPlan",
+    "FleetKeys", "HoverPoint", "Keys", "MAX_PAYLOAD_BYTES", "MissionError", "MissionItem", "MissionPlan",
     "PendingRequest", "Plan", "PlanPoint", "ProtocolError", "SCHEMA_VERSION", "SigningError", "State", "Status",
     "TaskAck", "TaskRequest", "UserPlace", "check_user_id", "decode", "decode_path", "decode_reply", "decode_request", "encode",
     "encode_path", "global_to_local", "local_to_global", "mission_digest", "read_plan", "read_wpl",

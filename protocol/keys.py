@@ -12,6 +12,8 @@ from .errors import ProtocolError
 
 DEFAULT_PREFIX = "uavmec"
 DEFAULT_VEHICLE = "uav1"
+FLEET = "fleet"
+"""The chunk after the prefix that holds the fleet's keys (``FleetKeys``); no vehicle's id."""
 
 # A key chunk must not contain zenoh's separators or wildcards, or a vehicle id
 # like "a/*" would silently subscribe to every vehicle.
@@ -44,6 +46,9 @@ class Keys:
     def __post_init__(self) -> None:
         _check_chunk("prefix", self.prefix)
         _check_chunk("vehicle", self.vehicle)
+        if self.vehicle == FLEET:
+            raise ProtocolError("vehicle", f"{FLEET!r} names the fleet's keys ({self.prefix}/{FLEET}/...), "
+                                           f"not a vehicle")
 
     def _key(self, leaf: str) -> str:
         return f"{self.prefix}/{self.vehicle}/{leaf}"
@@ -126,3 +131,44 @@ class Keys:
     def all(self) -> str:
         """Every key of this vehicle, for a subscriber that wants them all."""
         return self._key("**")
+
+
+@dataclass(frozen=True)
+class FleetKeys:
+    """The keys the services of one fleet share under one prefix: ``{prefix}/fleet/...``.
+    Each service's own are below its vehicle's chunk (``Keys``), so that access control can
+    give a UAV's certificate its own member keys alone."""
+
+    prefix: str = DEFAULT_PREFIX
+
+    def __post_init__(self) -> None:
+        _check_chunk("prefix", self.prefix)
+
+    def _key(self, leaf: str) -> str:
+        return f"{self.prefix}/{FLEET}/{leaf}"
+
+    def member(self, vehicle: str) -> str:
+        """Liveliness token of ``vehicle``'s service while it is a member of the fleet."""
+        return self._key(f"members/{_check_chunk('vehicle', vehicle)}")
+
+    @property
+    def members(self) -> str:
+        """Every member's token (a liveliness subscriber's key)."""
+        return self._key("members/*")
+
+    def announce(self, vehicle: str) -> str:
+        """Publication with a cache: what ``vehicle``'s service says of itself to the fleet
+        (``fleet_member``: its altitude layer)."""
+        return self._key(f"uavs/{_check_chunk('vehicle', vehicle)}")
+
+    @property
+    def announces(self) -> str:
+        """Every member's announcement (an advanced subscriber's key)."""
+        return self._key("uavs/*")
+
+    def vehicle_of(self, key_expr: str) -> str | None:
+        """The vehicle id that ends a member or announcement key; None for any other key."""
+        for head in (self._key("members/"), self._key("uavs/")):
+            if key_expr.startswith(head) and _CHUNK.fullmatch(key_expr[len(head):]):
+                return key_expr[len(head):]
+        return None

@@ -321,6 +321,20 @@ class OperatorReply(_Message, tag="operator_reply", kw_only=True):
     """``status`` only: the state with every pending request and the plan's users."""
 
 
+class FleetMember(_Message, tag="fleet_member"):
+    """What a fleet member's service says of itself to the others (``FleetKeys.announce``,
+    published with a cache so that a member who joins later reads it): the altitude layer its
+    UAV flies in, which no other member's may come within ``min_gap_m`` of."""
+
+    vehicle: Annotated[str, msgspec.Meta(min_length=1, max_length=64, pattern=r"\A[A-Za-z0-9_.\-]+\Z")]
+    layer_m: Annotated[float, msgspec.Meta(ge=0.0)]
+    """The altitude (m above the origin) of its hovering points and legs."""
+    min_gap_m: Annotated[float, msgspec.Meta(ge=0.0)]
+    """The least vertical gap it keeps to every other member's layer (``fleet.min_layer_gap_m``)."""
+    autopilot: ShortText = ""
+    """The autopilot its service flies (``mavlink.flavour``: ardupilot, px4)."""
+
+
 class _NoMessage(_Message, tag="-"):
     """Never valid. Decoding a single type as ``Union[Type, _NoMessage]`` makes msgspec
     require the ``kind`` tag, which it does not for a lone tagged type: without it ``{}``
@@ -328,7 +342,7 @@ class _NoMessage(_Message, tag="-"):
 
 
 Message = Union[TaskRequest, TaskAck, ErrorReply, Status, Plan, Event, State, UserPlace, OperatorCommand,
-                OperatorReply]
+                OperatorReply, FleetMember]
 Reply = Union[TaskAck, ErrorReply]
 """What the request queryable answers."""
 OperatorAnswer = Union[OperatorReply, ErrorReply]

@@ -1,11 +1,12 @@
 """The operator's command line. ``watch``: a live view of the service (phase, mode, battery
-and its source, position, authority, the plan, pending users, the last events), redrawn
-from its status, plan and event publications and its state query, until Ctrl-C; plain text
-(on a terminal that cannot clear, or into a file or pipe, each changed view is printed
-after the last). ``start``: give the service authority to arm, switch modes and start the
-mission; ``hold``: take it back (the service commands nothing more, the vehicle keeps its
-mission); ``status``: ask. Each prints what the service did. Exit status: 0 accepted,
-1 refused or no answer, 2 a usage error, 141 the reader of its output went away.
+and its source, position, authority, the fleet's members and their layers, the plan, pending
+users, the last events), redrawn from its status, plan and event publications and its state
+query, until Ctrl-C; plain text (on a terminal that cannot clear, or into a file or pipe,
+each changed view is printed after the last). ``start``: give the service authority to
+arm, switch modes and start the mission; ``hold``: take it back (the service commands
+nothing more, the vehicle keeps its mission); ``status``: ask. Each prints what the service
+did. Exit status: 0 accepted, 1 refused or no answer, 2 a usage error, 141 the reader of its
+output went away.
 
 Who may command: without zenoh access control, the holder of the service's operator key
 (``--operator-key``; each command carries its proof, never the key); under access control,
@@ -139,9 +140,10 @@ def _command(client: Any, args: argparse.Namespace) -> int:
 def _watch(client: Any, args: argparse.Namespace, stop: threading.Event) -> int:
     import zenoh
 
-    from protocol import ProtocolError
+    from protocol import FleetKeys, ProtocolError
     from protocol.client import ClientError
 
+    from ..fleet_roster import FleetRoster
     from ..operator_view import WatchView, render
 
     view = WatchView(vehicle=f"{client.keys.prefix}/{client.keys.vehicle}")
@@ -164,6 +166,8 @@ def _watch(client: Any, args: argparse.Namespace, stop: threading.Event) -> int:
     client.follow_plans(lambda p: update(plan=p))
     client.follow_events(on_event)
     alive_sub = client.session.liveliness().declare_subscriber(client.keys.alive, on_alive, history=True)
+    roster = FleetRoster(FleetKeys(client.keys.prefix))
+    roster.follow(client.session)
     term = os.environ.get("TERM", "")
     plain = args.plain or not sys.stdout.isatty() or term in ("", "dumb", "unknown")
     last: list[str] | None = None
@@ -187,6 +191,9 @@ def _watch(client: Any, args: argparse.Namespace, stop: threading.Event) -> int:
                 continue
             if args.once and view.alive is None and client.wait_for_service(timeout_s=1.0):
                 update(alive=True)  # the token's history may reach the subscriber after the state's answer
+            if args.once:  # one view: with the layers of the members the roster knows of
+                roster.settle(min(args.timeout, 2.0))
+            update(fleet=roster.members())
             with lock:
                 lines = render(view, time.monotonic())
             if plain:
@@ -201,6 +208,7 @@ def _watch(client: Any, args: argparse.Namespace, stop: threading.Event) -> int:
             stop.wait(args.refresh)
     finally:
         alive_sub.undeclare()
+        roster.close()
     if not plain:
         print()
     return 0

@@ -35,7 +35,8 @@ from typing import Any, Awaitable, Callable, assert_never
 import msgspec
 import numpy as np
 
-from protocol import ErrorReply, PendingRequest, Plan, PlanPoint, SigningError, State, Status, encode
+from protocol import ErrorReply, FleetKeys, PendingRequest, Plan, PlanPoint, SigningError, State, Status, encode
+from protocol.messages import FleetMember
 from protocol.operator_proof import ProofCheck, load_or_create_key
 from protocol.text import printable
 
@@ -43,6 +44,7 @@ from ..mcts import MctsConfig
 from .allocator import ARENAS, cap_arenas
 from .config import ServiceConfig
 from .errors import ConfigError, JournalError, LinkError, PlanningError
+from .fleet_presence import FleetPresence
 from . import events as ev
 from .intake import Accepted, Intake, fairness_rule
 from .journal import Journal
@@ -680,7 +682,18 @@ def build_parts(config: ServiceConfig) -> Parts:
         journal.close()
         raise
     return Parts(journal=journal, open_link=lambda on_event: open_link(m.backend, settings, on_event),
-                 zio=ZenohIO(config.zenoh, config.keys()), operator_gate=gate)
+                 zio=ZenohIO(config.zenoh, config.keys(), fleet_presence(config), config.fleet.discovery_s),
+                 operator_gate=gate)
+
+
+def fleet_presence(config: ServiceConfig) -> FleetPresence | None:
+    """This UAV's membership of the fleet (``[fleet] enabled``): its layer is the scenario's
+    altitude; None for a lone UAV."""
+    if not config.fleet.enabled:
+        return None
+    own = FleetMember(vehicle=config.zenoh.vehicle, layer_m=config.scenario().altitude_m,
+                      min_gap_m=config.fleet.min_layer_gap_m, autopilot=config.mavlink.flavour)
+    return FleetPresence(FleetKeys(config.zenoh.prefix), own)
 
 
 def run_service(config: ServiceConfig) -> int:

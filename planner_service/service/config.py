@@ -327,10 +327,28 @@ class OperatorConfig(Section):
     its client_ref is refused again for twice this long (replays)."""
 
 
+@dataclass(frozen=True)
+class MembershipConfig(Section):
+    """Membership of a fleet of UAVs, one service each, under ``zenoh.prefix`` (docs/OPERATIONS.md,
+    "A fleet"). The UAV's altitude layer is its scenario's ``altitude_m``."""
+
+    section: ClassVar[str] = "fleet"
+
+    enabled: bool = False
+    """Join the fleet: announce this UAV's layer and hold a member's token; refuse to start
+    when another member is this vehicle, or flies a layer within ``min_layer_gap_m``."""
+    min_layer_gap_m: float = setting(10.0, gt=0, unit="m")
+    """The least vertical distance between this UAV's layer and any other member's (the
+    larger of the two members' settings applies)."""
+    discovery_s: float = setting(3.0, gt=0, le=60.0, unit="s")
+    """How long a joining service waits for the mesh to tell it of every member (and as long
+    again for their layers) before it judges the separation and goes on."""
+
+
 SECTIONS: dict[str, type[Section]] = {
     "zenoh": ZenohConfig, "intake": IntakeConfig, "mavlink": MavlinkConfig, "planner": PlannerConfig,
     "journal": JournalConfig, "origin": OriginConfig, "safety": SafetyConfig, "sortie": SortieConfig,
-    "operator": OperatorConfig}
+    "operator": OperatorConfig, "fleet": MembershipConfig}
 """The TOML tables besides ``[scenario]``, in the order ``to_toml`` writes them."""
 SCENARIO_DEFAULTS: tuple[tuple[str, Any], ...] = (("task_arrival_period_s", 55.0), ("task_model", "backlog"))
 """The ``[scenario]`` keys the service sets besides the preset's: live users' requests are
@@ -351,6 +369,7 @@ class ServiceConfig:
     safety: SafetyConfig = field(default_factory=SafetyConfig)
     sortie: SortieConfig = field(default_factory=SortieConfig)
     operator: OperatorConfig = field(default_factory=OperatorConfig)
+    fleet: MembershipConfig = field(default_factory=MembershipConfig)
     scenario_preset: Preset = "field"
     scenario_overrides: tuple[tuple[str, Any], ...] = SCENARIO_DEFAULTS
     """(name, value) pairs of the [scenario] section besides ``preset``, each value of its

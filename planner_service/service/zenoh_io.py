@@ -27,6 +27,7 @@ from protocol.zenoh_config import session_config as _session_config
 
 from .config import ZenohConfig
 from .errors import ServiceError
+from .fleet_presence import FleetPresence
 from .intake import BUSY, client_ref
 
 log = logging.getLogger("planner_service.zenoh")
@@ -85,9 +86,14 @@ class InFlight:
 
 
 class ZenohIO:
-    def __init__(self, cfg: ZenohConfig, keys: Keys) -> None:
+    def __init__(self, cfg: ZenohConfig, keys: Keys, fleet: FleetPresence | None = None,
+                 discovery_s: float = 0.0) -> None:
         self.cfg = cfg
         self.keys = keys
+        self.fleet = fleet
+        """The fleet membership joined once the session is open, before anything is declared
+        (``fleet.enabled``); None: a lone UAV."""
+        self.discovery_s = discovery_s
         self.session: Any = None
         self.in_flight = InFlight(cfg.max_queries_in_flight)
         self.operator_in_flight = InFlight(OPERATOR_QUERIES_IN_FLIGHT)
@@ -101,7 +107,10 @@ class ZenohIO:
 
     def _config(self) -> zenoh.Config:
         c = self.cfg
-        return session_config(c.mode, c.listen, c.connect, c.multicast_scouting, c.config_file or None)
+        conf = session_config(c.mode, c.listen, c.connect, c.multicast_scouting, c.config_file or None)
+        if self.fleet is not None:  # zenoh.ext's advanced publisher orders its cache by timestamps
+            conf.insert_json5("timestamping/enabled", "true")
+        return conf
 
     async def open(self, loop: asyncio.AbstractEventLoop, on_request: Callable[[Any], None],
                    on_state: Callable[[Any], None], stopping: asyncio.Event,
@@ -140,6 +149,12 @@ class ZenohIO:
         if stopping.is_set():
             self.close()
             return False
+        if self.fleet is not None:
+            try:
+                await asyncio.to_thread(self.fleet.join, self.session, self.discovery_s)
+            except BaseException:
+                self.close()
+                raise
         s = self.session
         self._pubs = {name: s.declare_publisher(getattr(self.keys, name)) for name in PUBLICATIONS.values()}
         self._state_q = s.declare_queryable(self.keys.state, self._hand_over(loop, on_state, self.keys.state))
@@ -225,6 +240,8 @@ class ZenohIO:
                 except zenoh.ZError:
                     pass
         self._token, self._state_q, self._operator_q, self._pubs = None, None, None, {}
+        if self.fleet is not None:
+            self.fleet.leave()
         if self.session is not None:
             self.session.close()
             self.session = None

@@ -1,0 +1,133 @@
+"""Who is in the fleet, as one zenoh session sees it: the members' liveliness tokens
+(``{prefix}/fleet/members/{vehicle}``) and what each says of itself (``fleet_member`` on
+``{prefix}/fleet/uavs/{vehicle}``), kept up to date by zenoh's own features rather than a
+protocol written here:
+
+- a liveliness subscriber with history: the tokens already declared, then each one declared
+  or withdrawn (a service that stops, is killed or is cut off from the mesh loses its token:
+  zenoh withdraws it when the session's transport goes);
+- an advanced subscriber (``zenoh.ext``) with history, late-publisher detection and recovery:
+  each member's announcement is kept in its advanced publisher's cache, so a member who joins
+  later, or whose router restarted, still reads it.
+
+Read by the service (``service/fleet_presence.py``: its layer checked against the others')
+and by ``operator watch``. Pure bookkeeping apart from the declarations; thread-safe (zenoh
+calls back on its own threads).
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections import deque
+from dataclasses import dataclass
+from typing import Any, Callable
+
+import zenoh
+import zenoh.ext as zext
+
+from protocol import FleetKeys, ProtocolError
+from protocol.messages import FleetMember, decode
+
+SETTLE_POLL_S = 0.02
+
+
+@dataclass(frozen=True)
+class Change:
+    """One change of the roster: ``vehicle`` joined (its token seen), left (its token gone)
+    or announced itself (``member``)."""
+
+    vehicle: str
+    what: str
+    """"joined", "left" or "announced"."""
+    member: FleetMember | None = None
+
+
+class FleetRoster:
+    """The members alive and their announcements (None until one arrives)."""
+
+    def __init__(self, keys: FleetKeys, on_change: Callable[[Change], None] | None = None) -> None:
+        self.keys = keys
+        self._on_change = on_change
+        self._lock = threading.Lock()
+        self._alive: set[str] = set()
+        self._said: dict[str, FleetMember] = {}
+        self.refused: deque[str] = deque(maxlen=16)
+        """The latest announcements refused (key: why), for the log (the sender's text:
+        print it through ``protocol.text.printable``)."""
+        self._subs: list[Any] = []
+
+    def follow(self, session: Any, timeout_s: float = 2.0) -> None:
+        """Declare the subscribers on ``session`` (tokens and announcements so far arrive
+        through their history, then every change), then ask for the tokens alive and wait for
+        the answer (at most ``timeout_s``): when this returns every member already declared is
+        known, though its announcement may still be on its way (``settle``)."""
+        self._subs.append(session.liveliness().declare_subscriber(self.keys.members, self._on_token, history=True))
+        self._subs.append(zext.declare_advanced_subscriber(
+            session, self.keys.announces, self._on_announce,
+            history=zext.HistoryConfig(detect_late_publishers=True),
+            recovery=zext.RecoveryConfig(heartbeat=True)))
+        for reply in session.liveliness().get(self.keys.members, timeout=timeout_s):
+            if reply.ok is not None:
+                self._on_token(reply.ok)
+
+    def settle(self, timeout_s: float) -> bool:
+        """Wait until every live member's announcement is known (True), or ``timeout_s``."""
+        deadline = time.monotonic() + timeout_s
+        while None in self.members().values():
+            if time.monotonic() >= deadline:
+                return False
+            time.sleep(SETTLE_POLL_S)
+        return True
+
+    def close(self) -> None:
+        for sub in self._subs:
+            try:
+                sub.undeclare()
+            except zenoh.ZError:  # the session is already closed
+                pass
+        self._subs.clear()
+
+    def members(self) -> dict[str, FleetMember | None]:
+        """Every member whose token is alive, with its announcement (None: not read yet)."""
+        with self._lock:
+            return {v: self._said.get(v) for v in sorted(self._alive)}
+
+    def _on_token(self, sample: Any) -> None:
+        vehicle = self.keys.vehicle_of(str(sample.key_expr))
+        if vehicle is None:
+            return
+        joined = sample.kind == zenoh.SampleKind.PUT
+        with self._lock:
+            if joined == (vehicle in self._alive):
+                return
+            if joined:
+                self._alive.add(vehicle)
+            else:
+                self._alive.discard(vehicle)
+        self._tell(Change(vehicle, "joined" if joined else "left"))
+
+    def _on_announce(self, sample: Any) -> None:
+        key = str(sample.key_expr)
+        vehicle = self.keys.vehicle_of(key)
+        if vehicle is None or sample.kind != zenoh.SampleKind.PUT:
+            return
+        try:
+            member = decode(sample.payload.to_bytes(), FleetMember)
+        except ProtocolError as err:
+            with self._lock:
+                self.refused.append(f"{key}: {err}")
+            return
+        if member.vehicle != vehicle:  # a member speaks for its own vehicle only
+            with self._lock:
+                self.refused.append(f"{key}: names vehicle {member.vehicle!r}")
+            return
+        with self._lock:
+            if self._said.get(vehicle) == member:
+                return
+            self._said[vehicle] = member
+        self._tell(Change(vehicle, "announced", member))
+
+    def _tell(self, change: Change) -> None:
+        if self._on_change is not None:
+            self._on_change(change)

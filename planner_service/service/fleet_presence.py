@@ -1,0 +1,126 @@
+"""A service's membership of the fleet (``[fleet] enabled``): its token, its announcement,
+and the separation rule checked before it takes a request or commands its vehicle.
+
+Each UAV flies its own altitude layer (its scenario's ``altitude_m``); no two members' layers
+may lie closer than the larger of their ``min_layer_gap_m``. A service joining the fleet:
+
+1. asks which tokens are alive: another service already a member under its own vehicle id is
+   refused (two services for one vehicle would both command it);
+2. declares its announcement (an advanced publisher with a cache of one) and its token, and
+   follows the others' (``planner_service.fleet_roster``);
+3. waits ``fleet.discovery_s`` for the mesh to tell it of every member, and as long again for
+   the announcements of the members it saw;
+4. refuses to go on when a member's layer is too close to its own, or unknown (a token with no
+   announcement: unknown is never "clear"). Two services started at once with one layer both
+   see the other in step 3 and both refuse: neither flies into the other's layer.
+
+A member that joins later with a clashing layer is refused by its own check; this service
+logs it. The check keeps two services from being configured into one layer; what the vehicles
+really fly is for their own positions to show (docs/OPERATIONS.md, "A fleet").
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from typing import Any, Mapping
+
+import zenoh
+import zenoh.ext as zext
+
+from protocol import FleetKeys
+from protocol.messages import FleetMember, encode
+from protocol.text import printable
+
+from ..fleet_roster import Change, FleetRoster
+from .errors import ServiceError
+
+log = logging.getLogger("planner_service.fleet")
+
+
+class MembershipError(ServiceError):
+    """The service may not join the fleet (its vehicle id or its layer clashes)."""
+
+
+def layer_clashes(own: FleetMember, others: Mapping[str, FleetMember | None]) -> list[str]:
+    """Why ``own`` may not fly beside the live members ``others`` (their announcements, None
+    where none was read): one sentence per clash, [] when there is none."""
+    out = []
+    for vehicle, member in sorted(others.items()):
+        if vehicle == own.vehicle:
+            continue
+        if member is None:
+            out.append(f"{vehicle} is a member but its layer is unknown (no announcement read)")
+            continue
+        gap = max(own.min_gap_m, member.min_gap_m)
+        if abs(own.layer_m - member.layer_m) < gap:
+            out.append(f"{vehicle} flies at {member.layer_m:g} m, within {gap:g} m of this UAV's layer "
+                       f"{own.layer_m:g} m (fleet.min_layer_gap_m)")
+    return out
+
+
+class FleetPresence:
+    """One service's membership: ``join`` on an open session, ``leave`` at the end."""
+
+    def __init__(self, keys: FleetKeys, own: FleetMember) -> None:
+        self.keys = keys
+        self.own = own
+        self.roster = FleetRoster(keys, self._on_change)
+        self._joined = False
+        self._publisher: Any = None
+        self._token: Any = None
+
+    def join(self, session: Any, discovery_s: float) -> None:
+        """Become a member (blocking: run it off the event loop), or ``MembershipError`` naming
+        every clash; nothing is left declared after a refusal."""
+        v = self.own.vehicle
+        self.roster.follow(session, discovery_s)
+        if v in self.roster.members():  # before this service's own token is declared
+            self.leave()
+            raise MembershipError(f"fleet: another service is already the member for vehicle {v} "
+                             f"({self.keys.member(v)}); one service per UAV")
+        self._publisher = zext.declare_advanced_publisher(session, self.keys.announce(v),
+                                                          cache=zext.CacheConfig(max_samples=1),
+                                                          publisher_detection=True)
+        self._publisher.put(encode(self.own))
+        self._token = session.liveliness().declare_token(self.keys.member(v))
+        time.sleep(discovery_s)
+        self.roster.settle(discovery_s)
+        clashes = layer_clashes(self.own, self._others())
+        if clashes:
+            self.leave()
+            raise MembershipError("fleet: " + "; ".join(printable(c, 200) for c in clashes))
+        self._joined = True
+        others = self._others()
+        log.info("fleet: joined as %s, layer %g m; %s", v, self.own.layer_m,
+                 ", ".join(f"{k} at {m.layer_m:g} m" for k, m in others.items() if m) or "no other member yet")
+
+    def _others(self) -> dict[str, FleetMember | None]:
+        return {k: m for k, m in self.roster.members().items() if k != self.own.vehicle}
+
+    def _on_change(self, change: Change) -> None:
+        if change.vehicle == self.own.vehicle or not self._joined:
+            return
+        if change.what == "announced" and change.member is not None:
+            clash = layer_clashes(self.own, {change.vehicle: change.member})
+            if clash:
+                log.error("fleet: %s (its service should refuse to fly)", printable(clash[0], 200))
+            else:
+                log.info("fleet: %s announced layer %g m", change.vehicle, change.member.layer_m)
+        else:
+            log.info("fleet: %s %s", change.vehicle, change.what)
+
+    def members(self) -> dict[str, FleetMember | None]:
+        return self.roster.members()
+
+    def leave(self) -> None:
+        """Withdraw the token and the announcement, stop following the others."""
+        self._joined = False
+        for thing in (self._token, self._publisher):
+            if thing is not None:
+                try:
+                    thing.undeclare()
+                except zenoh.ZError:
+                    pass
+        self._token = self._publisher = None
+        self.roster.close()

@@ -1,0 +1,189 @@
+"""Fleet membership (``[fleet] enabled``): the layer rule on its own, then services joining
+through a real zenoh router on loopback (client sessions, as UAVs in the field): members
+found through liveliness tokens, layers through cached announcements, a clash or an unknown
+layer refused with nothing left declared, a member's loss seen."""
+
+from __future__ import annotations
+
+import time
+from typing import Any, Callable, Iterator
+
+import pytest
+import zenoh
+
+from planner_service.fleet_roster import FleetRoster
+from planner_service.harness.processes import free_port
+from planner_service.service.fleet_presence import MembershipError, FleetPresence, layer_clashes
+from protocol import FleetKeys, Keys, ProtocolError
+from protocol.messages import FleetMember
+from protocol.zenoh_config import session_config
+
+KEYS = FleetKeys("fleettest")
+DISCOVERY_S = 0.5
+
+
+def member(vehicle: str, layer_m: float, gap_m: float = 10.0) -> FleetMember:
+    return FleetMember(vehicle=vehicle, layer_m=layer_m, min_gap_m=gap_m)
+
+
+def wait_until(check: Callable[[], bool], timeout_s: float, what: str) -> None:
+    deadline = time.monotonic() + timeout_s
+    while not check():
+        assert time.monotonic() < deadline, f"not within {timeout_s} s: {what}"
+        time.sleep(0.02)
+
+
+# --- the rule ---------------------------------------------------------------------------------
+def test_layers_closer_than_the_larger_gap_clash() -> None:
+    own = member("uav1", 100.0)
+    assert layer_clashes(own, {"uav2": member("uav2", 110.0)}) == []
+    assert layer_clashes(own, {"uav2": member("uav2", 90.0)}) == []
+    (clash,) = layer_clashes(own, {"uav2": member("uav2", 105.0)})
+    assert "uav2 flies at 105 m, within 10 m of this UAV's layer 100 m" in clash
+    # the larger of the two gaps: uav2 keeps 15 m
+    (clash,) = layer_clashes(own, {"uav2": member("uav2", 112.0, gap_m=15.0)})
+    assert "within 15 m" in clash
+    assert layer_clashes(own, {"uav1": member("uav1", 100.0)}) == []  # itself
+
+
+def test_a_member_of_unknown_layer_is_a_clash() -> None:
+    (clash,) = layer_clashes(member("uav1", 100.0), {"uav2": None, "uav3": member("uav3", 60.0)})
+    assert clash.startswith("uav2 is a member but its layer is unknown")
+
+
+def test_fleet_keys_and_no_vehicle_named_fleet() -> None:
+    assert KEYS.member("uav2") == "fleettest/fleet/members/uav2"
+    assert KEYS.announce("uav2") == "fleettest/fleet/uavs/uav2"
+    assert KEYS.vehicle_of("fleettest/fleet/uavs/uav2") == "uav2"
+    assert KEYS.vehicle_of("fleettest/fleet/uavs/a/b") is None
+    assert KEYS.vehicle_of("fleettest/uav2/status") is None
+    with pytest.raises(ProtocolError) as err:
+        Keys("fleettest", "fleet")
+    assert err.value.field == "vehicle"
+    with pytest.raises(ProtocolError):
+        KEYS.member("*")
+
+
+# --- through a router -------------------------------------------------------------------------
+@pytest.fixture
+def mesh() -> Iterator[Callable[[], Any]]:
+    """A router on loopback and a maker of client sessions to it (timestamping on, as the
+    service's own session is when it joins a fleet)."""
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    router = zenoh.open(session_config("router", listen=[endpoint]))
+    sessions: list[Any] = []
+
+    def client() -> Any:
+        conf = session_config("client", connect=[endpoint])
+        conf.insert_json5("timestamping/enabled", "true")
+        s = zenoh.open(conf)
+        sessions.append(s)
+        return s
+    try:
+        yield client
+    finally:
+        for s in sessions:
+            s.close()
+        router.close()
+
+
+def test_members_find_each_other_and_a_clash_is_refused(mesh: Callable[[], Any]) -> None:
+    a = FleetPresence(KEYS, member("uav1", 100.0))
+    a.join(mesh(), DISCOVERY_S)
+    b = FleetPresence(KEYS, member("uav2", 110.0))
+    b.join(mesh(), DISCOVERY_S)  # a's layer read from its publisher's cache, b joined later
+    assert b.members() == {"uav1": member("uav1", 100.0), "uav2": member("uav2", 110.0)}
+    wait_until(lambda: a.members().get("uav2") == member("uav2", 110.0), 5.0, "uav1 reads uav2's layer")
+
+    c = FleetPresence(KEYS, member("uav3", 104.0))
+    with pytest.raises(MembershipError) as err:
+        c.join(mesh(), DISCOVERY_S)
+    assert "uav1 flies at 100 m, within 10 m" in str(err.value)
+    assert "uav2 flies at 110 m, within 10 m" in str(err.value)
+    time.sleep(DISCOVERY_S)  # the refused one's token must be gone, not just late
+    assert set(a.members()) == {"uav1", "uav2"}
+
+    twin = FleetPresence(KEYS, member("uav2", 60.0))
+    with pytest.raises(MembershipError) as err:
+        twin.join(mesh(), DISCOVERY_S)
+    assert "already the member for vehicle uav2" in str(err.value)
+
+
+def test_a_member_that_goes_is_seen_gone(mesh: Callable[[], Any]) -> None:
+    a = FleetPresence(KEYS, member("uav1", 100.0))
+    a.join(mesh(), DISCOVERY_S)
+    b_session = mesh()
+    b = FleetPresence(KEYS, member("uav2", 110.0))
+    b.join(b_session, DISCOVERY_S)
+    wait_until(lambda: "uav2" in a.members(), 5.0, "uav1 sees uav2")
+    b_session.close()  # as a killed service: its transport goes, zenoh withdraws its token
+    wait_until(lambda: "uav2" not in a.members(), 10.0, "uav1 sees uav2 gone")
+
+
+def test_a_member_whose_layer_cannot_be_read_bars_a_join(mesh: Callable[[], Any]) -> None:
+    """A token with an announcement that does not decode (or names another vehicle): the
+    layer is unknown, and unknown is never clear."""
+    rogue = mesh()
+    token = rogue.liveliness().declare_token(KEYS.member("uav9"))
+    roster = FleetRoster(KEYS)
+    roster.follow(mesh())
+    wait_until(lambda: "uav9" in roster.members(), 5.0, "the rogue's token")
+
+    def say(payload: bytes) -> Callable[[], bool]:
+        def said() -> bool:  # until the roster's subscription has reached the rogue
+            rogue.put(KEYS.announce("uav9"), payload)
+            return len(roster.refused) > 0
+        return said
+    wait_until(say(b'{"kind": "fleet_member", "vehicle": "uav1", "layer_m": 50, "min_gap_m": 1}'), 5.0,
+               "an announcement for another vehicle refused")
+    assert "names vehicle 'uav1'" in roster.refused[-1]
+    roster.refused.clear()
+    wait_until(say(b'{"kind": "fleet_member", "vehicle": "uav9", "layer_m": -5, "min_gap_m": 1}'), 5.0,
+               "a negative layer refused")
+    assert roster.members() == {"uav9": None}
+    a = FleetPresence(KEYS, member("uav1", 100.0))
+    with pytest.raises(MembershipError) as err:
+        a.join(mesh(), DISCOVERY_S)
+    assert "uav9 is a member but its layer is unknown" in str(err.value)
+    token.undeclare()
+
+
+def test_a_member_moves_to_the_other_router_when_its_own_dies() -> None:
+    """Two meshed ground routers; uav1 connects to either (the first), uav2 to the second.
+    The first router dies: uav1's session moves to the second, its token is declared there
+    again, and uav2 sees it a member with its layer (at most a moment gone: a router's loss
+    can look like the member's for as long as the move takes)."""
+    e1, e2 = (f"tcp/127.0.0.1:{free_port()}" for _ in range(2))
+    r1 = zenoh.open(session_config("router", listen=[e1]))
+    r2 = zenoh.open(session_config("router", listen=[e2], connect=[e1]))
+    sessions = []
+
+    def client(*endpoints: str) -> Any:
+        conf = session_config("client", connect=list(endpoints))
+        conf.insert_json5("timestamping/enabled", "true")
+        sessions.append(zenoh.open(conf))
+        return sessions[-1]
+    try:
+        a_session = client(e1, e2)
+        a = FleetPresence(KEYS, member("uav1", 100.0))
+        a.join(a_session, DISCOVERY_S)
+        b = FleetPresence(KEYS, member("uav2", 110.0))
+        b.join(client(e2), DISCOVERY_S)
+        assert b.members()["uav1"] == member("uav1", 100.0)
+        first_router = a_session.info.routers_zid()
+        changes: list[str] = []  # the tokens' (the announcements' history may come at any time)
+        watcher = FleetRoster(KEYS, lambda c: changes.append(f"{c.vehicle} {c.what}") if c.member is None else None)
+        watcher.follow(client(e2))
+        changes.clear()  # what the history told
+        r1.close()
+        wait_until(lambda: a_session.info.routers_zid() != first_router, 10.0, "uav1's session on the other router")
+        # the second router may hear uav1's token declared again before it hears the first's
+        # loss (no change at all), or after (a "left", then "joined" at once)
+        time.sleep(1.0)
+        assert changes in ([], ["uav1 left", "uav1 joined"]), changes
+        assert b.members() == {"uav1": member("uav1", 100.0), "uav2": member("uav2", 110.0)}
+        assert watcher.members() == b.members()
+    finally:
+        for s in sessions:
+            s.close()
+        r2.close()
