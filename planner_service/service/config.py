@@ -341,8 +341,9 @@ class MembershipConfig(Section):
     """The least vertical distance between this UAV's layer and any other member's (the
     larger of the two members' settings applies)."""
     discovery_s: float = setting(3.0, gt=0, le=60.0, unit="s")
-    """How long a joining service waits for the mesh to tell it of every member (and as long
-    again for their layers) before it judges the separation and goes on."""
+    """How long a joining service waits for the mesh to tell it of every member (then for
+    their layers until each is read: 5 s at most, or this if longer) before it judges the
+    separation and goes on."""
 
 
 SECTIONS: dict[str, type[Section]] = {

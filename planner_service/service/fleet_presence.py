@@ -8,8 +8,10 @@ may lie closer than the larger of their ``min_layer_gap_m``. A service joining t
    refused (two services for one vehicle would both command it);
 2. declares its announcement (an advanced publisher with a cache of one) and its token, and
    follows the others' (``planner_service.fleet_roster``);
-3. waits ``fleet.discovery_s`` for the mesh to tell it of every member, and as long again for
-   the announcements of the members it saw;
+3. waits ``fleet.discovery_s`` for the mesh to tell it of every member, then for the
+   announcements of the members it saw (at most ``discovery_s`` or ``ANNOUNCE_WAIT_S``, the
+   longer: each normally comes within milliseconds of its token, so the wait costs nothing
+   unless one is missing, and a loaded computer is not taken for a missing layer);
 4. refuses to go on when a member's layer is too close to its own, or unknown (a token with no
    announcement: unknown is never "clear"). Two services started at once with one layer both
    see the other in step 3 and both refuse: neither flies into the other's layer.
@@ -36,6 +38,8 @@ from ..fleet_roster import Change, FleetRoster
 from .errors import ServiceError
 
 log = logging.getLogger("planner_service.fleet")
+ANNOUNCE_WAIT_S = 5.0
+"""Seconds a joining service waits at least for the announcements of the members it saw."""
 
 
 class MembershipError(ServiceError):
@@ -85,7 +89,7 @@ class FleetPresence:
         self._publisher.put(encode(self.own))
         self._token = session.liveliness().declare_token(self.keys.member(v))
         time.sleep(discovery_s)
-        self.roster.settle(discovery_s)
+        self.roster.settle(max(discovery_s, ANNOUNCE_WAIT_S))
         clashes = layer_clashes(self.own, self._others())
         if clashes:
             self.leave()
