@@ -8,7 +8,9 @@ protocol written here:
   zenoh withdraws it when the session's transport goes);
 - an advanced subscriber (``zenoh.ext``) with history, late-publisher detection and recovery:
   each member's announcement is kept in its advanced publisher's cache, so a member who joins
-  later, or whose router restarted, still reads it.
+  later, or whose router restarted, still reads it;
+- a subscriber to every vehicle's ``status``: the members' own positions, on which the
+  fleet's separation is judged (``fleet_separation``).
 
 Read by the service (``service/fleet_presence.py``: its layer checked against the others')
 and by ``operator watch``. Pure bookkeeping apart from the declarations; thread-safe (zenoh
@@ -26,8 +28,10 @@ from typing import Any, Callable
 import zenoh
 import zenoh.ext as zext
 
-from protocol import FleetKeys, ProtocolError
+from protocol import FleetKeys, ProtocolError, Status
 from protocol.messages import FleetMember, decode
+
+from .fleet_separation import MIN_HORIZONTAL_M, STALE_S, Judgement, Seen, judge
 
 SETTLE_POLL_S = 0.02
 
@@ -52,6 +56,8 @@ class FleetRoster:
         self._lock = threading.Lock()
         self._alive: set[str] = set()
         self._said: dict[str, FleetMember] = {}
+        self._seen: dict[str, Seen] = {}
+        """Each member's last status (its vehicle's own position)."""
         self.refused: deque[str] = deque(maxlen=16)
         """The latest announcements refused (key: why), for the log (the sender's text:
         print it through ``protocol.text.printable``)."""
@@ -67,18 +73,25 @@ class FleetRoster:
             session, self.keys.announces, self._on_announce,
             history=zext.HistoryConfig(detect_late_publishers=True),
             recovery=zext.RecoveryConfig(heartbeat=True)))
+        self._subs.append(session.declare_subscriber(self.keys.statuses, self._on_status))
         for reply in session.liveliness().get(self.keys.members, timeout=timeout_s):
             if reply.ok is not None:
                 self._on_token(reply.ok)
 
-    def settle(self, timeout_s: float) -> bool:
-        """Wait until every live member's announcement is known (True), or ``timeout_s``."""
+    def settle(self, timeout_s: float, positions: bool = False) -> bool:
+        """Wait until every live member's announcement is known (and with ``positions`` its
+        status too) (True), or ``timeout_s``."""
         deadline = time.monotonic() + timeout_s
-        while None in self.members().values():
+        while not self._settled(positions):
             if time.monotonic() >= deadline:
                 return False
             time.sleep(SETTLE_POLL_S)
         return True
+
+    def _settled(self, positions: bool) -> bool:
+        members = self.members()
+        with self._lock:
+            return None not in members.values() and (not positions or all(v in self._seen for v in members))
 
     def close(self) -> None:
         for sub in self._subs:
@@ -93,6 +106,24 @@ class FleetRoster:
         with self._lock:
             return {v: self._said.get(v) for v in sorted(self._alive)}
 
+    def separation(self, min_horizontal_m: float = MIN_HORIZONTAL_M, stale_s: float = STALE_S) -> Judgement:
+        """The fleet's separation now, on the members' last statuses (``fleet_separation``)."""
+        with self._lock:
+            seen = dict(self._seen)
+        return judge(self.members(), seen, time.monotonic(), min_horizontal_m, stale_s)
+
+    def _on_status(self, sample: Any) -> None:
+        vehicle = self.keys.status_vehicle(str(sample.key_expr)) or ""
+        with self._lock:
+            if vehicle not in self._alive:  # a member's only: what it holds stays bounded
+                return
+        try:
+            status = decode(sample.payload.to_bytes(), Status)
+        except ProtocolError:
+            return
+        with self._lock:
+            self._seen[vehicle] = Seen(status, time.monotonic())
+
     def _on_token(self, sample: Any) -> None:
         vehicle = self.keys.vehicle_of(str(sample.key_expr))
         if vehicle is None:
@@ -105,6 +136,7 @@ class FleetRoster:
                 self._alive.add(vehicle)
             else:
                 self._alive.discard(vehicle)
+                self._seen.pop(vehicle, None)
         self._tell(Change(vehicle, "joined" if joined else "left"))
 
     def _on_announce(self, sample: Any) -> None:

@@ -15,6 +15,8 @@ from dataclasses import dataclass, field
 
 from protocol import Event, PendingRequest, Plan, Status
 from protocol.messages import FleetMember
+
+from .fleet_separation import Judgement
 from protocol.text import printable
 
 MAX_POINTS_SHOWN = 8
@@ -39,6 +41,8 @@ class WatchView:
     fleet: dict[str, FleetMember | None] = field(default_factory=dict)
     """The fleet's members alive under the prefix and their layers (None: not read yet);
     empty for a lone UAV."""
+    separation: Judgement | None = None
+    """The fleet's separation on the members' own positions (None for a lone UAV)."""
 
 
 def _t(text: object, limit: int = 80) -> str:
@@ -97,8 +101,15 @@ def _fleet_lines(view: WatchView) -> list[str]:
     def one(vehicle: str, m: FleetMember | None) -> str:
         layer = "layer unknown" if m is None else f"{m.layer_m:g} m"
         return f"{_t(vehicle, 64)} {layer}" + (" (this)" if vehicle == this else "")
-    return [f"fleet      {len(view.fleet)} member{'s' if len(view.fleet) != 1 else ''}: "
-            + ", ".join(one(v, m) for v, m in sorted(view.fleet.items()))]
+    lines = [f"fleet      {len(view.fleet)} member{'s' if len(view.fleet) != 1 else ''}: "
+             + ", ".join(one(v, m) for v, m in sorted(view.fleet.items()))]
+    j = view.separation
+    if j is not None:
+        lines += [f"SEPARATION LOST {_t(c, 120)}" for c in j.conflicts]
+        lines += [f"separation unknown: {_t(u, 120)}" for u in j.unknown]
+        if not j.conflicts and not j.unknown:
+            lines.append(f"separation ok{': closest ' + _t(j.closest, 120) if j.closest else ''}")
+    return lines
 
 
 def _plan_lines(plan: Plan | None) -> list[str]:

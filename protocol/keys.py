@@ -166,6 +166,19 @@ class FleetKeys:
         """Every member's announcement (an advanced subscriber's key)."""
         return self._key("uavs/*")
 
+    @property
+    def statuses(self) -> str:
+        """Every vehicle's status publication (``Keys.status``): the members' positions."""
+        return f"{self.prefix}/*/status"
+
+    def status_vehicle(self, key_expr: str) -> str | None:
+        """The vehicle id of a ``{prefix}/{vehicle}/status`` key; None for any other key."""
+        parts = key_expr.split("/")
+        if len(parts) == 3 and parts[0] == self.prefix and parts[2] == "status" and parts[1] != FLEET \
+                and _CHUNK.fullmatch(parts[1]):
+            return parts[1]
+        return None
+
     def vehicle_of(self, key_expr: str) -> str | None:
         """The vehicle id that ends a member or announcement key; None for any other key."""
         for head in (self._key("members/"), self._key("uavs/")):

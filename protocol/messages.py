@@ -331,6 +331,11 @@ class FleetMember(_Message, tag="fleet_member"):
     """The altitude (m above the origin) of its hovering points and legs."""
     min_gap_m: Annotated[float, msgspec.Meta(ge=0.0)]
     """The least vertical gap it keeps to every other member's layer (``fleet.min_layer_gap_m``)."""
+    origin_lat_deg: Annotated[float, msgspec.Meta(ge=-90.0, le=90.0)]
+    origin_lon_deg: Annotated[float, msgspec.Meta(ge=-180.0, le=180.0)]
+    origin_alt_m: float
+    """Its local frame's origin (``[origin]``): its status's x, y, z are metres east, north and
+    up of this point, which puts every member's position in one frame."""
     autopilot: ShortText = ""
     """The autopilot its service flies (``mavlink.flavour``: ardupilot, px4)."""
 

@@ -1,8 +1,8 @@
 """The operator's command line. ``watch``: a live view of the service (phase, mode, battery
-and its source, position, authority, the fleet's members and their layers, the plan, pending
-users, the last events), redrawn from its status, plan and event publications and its state
-query, until Ctrl-C; plain text (on a terminal that cannot clear, or into a file or pipe,
-each changed view is printed after the last). ``start``: give the service authority to
+and its source, position, authority, the fleet's members, layers and separation, the plan,
+pending users, the last events), redrawn from its status, plan and event publications and
+its state query, until Ctrl-C; plain text (on a terminal that cannot clear, or into a file
+or pipe, each changed view is printed after the last). ``start``: give the service authority to
 arm, switch modes and start the mission; ``hold``: take it back (the service commands
 nothing more, the vehicle keeps its mission); ``status``: ask. Each prints what the service
 did. Exit status: 0 accepted, 1 refused or no answer, 2 a usage error, 141 the reader of its
@@ -191,9 +191,9 @@ def _watch(client: Any, args: argparse.Namespace, stop: threading.Event) -> int:
                 continue
             if args.once and view.alive is None and client.wait_for_service(timeout_s=1.0):
                 update(alive=True)  # the token's history may reach the subscriber after the state's answer
-            if args.once:  # one view: with the layers of the members the roster knows of
-                roster.settle(min(args.timeout, 2.0))
-            update(fleet=roster.members())
+            if args.once:  # one view: with the layers and positions of the members the roster knows of
+                roster.settle(min(args.timeout, 2.0), positions=True)
+            update(fleet=roster.members(), separation=roster.separation())
             with lock:
                 lines = render(view, time.monotonic())
             if plain:

@@ -450,6 +450,8 @@ class Service:
             self._check_journal()
             self.zio.publish(self._status())
             self._log_busy()
+            if self.zio.fleet is not None and self.zio.fleet.joined:
+                self.zio.fleet.check_separation()
             await asyncio.sleep(period)
 
     def _log_busy(self) -> None:
@@ -691,9 +693,12 @@ def fleet_presence(config: ServiceConfig) -> FleetPresence | None:
     altitude; None for a lone UAV."""
     if not config.fleet.enabled:
         return None
+    o = config.origin_point()
     own = FleetMember(vehicle=config.zenoh.vehicle, layer_m=config.scenario().altitude_m,
-                      min_gap_m=config.fleet.min_layer_gap_m, autopilot=config.mavlink.flavour)
-    return FleetPresence(FleetKeys(config.zenoh.prefix), own)
+                      min_gap_m=config.fleet.min_layer_gap_m, origin_lat_deg=o.lat_deg, origin_lon_deg=o.lon_deg,
+                      origin_alt_m=o.alt_m, autopilot=config.mavlink.flavour)
+    f = config.fleet
+    return FleetPresence(FleetKeys(config.zenoh.prefix), own, f.min_horizontal_m, f.position_stale_s)
 
 
 def run_service(config: ServiceConfig) -> int:

@@ -340,6 +340,11 @@ class MembershipConfig(Section):
     min_layer_gap_m: float = setting(10.0, gt=0, unit="m")
     """The least vertical distance between this UAV's layer and any other member's (the
     larger of the two members' settings applies)."""
+    min_horizontal_m: float = setting(20.0, gt=0, unit="m")
+    """Two armed UAVs closer than this horizontally, and vertically closer than their layer
+    gap, have lost separation (judged on their own positions; logged as an error)."""
+    position_stale_s: float = setting(3.0, gt=0, unit="s")
+    """A member's position older than this is unknown (logged): never taken as separated."""
     discovery_s: float = setting(3.0, gt=0, le=60.0, unit="s")
     """How long a joining service waits for the mesh to tell it of every member (then for
     their layers until each is read: 5 s at most, or this if longer) before it judges the

@@ -35,6 +35,7 @@ from protocol.messages import FleetMember, encode
 from protocol.text import printable
 
 from ..fleet_roster import Change, FleetRoster
+from ..fleet_separation import MIN_HORIZONTAL_M, STALE_S, Judgement
 from .errors import ServiceError
 
 log = logging.getLogger("planner_service.fleet")
@@ -66,11 +67,17 @@ def layer_clashes(own: FleetMember, others: Mapping[str, FleetMember | None]) ->
 class FleetPresence:
     """One service's membership: ``join`` on an open session, ``leave`` at the end."""
 
-    def __init__(self, keys: FleetKeys, own: FleetMember) -> None:
+    def __init__(self, keys: FleetKeys, own: FleetMember, min_horizontal_m: float = MIN_HORIZONTAL_M,
+                 stale_s: float = STALE_S) -> None:
         self.keys = keys
         self.own = own
+        self.min_horizontal_m = min_horizontal_m
+        self.stale_s = stale_s
+        self._conflicts: set[str] = set()
+        self._unknown: set[str] = set()
         self.roster = FleetRoster(keys, self._on_change)
-        self._joined = False
+        self.joined = False
+        """A member now (``join`` went through, ``leave`` not called)."""
         self._publisher: Any = None
         self._token: Any = None
 
@@ -94,7 +101,7 @@ class FleetPresence:
         if clashes:
             self.leave()
             raise MembershipError("fleet: " + "; ".join(printable(c, 200) for c in clashes))
-        self._joined = True
+        self.joined = True
         others = self._others()
         log.info("fleet: joined as %s, layer %g m; %s", v, self.own.layer_m,
                  ", ".join(f"{k} at {m.layer_m:g} m" for k, m in others.items() if m) or "no other member yet")
@@ -103,7 +110,7 @@ class FleetPresence:
         return {k: m for k, m in self.roster.members().items() if k != self.own.vehicle}
 
     def _on_change(self, change: Change) -> None:
-        if change.vehicle == self.own.vehicle or not self._joined:
+        if change.vehicle == self.own.vehicle or not self.joined:
             return
         if change.what == "announced" and change.member is not None:
             clash = layer_clashes(self.own, {change.vehicle: change.member})
@@ -117,9 +124,27 @@ class FleetPresence:
     def members(self) -> dict[str, FleetMember | None]:
         return self.roster.members()
 
+    def check_separation(self) -> Judgement:
+        """Judge the fleet's separation now and log what changed: a pair that lost it (an
+        error), a pair that has it again, a member whose position became unknown or known."""
+        j = self.roster.separation(self.min_horizontal_m, self.stale_s)
+        conflicts = {c.split(":", 1)[0]: c for c in j.conflicts}
+        unknown = {u.split(":", 1)[0]: u for u in j.unknown}
+        for pair in sorted(conflicts.keys() - self._conflicts):
+            log.error("fleet: SEPARATION LOST %s (fleet.min_horizontal_m %g)",
+                      printable(conflicts[pair], 200), self.min_horizontal_m)
+        for pair in sorted(self._conflicts - conflicts.keys()):
+            log.warning("fleet: separation back for %s", printable(pair, 140))
+        for vehicle in sorted(unknown.keys() - self._unknown):
+            log.warning("fleet: %s: its separation cannot be judged", printable(unknown[vehicle], 140))
+        for vehicle in sorted(self._unknown - unknown.keys()):
+            log.info("fleet: %s's position known again", printable(vehicle, 64))
+        self._conflicts, self._unknown = set(conflicts), set(unknown)
+        return j
+
     def leave(self) -> None:
         """Withdraw the token and the announcement, stop following the others."""
-        self._joined = False
+        self.joined = False
         for thing in (self._token, self._publisher):
             if thing is not None:
                 try:

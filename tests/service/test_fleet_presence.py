@@ -1,10 +1,12 @@
 """Fleet membership (``[fleet] enabled``): the layer rule on its own, then services joining
 through a real zenoh router on loopback (client sessions, as UAVs in the field): members
 found through liveliness tokens, layers through cached announcements, a clash or an unknown
-layer refused with nothing left declared, a member's loss seen."""
+layer refused with nothing left declared, a member's loss seen, the separation judged on the
+members' published positions."""
 
 from __future__ import annotations
 
+import logging
 import time
 from typing import Any, Callable, Iterator
 
@@ -14,7 +16,7 @@ import zenoh
 from planner_service.fleet_roster import FleetRoster
 from planner_service.harness.processes import free_port
 from planner_service.service.fleet_presence import MembershipError, FleetPresence, layer_clashes
-from protocol import FleetKeys, Keys, ProtocolError
+from protocol import FleetKeys, Keys, ProtocolError, Status, encode
 from protocol.messages import FleetMember
 from protocol.zenoh_config import session_config
 
@@ -23,7 +25,8 @@ DISCOVERY_S = 0.5
 
 
 def member(vehicle: str, layer_m: float, gap_m: float = 10.0) -> FleetMember:
-    return FleetMember(vehicle=vehicle, layer_m=layer_m, min_gap_m=gap_m)
+    return FleetMember(vehicle=vehicle, layer_m=layer_m, min_gap_m=gap_m, origin_lat_deg=47.397742,
+                       origin_lon_deg=8.545594, origin_alt_m=488.0)
 
 
 def wait_until(check: Callable[[], bool], timeout_s: float, what: str) -> None:
@@ -134,11 +137,13 @@ def test_a_member_whose_layer_cannot_be_read_bars_a_join(mesh: Callable[[], Any]
             rogue.put(KEYS.announce("uav9"), payload)
             return len(roster.refused) > 0
         return said
-    wait_until(say(b'{"kind": "fleet_member", "vehicle": "uav1", "layer_m": 50, "min_gap_m": 1}'), 5.0,
+    wait_until(say(b'{"kind": "fleet_member", "vehicle": "uav1", "layer_m": 50, "min_gap_m": 1, '
+                   b'"origin_lat_deg": 47.4, "origin_lon_deg": 8.5, "origin_alt_m": 488}'), 5.0,
                "an announcement for another vehicle refused")
     assert "names vehicle 'uav1'" in roster.refused[-1]
     roster.refused.clear()
-    wait_until(say(b'{"kind": "fleet_member", "vehicle": "uav9", "layer_m": -5, "min_gap_m": 1}'), 5.0,
+    wait_until(say(b'{"kind": "fleet_member", "vehicle": "uav9", "layer_m": -5, "min_gap_m": 1, '
+                   b'"origin_lat_deg": 47.4, "origin_lon_deg": 8.5, "origin_alt_m": 488}'), 5.0,
                "a negative layer refused")
     assert roster.members() == {"uav9": None}
     a = FleetPresence(KEYS, member("uav1", 100.0))
@@ -187,3 +192,33 @@ def test_a_member_moves_to_the_other_router_when_its_own_dies() -> None:
         for s in sessions:
             s.close()
         r2.close()
+
+
+def test_separation_is_judged_on_the_members_published_positions(mesh: Callable[[], Any],
+                                                                  caplog: pytest.LogCaptureFixture) -> None:
+    """Each member's status (its vehicle's own position, as the service publishes it): two
+    armed UAVs 10 m apart in one layer have lost separation (an error in the log), then
+    30 m apart have it back; a vehicle that is no member is not judged."""
+    a_session, b_session, stranger = mesh(), mesh(), mesh()
+    a = FleetPresence(KEYS, member("uav1", 100.0))
+    a.join(a_session, DISCOVERY_S)
+    b = FleetPresence(KEYS, member("uav2", 110.0))
+    b.join(b_session, DISCOVERY_S)
+
+    def fly(a_xyz: tuple[float, float, float], b_xyz: tuple[float, float, float]) -> Callable[[], Any]:
+        def put() -> Any:
+            for session, vehicle, (x, y, z) in ((a_session, "uav1", a_xyz), (b_session, "uav2", b_xyz)):
+                session.put(Keys(KEYS.prefix, vehicle).status,
+                            encode(Status(vehicle=vehicle, armed=True, x_m=x, y_m=y, z_m=z)))
+            # no member: right above uav1, it would have lost separation with it if judged
+            stranger.put(Keys(KEYS.prefix, "uav7").status, encode(Status(vehicle="uav7", armed=True, z_m=105.0)))
+            return a.check_separation()
+        return put
+    close = fly((0.0, 0.0, 100.0), (6.0, 8.0, 104.0))  # uav2 below its layer, 10 m from uav1
+    with caplog.at_level(logging.WARNING, logger="planner_service.fleet"):
+        wait_until(lambda: close().conflicts == ("uav1-uav2: 10 m apart horizontally, 4 m vertically",), 10.0,
+                   "the loss of separation seen")
+        assert "fleet: SEPARATION LOST uav1-uav2: 10 m apart horizontally" in caplog.text
+        apart = fly((0.0, 0.0, 100.0), (30.0, 0.0, 104.0))
+        wait_until(lambda: apart().conflicts == () and apart().unknown == (), 10.0, "separation back")
+        assert "fleet: separation back for uav1-uav2" in caplog.text

@@ -61,6 +61,8 @@ def test_a_service_in_another_members_layer_refuses_to_start(stack: Stack, tmp_p
                            capture_output=True, text=True, timeout=60)
     assert watch.returncode == 0, watch.stderr
     assert "fleet      2 members: uav1 100 m (this), uav2 110 m" in watch.stdout, watch.stdout
+    # both on the ground (uav2's vehicle not even there), each position from its own status
+    assert "separation ok" in watch.stdout, watch.stdout
     other.proc.send_signal(signal.SIGKILL)  # as a companion computer that dies: no goodbye
     stack.wait_log(first, "fleet: uav2 left", 20.0)
     assert first.proc.poll() is None

@@ -1,0 +1,81 @@
+"""The fleet's separation, judged on the vehicles' own positions (pure).
+
+Each member publishes its vehicle's position as its autopilot reports it (``status``: metres
+east, north and up of its own origin, which its announcement names); here they are put in
+one frame and every pair of armed vehicles is judged: closer than ``min_horizontal_m``
+horizontally while within the larger of their layer gaps vertically is a loss of
+separation. A member whose position is not known or is stale is reported as such: unknown
+is never "separated". Vehicles on the ground and disarmed are not judged (they stand at
+their homes, which may lie close together).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from itertools import combinations
+from typing import Mapping
+
+from protocol import GeoOrigin, Status, global_to_local, local_to_global
+from protocol.messages import FleetMember
+
+MIN_HORIZONTAL_M = 20.0
+"""Two UAVs within one layer must stay this far apart horizontally (``fleet.min_horizontal_m``)."""
+STALE_S = 3.0
+"""A position older than this (seconds since its status arrived) is not known
+(``fleet.position_stale_s``): the status comes at 2 Hz or more."""
+
+
+@dataclass(frozen=True)
+class Seen:
+    """A member's last status and when it arrived (the watcher's monotonic clock)."""
+
+    status: Status
+    at_s: float
+
+
+@dataclass(frozen=True)
+class Judgement:
+    """Pairs that lost separation, and the members whose position is not known."""
+
+    conflicts: tuple[str, ...]
+    """"uav1-uav2: 12 m apart horizontally, 3 m vertically" for each pair too close."""
+    unknown: tuple[str, ...]
+    """"uav3: no position" or "uav3: position 5.2 s old" for each member not judged."""
+    closest: str = ""
+    """The closest armed pair's distance, for the operator ("" with fewer than two)."""
+
+
+def judge(members: Mapping[str, FleetMember | None], seen: Mapping[str, Seen], now_s: float,
+          min_horizontal_m: float = MIN_HORIZONTAL_M, stale_s: float = STALE_S) -> Judgement:
+    """The separation of ``members`` (alive, with their announcements) from the statuses
+    ``seen`` of each, at ``now_s``."""
+    unknown: list[str] = []
+    where: dict[str, tuple[float, float, float, float]] = {}
+    frame: GeoOrigin | None = None
+    for vehicle, member in sorted(members.items()):
+        last = seen.get(vehicle)
+        if member is None or last is None:
+            unknown.append(f"{vehicle}: no position" if member is not None else f"{vehicle}: no announcement")
+            continue
+        age = now_s - last.at_s
+        if age > stale_s:
+            unknown.append(f"{vehicle}: position {age:.1f} s old")
+            continue
+        if not last.status.armed:
+            continue
+        origin = GeoOrigin(member.origin_lat_deg, member.origin_lon_deg, member.origin_alt_m)
+        frame = frame or origin
+        s = last.status
+        x, y, z = global_to_local(frame, *local_to_global(origin, s.x_m, s.y_m, s.z_m))
+        where[vehicle] = (x, y, z, member.min_gap_m)
+    conflicts, closest = [], ""
+    best = float("inf")
+    for (a, pa), (b, pb) in combinations(sorted(where.items()), 2):
+        horizontal = ((pa[0] - pb[0]) ** 2 + (pa[1] - pb[1]) ** 2) ** 0.5
+        vertical = abs(pa[2] - pb[2])
+        text = f"{a}-{b}: {horizontal:.0f} m apart horizontally, {vertical:.0f} m vertically"
+        if horizontal < min_horizontal_m and vertical < max(pa[3], pb[3]):
+            conflicts.append(text)
+        if horizontal < best:
+            best, closest = horizontal, text
+    return Judgement(tuple(conflicts), tuple(unknown), closest)
