@@ -39,6 +39,10 @@ from ..fleet_separation import MIN_HORIZONTAL_M, STALE_S, Judgement
 from .errors import ServiceError
 
 log = logging.getLogger("planner_service.fleet")
+HEARTBEAT_S = 1.0
+"""The announcement's publisher says every this many seconds which sample it last sent, so
+that a subscriber that missed it (a router lost meanwhile) asks its cache again (the
+subscribers' recovery)."""
 ANNOUNCE_WAIT_S = 5.0
 """Seconds a joining service waits at least for the announcements of the members it saw."""
 
@@ -90,9 +94,9 @@ class FleetPresence:
             self.leave()
             raise MembershipError(f"fleet: another service is already the member for vehicle {v} "
                              f"({self.keys.member(v)}); one service per UAV")
-        self._publisher = zext.declare_advanced_publisher(session, self.keys.announce(v),
-                                                          cache=zext.CacheConfig(max_samples=1),
-                                                          publisher_detection=True)
+        self._publisher = zext.declare_advanced_publisher(
+            session, self.keys.announce(v), cache=zext.CacheConfig(max_samples=1),
+            sample_miss_detection=zext.MissDetectionConfig(heartbeat=HEARTBEAT_S), publisher_detection=True)
         self._publisher.put(encode(self.own))
         self._token = session.liveliness().declare_token(self.keys.member(v))
         time.sleep(discovery_s)
