@@ -93,7 +93,7 @@ class FleetPresence:
         if v in self.roster.members():  # before this service's own token is declared
             self.leave()
             raise MembershipError(f"fleet: another service is already the member for vehicle {v} "
-                             f"({self.keys.member(v)}); one service per UAV")
+                                  f"({self.keys.member(v)}); one service per UAV")
         self._publisher = zext.declare_advanced_publisher(
             session, self.keys.announce(v), cache=zext.CacheConfig(max_samples=1),
             sample_miss_detection=zext.MissDetectionConfig(heartbeat=HEARTBEAT_S), publisher_detection=True)
