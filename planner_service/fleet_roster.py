@@ -34,6 +34,8 @@ from protocol.messages import FleetMember, decode
 from .fleet_separation import MIN_HORIZONTAL_M, STALE_S, Judgement, Seen, judge
 
 SETTLE_POLL_S = 0.02
+MAX_PUBLISHERS_KEPT = 8
+"""Announcement publishers kept per vehicle: two already say it is claimed twice."""
 
 
 @dataclass(frozen=True)
@@ -58,6 +60,9 @@ class FleetRoster:
         self._said: dict[str, FleetMember] = {}
         self._seen: dict[str, Seen] = {}
         """Each member's last status (its vehicle's own position)."""
+        self._publishers: dict[str, set[str]] = {}
+        """The announcement publishers alive for each vehicle (zenoh.ext's publisher
+        detection: one per service): two for one vehicle are two services claiming it."""
         self.refused: deque[str] = deque(maxlen=16)
         """The latest announcements refused (key: why), for the log (the sender's text:
         print it through ``protocol.text.printable``)."""
@@ -69,10 +74,12 @@ class FleetRoster:
         the answer (at most ``timeout_s``): when this returns every member already declared is
         known, though its announcement may still be on its way (``settle``)."""
         self._subs.append(session.liveliness().declare_subscriber(self.keys.members, self._on_token, history=True))
-        self._subs.append(zext.declare_advanced_subscriber(
+        announces = zext.declare_advanced_subscriber(
             session, self.keys.announces, self._on_announce,
             history=zext.HistoryConfig(detect_late_publishers=True),
-            recovery=zext.RecoveryConfig(heartbeat=True)))
+            recovery=zext.RecoveryConfig(heartbeat=True))
+        self._subs.append(announces)
+        self._subs.append(announces.detect_publishers(self._on_publisher, history=True))
         self._subs.append(session.declare_subscriber(self.keys.statuses, self._on_status))
         for reply in session.liveliness().get(self.keys.members, timeout=timeout_s):
             if reply.ok is not None:
@@ -123,6 +130,27 @@ class FleetRoster:
             return
         with self._lock:
             self._seen[vehicle] = Seen(status, time.monotonic())
+
+    def publishers(self, vehicle: str) -> int:
+        """How many services announce themselves as ``vehicle`` (1 for a member, as it should be)."""
+        with self._lock:
+            return len(self._publishers.get(vehicle, ()))
+
+    def _on_publisher(self, sample: Any) -> None:
+        # an advanced publisher's token: {announce key}/@adv/pub/{its session's id}/...
+        head, _, tail = str(sample.key_expr).partition("/@adv/pub/")
+        vehicle, who = self.keys.vehicle_of(head), tail.split("/", 1)[0]
+        if vehicle is None or not who:
+            return
+        with self._lock:
+            held = self._publishers.setdefault(vehicle, set())
+            if sample.kind == zenoh.SampleKind.PUT:
+                if len(held) < MAX_PUBLISHERS_KEPT:
+                    held.add(who)
+            else:
+                held.discard(who)
+                if not held:
+                    del self._publishers[vehicle]
 
     def _on_token(self, sample: Any) -> None:
         vehicle = self.keys.vehicle_of(str(sample.key_expr))

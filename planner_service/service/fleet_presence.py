@@ -5,7 +5,9 @@ Each UAV flies its own altitude layer (its scenario's ``altitude_m``); no two me
 may lie closer than the larger of their ``min_layer_gap_m``. A service joining the fleet:
 
 1. asks which tokens are alive: another service already a member under its own vehicle id is
-   refused (two services for one vehicle would both command it);
+   refused (two services for one vehicle would both command it), and so is one that sees
+   another announce itself under that id at the same moment (step 3: zenoh.ext's publisher
+   detection counts the announcement publishers of each vehicle; of two, one at most goes on);
 2. declares its announcement (an advanced publisher with a cache of one) and its token, and
    follows the others' (``planner_service.fleet_roster``);
 3. waits ``fleet.discovery_s`` for the mesh to tell it of every member, then for the
@@ -102,6 +104,8 @@ class FleetPresence:
         time.sleep(discovery_s)
         self.roster.settle(max(discovery_s, ANNOUNCE_WAIT_S))
         clashes = layer_clashes(self.own, self._others())
+        if self.roster.publishers(v) > 1:  # started at the same moment under one id
+            clashes.insert(0, f"another service announces itself as vehicle {v} too; one service per UAV")
         if clashes:
             self.leave()
             raise MembershipError("fleet: " + "; ".join(printable(c, 200) for c in clashes))

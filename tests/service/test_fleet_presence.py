@@ -7,6 +7,7 @@ members' published positions."""
 from __future__ import annotations
 
 import logging
+import threading
 import time
 from typing import Any, Callable, Iterator
 
@@ -222,3 +223,30 @@ def test_separation_is_judged_on_the_members_published_positions(mesh: Callable[
         apart = fly((0.0, 0.0, 100.0), (30.0, 0.0, 104.0))
         wait_until(lambda: apart().conflicts == () and apart().unknown == (), 10.0, "separation back")
         assert "fleet: separation back for uav1-uav2" in caplog.text
+
+
+def test_of_two_services_started_at_once_for_one_vehicle_one_at_most_goes_on(mesh: Callable[[], Any]) -> None:
+    """Each refuses when it sees the other's token before declaring its own, or two
+    publishers announcing the vehicle after: one may go on (the other saw it first, or
+    judged after the other had already refused and left), never both."""
+    twins = [FleetPresence(KEYS, member("uav1", 100.0)) for _ in range(2)]
+    sessions = [mesh(), mesh()]
+    errors: list[str] = []
+
+    def join(n: int) -> None:
+        try:
+            twins[n].join(sessions[n], DISCOVERY_S)
+        except MembershipError as err:
+            errors.append(str(err))
+    threads = [threading.Thread(target=join, args=(n,)) for n in range(2)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(30.0)
+    assert len(errors) >= 1, "both services joined as uav1"
+    assert all("uav1 too" in e or "already the member for vehicle uav1" in e for e in errors), errors
+    members = [t for t in twins if t.joined]
+    roster = FleetRoster(KEYS)
+    roster.follow(mesh())
+    wait_until(lambda: roster.publishers("uav1") == len(members) and len(roster.members()) == len(members), 5.0,
+               "only the member's token and announcement left")
