@@ -36,6 +36,9 @@ from .fleet_separation import MIN_HORIZONTAL_M, STALE_S, Judgement, Seen, judge
 SETTLE_POLL_S = 0.02
 MAX_PUBLISHERS_KEPT = 8
 """Announcement publishers kept per vehicle: two already say it is claimed twice."""
+MAX_VEHICLES_KEPT = 1024
+"""Vehicles whose announcements and publishers are kept: a peer that announces thousands of
+vehicle ids (a network without access control) cannot grow the roster without bound."""
 
 
 @dataclass(frozen=True)
@@ -143,6 +146,8 @@ class FleetRoster:
         if vehicle is None or not who:
             return
         with self._lock:
+            if vehicle not in self._publishers and len(self._publishers) >= MAX_VEHICLES_KEPT:
+                return
             held = self._publishers.setdefault(vehicle, set())
             if sample.kind == zenoh.SampleKind.PUT:
                 if len(held) < MAX_PUBLISHERS_KEPT:
@@ -184,6 +189,9 @@ class FleetRoster:
             return
         with self._lock:
             if self._said.get(vehicle) == member:
+                return
+            if vehicle not in self._said and len(self._said) >= MAX_VEHICLES_KEPT:
+                self.refused.append(f"{key}: more than {MAX_VEHICLES_KEPT} vehicles announced")
                 return
             self._said[vehicle] = member
         self._tell(Change(vehicle, "announced", member))

@@ -263,6 +263,13 @@ def test_restart_read_back_and_a_lost_mission_resumed_from_where_it_is() -> None
     (asked,) = [e.event for e in only(out, fx.Emit) if e.event.kind == "resume_needed"]
     assert "plan 2" in asked.detail and "LOITER" in asked.detail, asked.detail
     assert not any(e.event.kind == "resume_needed" for e in only(run.tick(), fx.Emit)), "told once"
+    # The link's own restart check can come after all that (its clock reports over 0.5 s; a
+    # clean-clone run): the same restart, the mission read back is plan 2: not told again.
+    out = run.feed(ins.Restarted("its clock went back"), boot_s=2.0, mode="LOITER", seq=2)
+    only(out, fx.ReadBack)
+    out = run.feed(ins.ReadBackDone(up2.items)) + run.tick(seq=2)
+    assert run.s.onboard.known and run.s.onboard.held.plan_id == 2
+    assert not any(e.event.kind == "resume_needed" for e in only(out, fx.Emit)), "one restart, told once"
     run.s, out, ok, _ = run.logic.operator(run.s, ins.OperatorAsked("start"), run.v, run.now)
     assert ok and run.s.authority.granted
     (plan,) = only(out, fx.MakePlan)  # from where the vehicle is now, then resumed

@@ -880,11 +880,13 @@ class SortieLogic:
                 or s.schedule.busy != ""
                 or not v.airborne or v.mode not in HOLDING_MODES):
             return s
+        if held.plan_id == s.onboard.resume_told:  # told already: nothing new to resume
+            return replace(s, onboard=replace(s.onboard, resume_pending=False))
         out += [fx.Emit(ev.ResumeNeeded(f"plan {held.plan_id} is on board and the vehicle holds in {v.mode}: the "
                                         f"service has no authority ({s.authority.state}); operator start resumes it")),
                 fx.Log("warning", f"plan {held.plan_id} is on board, the vehicle holds in {v.mode}: the operator "
                                   f"must resume it (operator start)")]
-        return replace(s, onboard=replace(s.onboard, resume_pending=False))
+        return replace(s, onboard=replace(s.onboard, resume_pending=False, resume_told=held.plan_id))
 
     def _command(self, s: Sortie, cmd: fx.Command, out: list[fx.Effect]) -> Sortie:
         mode = self.rules.mode_names.get(cmd.kind)

@@ -37,6 +37,10 @@ class OnBoard:
     """The vehicle lost its mission in the air: upload whatever the plan."""
     resume_pending: bool = False
     """A mission re-planned in the air is to be resumed (or the operator told it waits)."""
+    resume_told: int = -1
+    """The plan the operator was told waits for ``operator start`` (``resume_needed``): a
+    restart seen late (the link's clock check can follow the mission's read-back, one
+    restart seen twice) does not tell it again."""
     restarted: bool = False
     """The vehicle restarted since the last read-back: the holds it flew were cut."""
     doubted: tuple[Sample, ...] = ()
