@@ -28,7 +28,7 @@ from planner_service.service.link.streams import stream_plan
 from protocol import GeoOrigin, HoverPoint, encode_path, global_to_local, replacement_items, same_mission
 from sim_bridge.vehicle.mission_id import px4_mission_id
 from tests.service.test_link_sitl import Recorder, distance, until, where
-from tests.support.px4 import Px4
+from tests.support.px4 import PARAMS, Px4, read_params
 
 pytestmark = [pytest.mark.sitl, pytest.mark.timeout(150)]
 BACKENDS = ["pymavlink", "mavsdk"]
@@ -44,6 +44,12 @@ FAR_M = 20.0
 PX4_UNASKED_HZ = {"GLOBAL_POSITION_INT": 50.0, "SYS_STATUS": 5.0, "EXTENDED_SYS_STATE": 5.0}
 """What PX4 sends of these on its onboard link unasked, per simulated second
 (test_conformance_px4.ONBOARD_HZ): the link's requests bring them down."""
+FLYING = {"COM_DISARM_PRFLT": read_params(PARAMS)["COM_DISARM_PRFLT"]}
+"""For a test that takes off: PX4's preflight disarm as the scenario sets it (60 s of its
+time), not its default 10 s, one second of wall time at x10, which a start's three round
+trips on the busy 2 cores once outlasted (a clean-clone run: "Disarmed by auto preflight
+disarming" between the arming and AUTO.MISSION). The test of that disarming keeps PX4's
+default."""
 
 
 def link_for(px4: Px4, backend: str, events: Recorder) -> VehicleLink:
@@ -151,7 +157,7 @@ def test_read_back_crc_and_a_replacement_in_flight_flown_with_each_reach_reporte
     """[takeoff, a, b, c, RTL]; while the vehicle holds at a (item 1), b and c are replaced by
     d and e (items 0..1 kept, d marked current): PX4 flies d at once, ending the hold. At e a
     replacement of return to launch alone brings it home, where it lands and disarms."""
-    px4 = make_px4(speed=SPEED)
+    px4 = make_px4(speed=SPEED, params=FLYING)
     px4.wait_ready()
     a, b, c = HoverPoint(30.0, 30.0, ALT_M, 60.0), HoverPoint(90.0, 30.0, ALT_M), HoverPoint(90.0, 90.0, ALT_M)
     d, e = HoverPoint(-10.0, 70.0, ALT_M, 3.0), HoverPoint(60.0, 100.0, ALT_M, 60.0)
@@ -221,7 +227,7 @@ def test_px4_killed_and_restarted_in_the_air(make_px4: Callable[..., Px4], backe
     ground at home, disarmed, with the mission kept in its dataman. The link sees it lost,
     restored and restarted, asks for its telemetry again, and reads the mission back."""
     caplog.set_level(logging.INFO, logger="planner_service")
-    px4 = make_px4(speed=SPEED)
+    px4 = make_px4(speed=SPEED, params=FLYING)
     px4.wait_ready()
     a = HoverPoint(40.0, 0.0, ALT_M, 60.0)
 

@@ -55,7 +55,7 @@ from .extensions import (MISSION_ACK_ID_OFFSET, MISSION_COUNT_ID_OFFSET, MISSION
 from .reports import Begin, Pass, ReportSequencer  # noqa: E402
 from .rtt import RetryTimer  # noqa: E402
 from .streams import INTERVAL_CMD, QUIET_INTERVAL_US, Request  # noqa: E402
-from .upload import MissionDownload, MissionUpload, cancel_message  # noqa: E402
+from .upload import MissionDownload, MissionUpload, Silence, cancel_message  # noqa: E402
 
 M = mavutil.mavlink
 log = logging.getLogger(__name__)
@@ -505,7 +505,8 @@ class PymavlinkLink(VehicleLink):
                 await self._ensure_current(current_seq, wait_for_report=True, restart=restart_current)
 
     async def _upload(self, items: Sequence[MissionItem]) -> None:
-        done = await self._run(MissionUpload(items, self._send, self._target, self.settings.retries))
+        done = await self._run(MissionUpload(items, self._send, self._target, self.settings.retries,
+                                               self._patience_s()))
         if done.accepted:
             return
         if not done.maybe_committed:
@@ -580,19 +581,26 @@ class PymavlinkLink(VehicleLink):
         """Read the mission back; with ``new_generation`` the vehicle's reports from then on
         count as about what was read (an upload's read-back decides that itself)."""
         self._generation_on_download = new_generation
-        done = await self._run(MissionDownload(self._send, self._target, self.settings.retries))
+        done = await self._run(MissionDownload(self._send, self._target, self.settings.retries,
+                                                 self._patience_s()))
         if not done.ok:
             raise LinkError("download_mission()", done.result)
         return list(done.items)
 
+    def _patience_s(self, tries: int | None = None) -> float:
+        """The silence an exchange bears before giving up: ``tries`` of the longest wait,
+        however short the measured round trip makes each repeat (upload.Silence)."""
+        return (self.settings.retries if tries is None else tries) * self.settings.item_timeout_s
+
     async def _command_result(self, command: int, *params: float, retries: int | None = None) -> str:
         """COMMAND_LONG with the confirmation counting up on each repeat; the result's name
-        (MAV_RESULT_*) or "NO_ANSWER"."""
+        (MAV_RESULT_*) or "NO_ANSWER" after ``retries`` tries and as many of the longest wait."""
         p = [float(x) for x in params] + [0.0] * (7 - len(params))
         tries = self.settings.retries if retries is None else retries
+        silence = Silence(tries - 1, self._patience_s(tries))  # the first send is no repeat
         async with self._command_lock:
             assert self._loop is not None
-            for confirmation in range(tries):
+            for confirmation in range(256):  # the confirmation field is a uint8
                 future: asyncio.Future[int] = self._loop.create_future()
                 self._acks[command] = future
                 try:
@@ -602,6 +610,8 @@ class PymavlinkLink(VehicleLink):
                     if confirmation == 0:
                         self.timer.sample(time.monotonic() - sent_at)
                 except TimeoutError:
+                    if silence.ran_out():
+                        break
                     continue
                 finally:
                     self._acks.pop(command, None)

@@ -1,6 +1,7 @@
 """The ground-station side of the MAVLink mission upload and download, as state machines
 with no I/O: each is given a ``send`` callable, fed the autopilot's messages and told when
-a wait ran out. Silence repeats the last message, up to ``retries`` times in a row.
+a wait ran out. Silence repeats the last message; an operation gives up after ``retries``
+repeats in a row *and* ``patience_s`` of silence (``Silence``).
 
 Upload: MISSION_COUNT -> (MISSION_REQUEST_INT or legacy MISSION_REQUEST ->
 MISSION_ITEM_INT)* -> MISSION_ACK. ArduPilot asks with the legacy MISSION_REQUEST and
@@ -14,6 +15,7 @@ Download: MISSION_REQUEST_LIST -> MISSION_COUNT -> (MISSION_REQUEST_INT -> MISSI
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 from typing import Any, Callable, Sequence
 
@@ -30,6 +32,35 @@ def result_name(code: int) -> str:
     return entry.name if entry is not None else f"MAV_MISSION_RESULT {code}"
 
 
+class Silence:
+    """Waits in a row that ran out with no answer. The link's wait before a repeat follows
+    the measured round trip (rtt.py) and may be as short as 0.1 s, but the vehicle's own
+    repeats do not speed up with it: PX4 asks again for a lost item every 0.25 s and drops
+    an item it did not ask for without a word, ArduPilot asks again every second. So a
+    short wait shortens the repeats, never the patience: giving up needs ``retries``
+    repeats and ``patience_s`` of silence both (the link gives ``retries`` times its
+    longest wait, ``mavlink.item_timeout_s``)."""
+
+    def __init__(self, retries: int, patience_s: float = 0.0, clock: Callable[[], float] = time.monotonic) -> None:
+        self.retries = retries
+        self.patience_s = patience_s
+        self.clock = clock
+        self.repeats = 0
+        self.since = clock()
+
+    def answered(self) -> None:
+        self.repeats, self.since = 0, self.clock()
+
+    def ran_out(self) -> bool:
+        """One more wait ran out: True when it is time to give up, else repeat."""
+        self.repeats += 1
+        return self.repeats > self.retries and self.clock() - self.since >= self.patience_s
+
+    def over(self) -> str:
+        """How long the silence was, for a NO_ANSWER: ' in 5.0 s'."""
+        return f" in {self.clock() - self.since:.1f} s"
+
+
 @dataclass(frozen=True)
 class UploadDone:
     """How an upload ended: ``accepted``, or why not (``result``: a MAV_MISSION_RESULT
@@ -44,17 +75,16 @@ class UploadDone:
 
 class MissionUpload:
     def __init__(self, items: Sequence[MissionItem], send: Callable[[Any], None], target: tuple[int, int],
-                 retries: int) -> None:
+                 retries: int, patience_s: float = 0.0) -> None:
         if not items:
             raise ValueError("a mission upload needs at least one item")
         self.items = list(items)
         self.send = send
         self.target = target
-        self.retries = retries
+        self.silence = Silence(retries, patience_s)
         self.last_sent: int | None = None
         self.sent_last = False
         """The last item went out at least once: only then can an ACCEPTED be this upload's."""
-        self.silent = 0
         self.sent = 0
         self.done: UploadDone | None = None
 
@@ -85,7 +115,7 @@ class MissionUpload:
                 # A repeated or reordered item: ArduPilot answers it so and goes on waiting
                 # for the item it asked for, asking again every second (MissionItemProtocol.cpp);
                 # so does this upload. The vehicle answered: it is not silent.
-                self.silent = 0
+                self.silence.answered()
                 return None
             if msg.type == mavlink.MAV_MISSION_ERROR and self.last_sent == len(self.items) - 1:
                 # ArduPilot answers ERROR to an item that comes after the upload ended: our
@@ -99,7 +129,7 @@ class MissionUpload:
             if not 0 <= msg.seq < len(self.items):
                 self.done = UploadDone(False, f"BAD_REQUEST (item {msg.seq} of {len(self.items)})", self.sent)
                 return self.done
-            self.silent = 0
+            self.silence.answered()
             self.last_sent = msg.seq
             self.sent_last |= msg.seq == len(self.items) - 1
             self._send(self.items[msg.seq].to_message(*self.target))
@@ -109,10 +139,9 @@ class MissionUpload:
         """The wait for the autopilot ran out: repeat the last message, or give up."""
         if self.done is not None:
             return self.done
-        self.silent += 1
-        if self.silent > self.retries:
+        if self.silence.ran_out():
             where = "MISSION_COUNT" if self.last_sent is None else f"item {self.last_sent}"
-            self.done = UploadDone(False, f"NO_ANSWER after {self.retries} repeats of {where}", self.sent,
+            self.done = UploadDone(False, f"NO_ANSWER after {self.silence.repeats - 1} repeats of {where}{self.silence.over()}", self.sent,
                                    maybe_committed=self.last_sent == len(self.items) - 1)
             return self.done
         if self.last_sent is None:
@@ -139,13 +168,13 @@ class DownloadDone:
 
 
 class MissionDownload:
-    def __init__(self, send: Callable[[Any], None], target: tuple[int, int], retries: int) -> None:
+    def __init__(self, send: Callable[[Any], None], target: tuple[int, int], retries: int,
+                 patience_s: float = 0.0) -> None:
         self.send = send
         self.target = target
-        self.retries = retries
+        self.silence = Silence(retries, patience_s)
         self.count: int | None = None
         self.items: list[MissionItem] = []
-        self.silent = 0
         self.sent = 0
         self.done: DownloadDone | None = None
 
@@ -175,13 +204,14 @@ class MissionDownload:
             return None
         kind = msg.get_type()
         if kind == "MISSION_COUNT" and self.count is None:
-            self.count, self.silent = int(msg.count), 0
+            self.count = int(msg.count)
+            self.silence.answered()
             if self.count == 0:
                 return self._finish()
             self._ask()
         elif kind == "MISSION_ITEM_INT" and self.count is not None and msg.seq == len(self.items):
             self.items.append(MissionItem.from_message(msg))
-            self.silent = 0
+            self.silence.answered()
             if len(self.items) == self.count:
                 return self._finish()
             self._ask()
@@ -193,10 +223,9 @@ class MissionDownload:
         """The wait ran out: ask again, or give up."""
         if self.done is not None:
             return self.done
-        self.silent += 1
-        if self.silent > self.retries:
+        if self.silence.ran_out():
             where = "MISSION_COUNT" if self.count is None else f"item {len(self.items)} of {self.count}"
-            self.done = DownloadDone(False, f"NO_ANSWER after {self.retries} requests for {where}")
+            self.done = DownloadDone(False, f"NO_ANSWER after {self.silence.repeats - 1} requests for {where}{self.silence.over()}")
             return self.done
         self._ask()
         return None
