@@ -18,6 +18,12 @@
 # "subjects" and "policies". One certificate per user and device: a lost device's
 # certificate is just not renewed, and its entries removed.
 #
+#   sh docs/zenoh/make-certs.sh DIR --vehicle VEHICLE
+#
+# adds VEHICLE.pem/VEHICLE.key, a fleet UAV's certificate (CN uavmec-vehicle-VEHICLE) for its
+# service's connection to the ground routers (docs/zenoh/vehicle-tls.json5), and prints the
+# entries to add to fleet-router-tls-acl.json5: that certificate may speak for VEHICLE only.
+#
 #   sh docs/zenoh/make-certs.sh DIR --operator NAME
 #
 # adds NAME.pem/NAME.key, another operator certificate (CN uavmec-operator): the identity that
@@ -26,7 +32,7 @@
 #
 # Keep ca.key off the aircraft and off users' devices: whoever holds it can make identities.
 set -eu
-[ $# -ge 1 ] || { echo "usage: $0 DIR [SERVICE_NAME ...] | $0 DIR --user NAME | $0 DIR --operator NAME" >&2; exit 2; }
+[ $# -ge 1 ] || { echo "usage: $0 DIR [SERVICE_NAME ...] | $0 DIR --user NAME | $0 DIR --vehicle VEHICLE | $0 DIR --operator NAME" >&2; exit 2; }
 dir=$1; shift
 mkdir -p "$dir"
 umask 077
@@ -55,8 +61,8 @@ if [ "${1:-}" = "--user" ]; then
     # the common name is the user id the access control binds: nothing else may pass
     case $user in
         ''|*[!A-Za-z0-9_.:-]*) echo "$0: '$user' is not a user id (1-64 of A-Z a-z 0-9 _ . : -)" >&2; exit 2 ;;
-        uavmec-service|uavmec-ca|uavmec-operator|service|ca|operator)
-            echo "$0: $user is reserved (the service's, the CA's or the operator's name)" >&2; exit 2 ;;
+        uavmec-*|service|ca|operator)
+            echo "$0: $user is reserved (uavmec-...: the names of the service, the CA, the operator and the vehicles)" >&2; exit 2 ;;
     esac
     [ ${#user} -le 64 ] || { echo "$0: '$user' is longer than 64 characters" >&2; exit 2; }
     sign "$user" "$user" "extendedKeyUsage=clientAuth"
@@ -65,6 +71,24 @@ if [ "${1:-}" = "--user" ]; then
     echo "rules: { id: \"$user-in\", permission: \"allow\", flows: [\"ingress\"], messages: [\"query\", \"declare_subscriber\"], key_exprs: [\"$k/request/$user\", \"$k/users/$user\"] }, { id: \"$user-out\", permission: \"allow\", flows: [\"egress\"], messages: [\"reply\", \"put\"], key_exprs: [\"$k/request/$user\", \"$k/users/$user\"] },"
     echo "subjects: { id: \"$user\", cert_common_names: [\"$user\"] },"
     echo "policies: { id: \"$user\", rules: [\"user-asks\", \"user-follows\", \"user-checks-alive\", \"to-users\", \"$user-in\", \"$user-out\"], subjects: [\"$user\"] },"
+    exit 0
+fi
+
+if [ "${1:-}" = "--vehicle" ]; then
+    [ $# -eq 2 ] || { echo "usage: $0 DIR --vehicle VEHICLE" >&2; exit 2; }
+    v=$2
+    # the vehicle id as the service's keys take it (protocol/keys.py): no wildcards, no "fleet"
+    case $v in
+        ''|*[!A-Za-z0-9_.:-]*) echo "$0: '$v' is not a vehicle id (1-64 of A-Z a-z 0-9 _ . : -)" >&2; exit 2 ;;
+        fleet) echo "$0: no vehicle may be named fleet (the fleet's keys)" >&2; exit 2 ;;
+    esac
+    [ ${#v} -le 64 ] || { echo "$0: '$v' is longer than 64 characters" >&2; exit 2; }
+    sign "$v" "uavmec-vehicle-$v" "extendedKeyUsage=clientAuth"
+    k="uavmec"
+    echo "add to the access_control of fleet-router-tls-acl.json5 (prefix uavmec: change it with yours):"
+    echo "rules: { id: \"$v-speaks\", permission: \"allow\", flows: [\"ingress\"], messages: [\"put\", \"delete\", \"declare_queryable\", \"reply\", \"liveliness_token\"], key_exprs: [\"$k/$v/**\", \"$k/fleet/members/$v\", \"$k/fleet/uavs/$v\", \"$k/fleet/uavs/$v/@adv/**\"] }, { id: \"$v-asked\", permission: \"allow\", flows: [\"egress\"], messages: [\"query\", \"declare_subscriber\"], key_exprs: [\"$k/$v/**\", \"$k/fleet/uavs/$v\", \"$k/fleet/uavs/$v/@adv/**\"] },"
+    echo "subjects: { id: \"$v\", cert_common_names: [\"uavmec-vehicle-$v\"] },"
+    echo "policies: { id: \"$v\", rules: [\"fleet-follows\", \"to-fleet\", \"$v-speaks\", \"$v-asked\"], subjects: [\"$v\"] },"
     exit 0
 fi
 

@@ -28,18 +28,7 @@ from planner_service.harness.processes import REPO, free_port
 from protocol import ErrorReply, Keys, Status, TaskAck, UserPlace, decode, decode_reply, encode
 from protocol.client import ClientError, PlannerClient, client_config
 from tests.support.stack import Stack
-from tests.support.zenoh_tls import MARKS, make_certs, shipped
-
-
-def with_user(config: Path, printed: str) -> None:
-    """Add a user's access-control entries as make-certs.sh --user printed them."""
-    text = config.read_text()
-    for line in printed.splitlines():
-        section, _, entries = line.partition(": ")
-        if section in MARKS:
-            assert MARKS[section] in text
-            text = text.replace(MARKS[section], f"{entries}\n      {MARKS[section]}")
-    config.write_text(text)
+from tests.support.zenoh_tls import add_entries, make_certs, shipped
 
 
 def session(endpoint: str, config_file: Path) -> Any:
@@ -66,7 +55,7 @@ def test_tls_and_access_control_from_the_shipped_configs(stack: Stack, tmp_path:
     make_certs(rogue)
     make_certs(rogue, "--user", "u-1")  # another CA, whose user certificate looks the same
     service_conf = shipped("service-tls-acl.json5", certs, tmp_path / "service.json5")
-    with_user(service_conf, printed)
+    add_entries(service_conf, printed)
     user_conf = shipped("user-tls.json5", certs, tmp_path / "user.json5", **{"/user.": "/u-1."})
     user2_conf = shipped("user-tls.json5", certs, tmp_path / "user2.json5", **{"/user.": "/u-2."})
     monitor_conf = shipped("user-tls.json5", certs, tmp_path / "monitor.json5", **{"/user.": "/service."})

@@ -13,6 +13,7 @@ DOCS = REPO / "docs" / "zenoh"
 SHIPPED_DIR = "/etc/uavmec/tls"
 MARKS = {"rules": "// more users' rules here", "subjects": "// more users' subjects here",
          "policies": "// more users' policies here"}
+VEHICLE_MARKS = {section: mark.replace("users'", "vehicles'") for section, mark in MARKS.items()}
 
 
 def make_certs(folder: Path, *args: str) -> str:
@@ -30,3 +31,15 @@ def shipped(name: str, certs: Path, out: Path, **swap: str) -> Path:
         text = text.replace(old, new)
     out.write_text(text)
     return out
+
+
+def add_entries(config: Path, printed: str, marks: dict[str, str] = MARKS) -> None:
+    """Add the access-control entries make-certs.sh printed (``--user``: ``MARKS``,
+    ``--vehicle``: ``VEHICLE_MARKS``) where the shipped file says more go."""
+    text = config.read_text()
+    for line in printed.splitlines():
+        section, _, entries = line.partition(": ")
+        if section in marks:
+            assert marks[section] in text
+            text = text.replace(marks[section], f"{entries}\n      {marks[section]}")
+    config.write_text(text)
