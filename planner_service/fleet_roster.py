@@ -10,7 +10,8 @@ protocol written here:
   each member's announcement is kept in its advanced publisher's cache, so a member who joins
   later, or whose router restarted, still reads it;
 - a subscriber to every vehicle's ``status``: the members' own positions, on which the
-  fleet's separation is judged (``fleet_separation``).
+  fleet's separation is judged (``fleet_separation``). A member that leaves with its vehicle
+  last seen armed stays in that judgement, unknown, until its service is back.
 
 Read by the service (``service/fleet_presence.py``: its layer checked against the others')
 and by ``operator watch``. Pure bookkeeping apart from the declarations; thread-safe (zenoh
@@ -50,6 +51,8 @@ class Change:
     what: str
     """"joined", "left" or "announced"."""
     member: FleetMember | None = None
+    armed: bool = False
+    """Left with its vehicle last seen armed: it may still be flying, and nothing tells where."""
 
 
 class FleetRoster:
@@ -63,6 +66,8 @@ class FleetRoster:
         self._said: dict[str, FleetMember] = {}
         self._seen: dict[str, Seen] = {}
         """Each member's last status (its vehicle's own position)."""
+        self._lost: dict[str, Seen] = {}
+        """The last status of each member gone with its vehicle armed, until it is back."""
         self._publishers: dict[str, set[str]] = {}
         """The announcement publishers alive for each vehicle (zenoh.ext's publisher
         detection: one per service): two for one vehicle are two services claiming it."""
@@ -119,8 +124,13 @@ class FleetRoster:
     def separation(self, min_horizontal_m: float = MIN_HORIZONTAL_M, stale_s: float = STALE_S) -> Judgement:
         """The fleet's separation now, on the members' last statuses (``fleet_separation``)."""
         with self._lock:
-            seen = dict(self._seen)
-        return judge(self.members(), seen, time.monotonic(), min_horizontal_m, stale_s)
+            seen, lost = dict(self._seen), dict(self._lost)
+        return judge(self.members(), seen, time.monotonic(), min_horizontal_m, stale_s, lost)
+
+    def lost(self) -> list[str]:
+        """The members gone while their vehicles were armed (not back yet)."""
+        with self._lock:
+            return sorted(self._lost)
 
     def _on_status(self, sample: Any) -> None:
         vehicle = self.keys.status_vehicle(str(sample.key_expr)) or ""
@@ -162,15 +172,20 @@ class FleetRoster:
         if vehicle is None:
             return
         joined = sample.kind == zenoh.SampleKind.PUT
+        armed = False
         with self._lock:
             if joined == (vehicle in self._alive):
                 return
             if joined:
                 self._alive.add(vehicle)
+                self._lost.pop(vehicle, None)  # judged as a member again
             else:
                 self._alive.discard(vehicle)
-                self._seen.pop(vehicle, None)
-        self._tell(Change(vehicle, "joined" if joined else "left"))
+                last = self._seen.pop(vehicle, None)
+                armed = last is not None and last.status.armed
+                if armed and len(self._lost) < MAX_VEHICLES_KEPT:
+                    self._lost[vehicle] = last
+        self._tell(Change(vehicle, "joined" if joined else "left", armed=armed))
 
     def _on_announce(self, sample: Any) -> None:
         key = str(sample.key_expr)

@@ -7,6 +7,10 @@ horizontally while within the larger of their layer gaps vertically is a loss of
 separation. A member whose position is not known or is stale is reported as such: unknown
 is never "separated". Vehicles on the ground and disarmed are not judged (they stand at
 their homes, which may lie close together).
+
+A member whose service is gone (its token withdrawn) while its vehicle was last seen armed is
+not forgotten: its vehicle may still be flying its uploaded mission, and no position will
+come from it. It is reported unknown until its service is back (``lost``).
 """
 
 from __future__ import annotations
@@ -46,10 +50,14 @@ class Judgement:
 
 
 def judge(members: Mapping[str, FleetMember | None], seen: Mapping[str, Seen], now_s: float,
-          min_horizontal_m: float = MIN_HORIZONTAL_M, stale_s: float = STALE_S) -> Judgement:
+          min_horizontal_m: float = MIN_HORIZONTAL_M, stale_s: float = STALE_S,
+          lost: Mapping[str, Seen] | None = None) -> Judgement:
     """The separation of ``members`` (alive, with their announcements) from the statuses
-    ``seen`` of each, at ``now_s``."""
-    unknown: list[str] = []
+    ``seen`` of each, at ``now_s``; ``lost``: the last statuses, armed, of members whose
+    service is gone."""
+    unknown = [f"{vehicle}: its service is gone; its vehicle was armed when last seen "
+               f"{now_s - last.at_s:.0f} s ago" for vehicle, last in sorted((lost or {}).items())
+               if vehicle not in members]
     where: dict[str, tuple[float, float, float, float]] = {}
     frame: GeoOrigin | None = None
     for vehicle, member in sorted(members.items()):

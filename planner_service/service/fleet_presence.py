@@ -120,7 +120,10 @@ class FleetPresence:
     def _on_change(self, change: Change) -> None:
         if change.vehicle == self.own.vehicle or not self.joined:
             return
-        if change.what == "announced" and change.member is not None:
+        if change.what == "left" and change.armed:
+            log.error("fleet: %s left with its vehicle armed: it may still be flying its mission, and its "
+                      "position is unknown until its service is back", change.vehicle)
+        elif change.what == "announced" and change.member is not None:
             clash = layer_clashes(self.own, {change.vehicle: change.member})
             if clash:
                 log.error("fleet: %s (its service should refuse to fly)", printable(clash[0], 200))

@@ -58,3 +58,17 @@ def test_positions_are_put_in_one_frame_from_each_members_origin() -> None:
     assert j.conflicts == ("uav1-uav2: 5 m apart horizontally, 0 m vertically",)
     assert abs(global_to_local(HOME, east.lat_deg, east.lon_deg, east.alt_m)[0] - 100.0) < 0.01
     assert judge(members, {"uav1": seen("uav1", 0, 0, 100), "uav2": seen("uav2", 0, 0, 100)}, 100.5).conflicts == ()
+
+
+def test_a_member_gone_with_its_vehicle_armed_stays_unknown() -> None:
+    """Its service's token went while its last status showed the vehicle armed: it may still
+    fly its uploaded mission, and nothing says where. Unknown until its service is back
+    (then it is a member again, judged on its statuses)."""
+    members = {"uav1": member("uav1")}
+    j = judge(members, {"uav1": seen("uav1", 0, 0, 100)}, 112.0, stale_s=20.0,
+              lost={"uav2": seen("uav2", 3, 0, 100, at_s=100.0)})
+    assert j.unknown == ("uav2: its service is gone; its vehicle was armed when last seen 12 s ago",)
+    assert j.conflicts == ()  # 3 m away when last seen, but not judged on an old position
+    back = {"uav1": member("uav1"), "uav2": member("uav2")}
+    j = judge(back, {"uav1": seen("uav1", 0, 0, 100, at_s=112.0)}, 112.0, lost={"uav2": seen("uav2", 3, 0, 100)})
+    assert j.unknown == ("uav2: no position",)  # back as a member: its status awaited

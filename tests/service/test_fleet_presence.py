@@ -225,6 +225,47 @@ def test_separation_is_judged_on_the_members_published_positions(mesh: Callable[
         assert "fleet: separation back for uav1-uav2" in caplog.text
 
 
+def test_a_member_gone_with_its_vehicle_armed_is_not_forgotten(mesh: Callable[[], Any],
+                                                                caplog: pytest.LogCaptureFixture) -> None:
+    """uav2's service dies with its vehicle armed (last status): uav1 logs it and keeps uav2
+    unknown in the separation, never dropped as if it had landed; once uav2's service is back
+    and says its vehicle is disarmed, all is known. uav3 leaves disarmed: simply gone."""
+    a_session = mesh()
+    a = FleetPresence(KEYS, member("uav1", 100.0))
+    a.join(a_session, DISCOVERY_S)
+    flying: dict[str, tuple[Any, bool]] = {"uav1": (a_session, True)}
+
+    def judged() -> tuple[str, ...]:
+        """Every open member's status sent (as each service does, 2 Hz), then uav1's judgement."""
+        for vehicle, (session, armed) in flying.items():
+            session.put(Keys(KEYS.prefix, vehicle).status, encode(Status(vehicle=vehicle, armed=armed, z_m=100.0)))
+        return a.check_separation().unknown
+    for vehicle, layer, armed in (("uav2", 110.0, True), ("uav3", 120.0, False)):
+        session = mesh()
+        FleetPresence(KEYS, member(vehicle, layer)).join(session, DISCOVERY_S)
+        flying[vehicle] = (session, armed)
+        wait_until(lambda: judged() == (), 10.0, f"{vehicle}'s status")
+    gone = {v: flying.pop(v)[0] for v in ("uav2", "uav3")}
+    with caplog.at_level(logging.INFO, logger="planner_service.fleet"):
+        for session in gone.values():
+            session.close()  # as a companion computer that dies
+        wait_until(lambda: set(a.members()) == {"uav1"}, 10.0, "uav2 and uav3 seen gone")
+    assert "fleet: uav2 left with its vehicle armed" in caplog.text
+    assert "fleet: uav3 left" in caplog.text and "uav3 left with" not in caplog.text
+    # uav1's own status may be stale by now on a loaded machine: until it is fresh again
+    wait_until(lambda: [u.split(";")[0] for u in judged()] == ["uav2: its service is gone"], 10.0,
+               "uav2 alone unknown")
+    assert "its vehicle was armed when last seen" in a.check_separation().unknown[0]
+    assert a.roster.lost() == ["uav2"]
+
+    back = mesh()
+    FleetPresence(KEYS, member("uav2", 110.0)).join(back, DISCOVERY_S)
+
+    flying["uav2"] = (back, False)
+    wait_until(lambda: judged() == (), 10.0, "uav2 back, its vehicle disarmed")
+    assert a.roster.lost() == []
+
+
 def test_of_two_services_started_at_once_for_one_vehicle_one_at_most_goes_on(mesh: Callable[[], Any]) -> None:
     """Each refuses when it sees the other's token before declaring its own, or two
     publishers announcing the vehicle after: one may go on (the other saw it first, or
