@@ -597,9 +597,9 @@ class PymavlinkLink(VehicleLink):
         (MAV_RESULT_*) or "NO_ANSWER" after ``retries`` tries and as many of the longest wait."""
         p = [float(x) for x in params] + [0.0] * (7 - len(params))
         tries = self.settings.retries if retries is None else retries
-        silence = Silence(tries - 1, self._patience_s(tries))  # the first send is no repeat
         async with self._command_lock:
             assert self._loop is not None
+            silence = Silence(tries - 1, self._patience_s(tries))  # the first send is no repeat
             for confirmation in range(256):  # the confirmation field is a uint8
                 future: asyncio.Future[int] = self._loop.create_future()
                 self._acks[command] = future

@@ -141,8 +141,8 @@ class MissionUpload:
             return self.done
         if self.silence.ran_out():
             where = "MISSION_COUNT" if self.last_sent is None else f"item {self.last_sent}"
-            self.done = UploadDone(False, f"NO_ANSWER after {self.silence.repeats - 1} repeats of {where}{self.silence.over()}", self.sent,
-                                   maybe_committed=self.last_sent == len(self.items) - 1)
+            result = f"NO_ANSWER after {self.silence.repeats - 1} repeats of {where}{self.silence.over()}"
+            self.done = UploadDone(False, result, self.sent, maybe_committed=self.last_sent == len(self.items) - 1)
             return self.done
         if self.last_sent is None:
             self._send(self._count())
@@ -225,7 +225,8 @@ class MissionDownload:
             return self.done
         if self.silence.ran_out():
             where = "MISSION_COUNT" if self.count is None else f"item {len(self.items)} of {self.count}"
-            self.done = DownloadDone(False, f"NO_ANSWER after {self.silence.repeats - 1} requests for {where}{self.silence.over()}")
+            result = f"NO_ANSWER after {self.silence.repeats - 1} requests for {where}{self.silence.over()}"
+            self.done = DownloadDone(False, result)
             return self.done
         self._ask()
         return None
