@@ -55,16 +55,23 @@ sign() {
     echo "$dir/$1.pem: CN=$2"
 }
 
+# check_id KIND VALUE: 1-64 of A-Z a-z 0-9 _ . : - (a key chunk with no wildcard), or exit 2
+check_id() {
+    case $2 in
+        ''|*[!A-Za-z0-9_.:-]*) echo "$0: '$2' is not a $1 id (1-64 of A-Z a-z 0-9 _ . : -)" >&2; exit 2 ;;
+    esac
+    [ ${#2} -le 64 ] || { echo "$0: '$2' is longer than 64 characters" >&2; exit 2; }
+}
+
 if [ "${1:-}" = "--user" ]; then
     [ $# -eq 2 ] || { echo "usage: $0 DIR --user USER_ID" >&2; exit 2; }
     user=$2
     # the common name is the user id the access control binds: nothing else may pass
+    check_id user "$user"
     case $user in
-        ''|*[!A-Za-z0-9_.:-]*) echo "$0: '$user' is not a user id (1-64 of A-Z a-z 0-9 _ . : -)" >&2; exit 2 ;;
         uavmec-*|service|ca|operator)
             echo "$0: $user is reserved (uavmec-...: the names of the service, the CA, the operator and the vehicles)" >&2; exit 2 ;;
     esac
-    [ ${#user} -le 64 ] || { echo "$0: '$user' is longer than 64 characters" >&2; exit 2; }
     sign "$user" "$user" "extendedKeyUsage=clientAuth"
     k="uavmec/uav1"
     echo "add to the access_control of service-tls-acl.json5 (prefix uavmec, vehicle uav1: change them with yours):"
@@ -78,11 +85,8 @@ if [ "${1:-}" = "--vehicle" ]; then
     [ $# -eq 2 ] || { echo "usage: $0 DIR --vehicle VEHICLE" >&2; exit 2; }
     v=$2
     # the vehicle id as the service's keys take it (protocol/keys.py): no wildcards, no "fleet"
-    case $v in
-        ''|*[!A-Za-z0-9_.:-]*) echo "$0: '$v' is not a vehicle id (1-64 of A-Z a-z 0-9 _ . : -)" >&2; exit 2 ;;
-        fleet) echo "$0: no vehicle may be named fleet (the fleet's keys)" >&2; exit 2 ;;
-    esac
-    [ ${#v} -le 64 ] || { echo "$0: '$v' is longer than 64 characters" >&2; exit 2; }
+    check_id vehicle "$v"
+    [ "$v" != fleet ] || { echo "$0: no vehicle may be named fleet (the fleet's keys)" >&2; exit 2; }
     sign "$v" "uavmec-vehicle-$v" "extendedKeyUsage=clientAuth"
     k="uavmec"
     echo "add to the access_control of fleet-router-tls-acl.json5 (prefix uavmec: change it with yours):"

@@ -38,10 +38,10 @@ def member(vehicle: str, layer_m: float) -> FleetMember:
                        origin_lon_deg=8.545594, origin_alt_m=488.0)
 
 
-def wait_until(check: Callable[[], bool], timeout_s: float, what: str) -> None:
+def wait_until(check: Callable[[], bool], timeout_s: float, what: str | Callable[[], str]) -> None:
     deadline = time.monotonic() + timeout_s
     while not check():
-        assert time.monotonic() < deadline, f"not within {timeout_s} s: {what}"
+        assert time.monotonic() < deadline, f"not within {timeout_s} s: {what() if callable(what) else what}"
         time.sleep(0.05)
 
 
@@ -108,7 +108,7 @@ def test_each_uav_certificate_speaks_for_its_own_vehicle_only(tmp_path: Path) ->
         presences.append(uav3)
         every = {v: member(v, layer) for v, layer in (("uav1", 80.0), ("uav2", 90.0), ("uav3", 100.0))}
         for p in (uav1, uav2, uav3):
-            wait_until(lambda p=p: p.members() == every, 10.0, f"{p.own.vehicle} reads the three members")
+            wait_until(lambda p=p: p.members() == every, 10.0, lambda p=p: f"{p.own.vehicle} reads the three members: {p.members()}")
 
         # a status in uav2's name: uav2's own reaches uav1, the thief's none
         status_key = Keys("uavmec", "uav2").status
@@ -171,3 +171,16 @@ def test_a_fleet_service_behind_the_routers_access_control(stack: Stack, tmp_pat
     assert "fleet      1 member: uav1 100 m (this)" in watch.stdout, watch.stdout
     assert "separation ok" in watch.stdout, watch.stdout  # its position from its own status, live
     assert service.proc.poll() is None and "Traceback" not in service.log()
+
+
+def test_no_certificate_for_a_vehicle_named_fleet_nor_a_user_in_the_vehicles_names(tmp_path: Path) -> None:
+    """A user whose id were uavmec-vehicle-uav1 would be uav1 to the routers; "fleet" is no
+    vehicle (its keys are the fleet's)."""
+    make_certs(tmp_path)
+    for args, said in ((("--vehicle", "fleet"), "no vehicle may be named fleet"),
+                       (("--user", "uavmec-vehicle-uav1"), "is reserved"),
+                       (("--vehicle", "uav*"), "is not a vehicle id")):
+        with pytest.raises(subprocess.CalledProcessError) as err:
+            make_certs(tmp_path, *args)
+        assert err.value.returncode == 2 and said in err.value.stderr, err.value.stderr
+    assert not (tmp_path / "fleet.pem").exists() and not (tmp_path / "uavmec-vehicle-uav1.pem").exists()
