@@ -55,7 +55,7 @@ from .extensions import (MISSION_ACK_ID_OFFSET, MISSION_COUNT_ID_OFFSET, MISSION
 from .reports import Begin, Pass, ReportSequencer  # noqa: E402
 from .rtt import RetryTimer  # noqa: E402
 from .streams import INTERVAL_CMD, QUIET_INTERVAL_US, Request  # noqa: E402
-from .upload import MissionDownload, MissionUpload, Silence, cancel_message  # noqa: E402
+from .upload import MissionDownload, MissionUpload, cancel_message  # noqa: E402
 
 M = mavutil.mavlink
 log = logging.getLogger(__name__)
@@ -587,20 +587,22 @@ class PymavlinkLink(VehicleLink):
             raise LinkError("download_mission()", done.result)
         return list(done.items)
 
-    def _patience_s(self, tries: int | None = None) -> float:
-        """The silence an exchange bears before giving up: ``tries`` of the longest wait,
-        however short the measured round trip makes each repeat (upload.Silence)."""
-        return (self.settings.retries if tries is None else tries) * self.settings.item_timeout_s
+    def _patience_s(self) -> float:
+        """The silence a mission transfer bears before giving up: ``retries`` of the longest
+        wait, however short the measured round trip makes each repeat (upload.Silence)."""
+        return self.settings.retries * self.settings.item_timeout_s
 
     async def _command_result(self, command: int, *params: float, retries: int | None = None) -> str:
         """COMMAND_LONG with the confirmation counting up on each repeat; the result's name
-        (MAV_RESULT_*) or "NO_ANSWER" after ``retries`` tries and as many of the longest wait."""
+        (MAV_RESULT_*) or "NO_ANSWER" after ``retries`` tries. Unlike a mission transfer, a
+        command is answered at once (COMMAND_ACK), so its repeats need no patience beyond the
+        measured wait; and a long one would carry a command across a vehicle's restart (tried:
+        the operator's hold's LOITER, repeated for 5 s, reached the vehicle started after it)."""
         p = [float(x) for x in params] + [0.0] * (7 - len(params))
         tries = self.settings.retries if retries is None else retries
         async with self._command_lock:
             assert self._loop is not None
-            silence = Silence(tries - 1, self._patience_s(tries))  # the first send is no repeat
-            for confirmation in range(256):  # the confirmation field is a uint8
+            for confirmation in range(tries):
                 future: asyncio.Future[int] = self._loop.create_future()
                 self._acks[command] = future
                 try:
@@ -610,8 +612,6 @@ class PymavlinkLink(VehicleLink):
                     if confirmation == 0:
                         self.timer.sample(time.monotonic() - sent_at)
                 except TimeoutError:
-                    if silence.ran_out():
-                        break
                     continue
                 finally:
                     self._acks.pop(command, None)
