@@ -16,7 +16,7 @@ import subprocess
 import sys
 import time
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import pytest
 import zenoh
@@ -25,24 +25,12 @@ from planner_service.harness.processes import REPO, Child, free_port
 from planner_service.service.fleet_presence import FleetPresence
 from protocol import FleetKeys, Keys, Status, decode, encode
 from protocol.client import PlannerClient, client_config
-from protocol.messages import FleetMember
+from tests.support.fleet import member, wait_until
 from tests.support.stack import Stack
 from tests.support.zenoh_tls import VEHICLE_MARKS, add_entries, make_certs, shipped
 
 KEYS = FleetKeys("uavmec")
 DISCOVERY_S = 0.5
-
-
-def member(vehicle: str, layer_m: float) -> FleetMember:
-    return FleetMember(vehicle=vehicle, layer_m=layer_m, min_gap_m=10.0, origin_lat_deg=47.397742,
-                       origin_lon_deg=8.545594, origin_alt_m=488.0)
-
-
-def wait_until(check: Callable[[], bool], timeout_s: float, what: str | Callable[[], str]) -> None:
-    deadline = time.monotonic() + timeout_s
-    while not check():
-        assert time.monotonic() < deadline, f"not within {timeout_s} s: {what() if callable(what) else what}"
-        time.sleep(0.05)
 
 
 @pytest.mark.timeout(120)
@@ -108,7 +96,8 @@ def test_each_uav_certificate_speaks_for_its_own_vehicle_only(tmp_path: Path) ->
         presences.append(uav3)
         every = {v: member(v, layer) for v, layer in (("uav1", 80.0), ("uav2", 90.0), ("uav3", 100.0))}
         for p in (uav1, uav2, uav3):
-            wait_until(lambda p=p: p.members() == every, 10.0, lambda p=p: f"{p.own.vehicle} reads the three members: {p.members()}")
+            wait_until(lambda p=p: p.members() == every, 10.0,
+                       lambda p=p: f"{p.own.vehicle} reads the three members: {p.members()}")
 
         # a status in uav2's name: uav2's own reaches uav1, the thief's none
         status_key = Keys("uavmec", "uav2").status

@@ -18,23 +18,11 @@ from planner_service.fleet_roster import FleetRoster
 from planner_service.harness.processes import free_port
 from planner_service.service.fleet_presence import MembershipError, FleetPresence, layer_clashes
 from protocol import FleetKeys, Keys, ProtocolError, Status, encode
-from protocol.messages import FleetMember
 from protocol.zenoh_config import session_config
+from tests.support.fleet import member, wait_until
 
 KEYS = FleetKeys("fleettest")
 DISCOVERY_S = 0.5
-
-
-def member(vehicle: str, layer_m: float, gap_m: float = 10.0) -> FleetMember:
-    return FleetMember(vehicle=vehicle, layer_m=layer_m, min_gap_m=gap_m, origin_lat_deg=47.397742,
-                       origin_lon_deg=8.545594, origin_alt_m=488.0)
-
-
-def wait_until(check: Callable[[], bool], timeout_s: float, what: str) -> None:
-    deadline = time.monotonic() + timeout_s
-    while not check():
-        assert time.monotonic() < deadline, f"not within {timeout_s} s: {what}"
-        time.sleep(0.02)
 
 
 # --- the rule ---------------------------------------------------------------------------------
