@@ -30,7 +30,7 @@ import msgspec
 import zenoh
 
 from .errors import ProtocolError
-from .keys import Keys
+from .keys import FleetKeys, Keys
 from .messages import (ErrorReply, Event, OperatorCommand, OperatorReply, Plan, State, Status, TaskAck, TaskRequest,
                        UserPlace, decode, decode_operator_reply, decode_reply, encode)
 from .operator_proof import sign
@@ -107,6 +107,17 @@ class PlannerClient:
             time.sleep(0.05)
         return False
 
+    def wait_for_fleet(self, timeout_s: float = 10.0) -> bool:
+        """True once a fleet member's liveliness token is seen (``{prefix}/fleet/members/*``:
+        a member declares its request queryables right after joining)."""
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            replies = self.session.liveliness().get(FleetKeys(self.keys.prefix).members, timeout=0.5)
+            if any(reply.ok is not None for reply in replies):
+                return True
+            time.sleep(0.05)
+        return False
+
     # --- requests ------------------------------------------------------------------------------
     def _query(self, key: str, payload: bytes | None, timeout_s: float | None) -> bytes | None:
         replies = self._replies(key, payload, timeout_s)
@@ -158,6 +169,22 @@ class PlannerClient:
         if isinstance(reply, ErrorReply):
             raise ClientError(reply.field, reply.message)
         return reply
+
+    def submit_to_fleet(self, request: TaskRequest, timeout_s: float | None = None) -> "FleetAck":
+        """Submit ``request`` once to the fleet (``{prefix}/fleet/request/{user_id}``): every
+        live member journals it and answers; the answer is one ``FleetAck``: the ack of the
+        member that plans to serve the user soonest (none plans it yet: the first member's
+        by vehicle id) and every member that holds the request. ``ClientError`` as ``submit``
+        when no member answers or every member refuses it (the first refusal's field)."""
+        ref = new_client_ref() if request.client_ref is None else request.client_ref
+        if request.client_ref is None:
+            request = msgspec.structs.replace(request, client_ref=ref)
+        key = FleetKeys(self.keys.prefix).user_request(request.user_id)
+        replies = self._replies(key, encode(request), timeout_s)
+        if not replies:
+            raise ClientError("service", f"no member of the fleet replied on {key} within "
+                                         f"{timeout_s or self.timeout_s:g} s")
+        return fleet_answer(replies, request.user_id, ref)
 
     def state(self, timeout_s: float | None = None) -> State:
         """The service's public snapshot: its status and the plan's points, nothing personal
@@ -317,3 +344,42 @@ def answer(replies: list[bytes], user_id: str, client_ref: str) -> TaskAck | Err
             f"the request key (a rogue one, or two services for one vehicle)"))
     raise ClientError("reply", printable(
         f"no reply answers the request of {wanted} (a forged or misrouted reply?): got {'; '.join(others)}", 400))
+
+
+class FleetAck(msgspec.Struct, frozen=True):
+    """The fleet's answer to one request (``PlannerClient.submit_to_fleet``)."""
+
+    ack: TaskAck
+    """The ack of the member that plans to serve the user soonest (its ``vehicle``,
+    ``place`` and ``eta_s``), else the first member's by vehicle id."""
+    holders: tuple[str, ...]
+    """Every member that journalled the request: it survives the loss of all but one."""
+    refusals: tuple[ErrorReply, ...] = ()
+    """Members that refused it (a member between sorties, a full one)."""
+
+
+def fleet_answer(replies: list[bytes], user_id: str, client_ref: str) -> FleetAck:
+    """One ``FleetAck`` of the members' replies that answer the request of ``user_id`` and
+    ``client_ref`` (others are ignored: each member answers once; an ack per member).
+    ``ClientError`` when none accepted it: the first refusal's, or ``reply``."""
+    acks: dict[str, TaskAck] = {}
+    refusals: list[ErrorReply] = []
+    for data in replies:
+        try:
+            reply = decode_reply(data)
+        except ProtocolError:
+            continue
+        if reply.client_ref != client_ref:
+            continue
+        if isinstance(reply, ErrorReply):
+            refusals.append(reply)
+        elif reply.user_id == user_id and reply.vehicle:
+            acks.setdefault(reply.vehicle, reply)
+    if not acks:
+        if refusals:
+            raise ClientError(refusals[0].field, refusals[0].message)
+        raise ClientError("reply", f"no member's ack answers the request of user_id '{printable(user_id)}', "
+                                   f"client_ref '{printable(client_ref)}'")
+    planned = [a for a in acks.values() if a.eta_s is not None]
+    best = min(planned, key=lambda a: (a.eta_s, a.vehicle)) if planned else acks[min(acks)]
+    return FleetAck(best, tuple(sorted(acks)), tuple(refusals))

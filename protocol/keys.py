@@ -179,9 +179,54 @@ class FleetKeys:
             return parts[1]
         return None
 
+    @property
+    def request(self) -> str:
+        """Queryable of every member: a user's request to the fleet, whichever UAV serves it
+        (each live service journals it and answers with its own ack)."""
+        return self._key("request")
+
+    def user_request(self, user_id: str) -> str:
+        """Queryable: ``user_id``'s own fleet request key (access control can give it to that
+        user's certificate alone)."""
+        return self._key(f"request/{check_user_id(user_id)}")
+
+    @property
+    def user_requests(self) -> str:
+        """Every user's fleet request key (each member's queryable for them)."""
+        return self._key("request/*")
+
+    def request_user(self, key_expr: str) -> str | None:
+        """As ``Keys.request_user``, for the fleet's request keys."""
+        if key_expr == self.request:
+            return None
+        head = self.request + "/"
+        user = key_expr[len(head):] if key_expr.startswith(head) else None
+        if user is None or not _USER_ID.fullmatch(user):
+            raise ProtocolError("key", f"{key_expr!r} is neither {self.request} nor {head}USER_ID "
+                                       f"(a request names at most one user, without wildcards)")
+        return user
+
+    def intentions(self, vehicle: str) -> str:
+        """Publication with a cache: the users ``vehicle``'s plan means to serve, and when
+        (``fleet_intentions``), on every plan."""
+        return self._key(f"intentions/{_check_chunk('vehicle', vehicle)}")
+
+    @property
+    def all_intentions(self) -> str:
+        return self._key("intentions/*")
+
+    def served(self, vehicle: str) -> str:
+        """Publication with a cache: each service ``vehicle`` flew (``fleet_served``)."""
+        return self._key(f"served/{_check_chunk('vehicle', vehicle)}")
+
+    @property
+    def all_served(self) -> str:
+        return self._key("served/*")
+
     def vehicle_of(self, key_expr: str) -> str | None:
-        """The vehicle id that ends a member or announcement key; None for any other key."""
-        for head in (self._key("members/"), self._key("uavs/")):
+        """The vehicle id that ends a member, announcement, intentions or served key; None
+        for any other key."""
+        for head in (self._key("members/"), self._key("uavs/"), self._key("intentions/"), self._key("served/")):
             if key_expr.startswith(head) and _CHUNK.fullmatch(key_expr[len(head):]):
                 return key_expr[len(head):]
         return None

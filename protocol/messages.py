@@ -161,6 +161,9 @@ class TaskAck(_Message, tag="task_ack"):
     place: Annotated[int, msgspec.Meta(ge=1)] | None = None
     eta_s: Annotated[float, msgspec.Meta(ge=0.0)] | None = None
     note: ShortText = ""
+    vehicle: Annotated[str, msgspec.Meta(max_length=64)] = ""
+    """The vehicle of the service that answers (its own id): in a fleet each member answers
+    a fleet request with its own ack, its own place and ETA for the user."""
 
 
 class UserPlace(_Message, tag="user_place"):
@@ -340,6 +343,37 @@ class FleetMember(_Message, tag="fleet_member"):
     """The autopilot its service flies (``mavlink.flavour``: ardupilot, px4)."""
 
 
+VehicleId = Annotated[str, msgspec.Meta(min_length=1, max_length=64, pattern=r"\A[A-Za-z0-9_.\-]+\Z")]
+
+
+class Intention(msgspec.Struct, frozen=True, array_like=True, forbid_unknown_fields=True):
+    """A user a member's plan means to serve, and the wall-clock time its hold should begin."""
+
+    user_id: UserId
+    due_s: float
+
+
+class FleetIntentions(_Message, tag="fleet_intentions"):
+    """What a member's plan means to do (``FleetKeys.intentions``), published on every plan
+    with a cache of one: each user of the points still to fly and when its service should
+    begin. A user several members mean to serve belongs to the earliest (docs/OPERATIONS.md, "A fleet")."""
+
+    vehicle: VehicleId
+    time_s: float
+    users: Annotated[list[Intention], msgspec.Meta(max_length=256)] = []
+
+
+class FleetServed(_Message, tag="fleet_served"):
+    """A service a member flew (``FleetKeys.served``): the other members count it against
+    the user's request and services as their own (the fairness rule spans the fleet)."""
+
+    vehicle: VehicleId
+    user_id: UserId
+    tasks: Annotated[int, msgspec.Meta(ge=1)]
+    at_s: float
+    """The wall-clock time it was recorded."""
+
+
 class _NoMessage(_Message, tag="-"):
     """Never valid. Decoding a single type as ``Union[Type, _NoMessage]`` makes msgspec
     require the ``kind`` tag, which it does not for a lone tagged type: without it ``{}``
@@ -347,7 +381,7 @@ class _NoMessage(_Message, tag="-"):
 
 
 Message = Union[TaskRequest, TaskAck, ErrorReply, Status, Plan, Event, State, UserPlace, OperatorCommand,
-                OperatorReply, FleetMember]
+                OperatorReply, FleetMember, FleetIntentions, FleetServed]
 Reply = Union[TaskAck, ErrorReply]
 """What the request queryable answers."""
 OperatorAnswer = Union[OperatorReply, ErrorReply]

@@ -44,7 +44,8 @@ import numpy as np
 
 from planner_service.model import Scenario, pack, user_rows
 from planner_service.model.mobility import draw_arrivals, draw_tasks
-from protocol import ProtocolError, TaskAck, TaskRequest, UserPlace, printable
+from protocol import FleetKeys, ProtocolError, TaskAck, TaskRequest, UserPlace, printable
+from protocol.messages import FleetServed, decode
 from protocol.client import ClientError, PlannerClient, request_for
 
 log = logging.getLogger("sim_bridge.users")
@@ -106,6 +107,9 @@ class TaskParams:
     """A user with tasks that has moved this far since its last request sends a new one."""
     retry_s: float = 40.0
     """After a refusal, the wait before the next try."""
+    fleet: bool = False
+    """Submit to the fleet (``{prefix}/fleet/request/{user_id}``), not to one vehicle: the
+    backlog comes down by the services the members announce (``fleet/served``)."""
 
 
 @dataclass
@@ -308,13 +312,32 @@ def sent(w: Walker, now_s: float) -> int:
     return w.backlog
 
 
+def on_fleet_served(w: Walker, done: FleetServed) -> None:
+    """A member of the fleet served this user: what it served comes off the backlog, and
+    off every member's count of the request in force (each counts the others' services)."""
+    w.served += done.tasks
+    w.backlog = max(w.backlog - done.tasks, 0)
+    if w.view is not None:
+        w.view = max(w.view - done.tasks, 0)
+
+
+def follow_fleet_services(client: PlannerClient, sink: "queue.SimpleQueue[FleetServed]") -> None:
+    """Every service the fleet's members fly (``{prefix}/fleet/served/*``), into ``sink``."""
+    def handler(sample: object) -> None:
+        try:
+            sink.put(decode(sample.payload.to_bytes(), FleetServed))  # type: ignore[attr-defined]
+        except ProtocolError:
+            pass
+    client._subs.append(client.session.declare_subscriber(FleetKeys(client.keys.prefix).all_served, handler))
+
+
 def request_of(w: Walker, now_s: float, tp: TaskParams, params: WalkParams) -> TaskRequest:
     """The request the user sends now (noted by ``sent``): its backlog, where it stands
     (in the area, to 0.1 m) and, under the ``backlog`` law once it has heard of its sortie,
     the tasks served to it there that its backlog has taken off (``served_seen``)."""
     x, y = (float(round(v, 1)) for v in np.clip(w.xy, 0.0, params.side_m))
     tasks = sent(w, now_s)
-    knows = tp.law == "backlog" and w.sortie is not None
+    knows = tp.law == "backlog" and w.sortie is not None and not tp.fleet
     return request_for(w.user_id, x, y, tasks, client_ref=f"{w.user_id}#{w.submitted}",
                        served_seen=w.served_seen if knows else None, sortie=w.sortie if knows else None)
 
@@ -334,7 +357,11 @@ def run_users(client: PlannerClient, scenario: Scenario, count: int, tp: TaskPar
     by_id = {w.user_id: w for w in walkers}
     p = pack(scenario)
     places: queue.SimpleQueue[UserPlace] = queue.SimpleQueue()
-    client.follow_places(places.put)  # zenoh's thread: handed over to this one
+    fleet_served: queue.SimpleQueue[FleetServed] = queue.SimpleQueue()
+    if tp.fleet:  # the services the members fly; each member's places are its own
+        follow_fleet_services(client, fleet_served)
+    else:
+        client.follow_places(places.put)  # zenoh's thread: handed over to this one
     start = time.monotonic()
     last = start
     while not stop.is_set():
@@ -346,6 +373,10 @@ def run_users(client: PlannerClient, scenario: Scenario, count: int, tp: TaskPar
             place = places.get()
             if place.user_id in by_id:
                 on_place(by_id[place.user_id], place)
+        while not fleet_served.empty():
+            done = fleet_served.get()
+            if done.user_id in by_id:
+                on_fleet_served(by_id[done.user_id], done)
         advance_users(walkers, streams, (now - last) * speedup, sim, params, p, tp)
         last = now
         for w in walkers:
@@ -364,7 +395,11 @@ def submit(client: PlannerClient, w: Walker, now_s: float, tp: TaskParams, param
     request = request_of(w, now_s, tp, params)
     x, y, tasks = request.x_m, request.y_m, request.tasks
     try:
-        ack = client.submit_request(request)
+        if tp.fleet:
+            answer = client.submit_to_fleet(request)
+            ack = answer.ack
+        else:
+            ack = client.submit_request(request)
     except ClientError as err:
         on_refused(w, now_s, tp, f"{err.field}: {err.message}")
         log.info("%s refused: %s", w.user_id, printable(w.last_refusal))
@@ -375,7 +410,11 @@ def submit(client: PlannerClient, w: Walker, now_s: float, tp: TaskParams, param
         on_refused(w, now_s, tp, str(err))
         log.info("%s: %s", w.user_id, printable(w.last_refusal))
         return
-    on_ack(w, ack, request)
+    if tp.fleet:  # each member's sortie and served counts are its own: the user counts what it heard
+        w.acked += 1
+        w.request_id, w.view, w.view_request = ack.request_id, request.tasks, ack.request_id
+    else:
+        on_ack(w, ack, request)
     where = "" if ack.place is None else f", place {ack.place} in about {ack.eta_s or 0.0:.0f} s"
     log.info("%s at (%.0f, %.0f): backlog %d -> request %d (served %d so far%s)", w.user_id, x, y, tasks,
              ack.request_id, w.served, where)

@@ -24,7 +24,7 @@ ALLOWED: dict[str, set[str] | None] = {
     "planner_service.fleet": {SETTINGS, MODEL, POLICY, REGISTRY, SORTIE},
     "planner_service.experiments": {SETTINGS, MODEL, POLICY, MCTS, SORTIE, "planner_service.fleet"},
     SERVICE: {"protocol", SETTINGS, MODEL, POLICY, MCTS, "planner_service.fleet_roster",
-              "planner_service.fleet_separation"},
+              "planner_service.fleet_separation", "planner_service.fleet_ledger"},
     HARNESS: {"protocol", SETTINGS, MODEL, POLICY, SORTIE, SERVICE},
     "planner_service.bench": EVERYTHING,
     "planner_service.commands": EVERYTHING,
@@ -32,6 +32,7 @@ ALLOWED: dict[str, set[str] | None] = {
     "planner_service.operator_view": {"protocol", "planner_service.fleet_separation"},
     "planner_service.fleet_separation": {"protocol"},  # pure: the service's and the operator's judge
     "planner_service.fleet_roster": {"protocol", "planner_service.fleet_separation"},  # zenoh I/O: both views
+    "planner_service.fleet_ledger": {"protocol"},  # zenoh I/O: the members' intentions and services
     "planner_service.__main__": EVERYTHING,
     "planner_service": EVERYTHING,
     "sim_bridge": {"protocol", SETTINGS, MODEL},

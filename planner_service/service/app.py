@@ -51,7 +51,8 @@ from .journal import Journal
 from .link import LinkEvent, LinkSettings, VehicleLink, open_link
 from .link.base import RETURNING_MODES
 from .operator import OperatorGate, read_command, reply_for
-from .places import plan_places, user_places
+from .places import Place, plan_places, user_places
+from .rows import UserRow
 from .planning import Planner, VehicleFix, after_hold, assemble, not_served_reason, planning_battery_j
 from .sortie import HeldMission, Rules, Sortie, SortieLogic, VehicleSnapshot, item_dict, new_sortie
 from .sortie import effects as fx
@@ -59,7 +60,7 @@ from .sortie import inputs as ins
 from .supervisor import Supervisor
 from .throttle import RateLimit
 from .vehicle_view import VehicleView
-from .world import JournalWorld
+from .world import FleetWorld, JournalWorld
 from .zenoh_io import ZenohIO, reply_and_drop
 
 log = logging.getLogger("planner_service")
@@ -115,8 +116,11 @@ class Service:
         self.flavour = config.mavlink.flavour
         self.journal = parts.journal
         self.zio = parts.zio
+        self.fleet = parts.zio.fleet
+        """This UAV's fleet membership (``[fleet] enabled``), None for a lone UAV."""
         self.intake = Intake(self.journal, self.area, self.wall, config.intake, keys=self.keys, monotonic=self.mono,
-                             unservable=fairness_rule(self.scenario))
+                             unservable=fairness_rule(self.scenario), vehicle=self.keys.vehicle,
+                             fleet_keys=None if self.fleet is None else self.fleet.keys)
         self._refusal_events = RateLimit(REFUSAL_EVENTS_PER_S, self.mono())
         self._refusals_unreported = 0
         self._busy_logged = (self.mono(), 0)
@@ -132,7 +136,8 @@ class Service:
         self.view = VehicleView(self.scenario, self.origin, self.area)
         self._waiting_for = ""
         s = config.safety
-        self.world = JournalWorld(self.journal)
+        self.world = JournalWorld(self.journal) if self.fleet is None else FleetWorld(self.journal,
+                                                                                      self.fleet.ledger.taken)
         self.logic = SortieLogic(Rules(
             scenario=self.scenario, origin=self.origin, area=self.area, flavour=self.flavour,
             start_mission=config.mavlink.start_mission, min_requests=config.planner.min_requests,
@@ -144,6 +149,12 @@ class Service:
             hold_margin_s=s.hold_margin_s, energy_margin_j=s.energy_margin_j,
         ), self.world)
         self.state = self._restore()
+        self._plan_dues: dict[str, float] = {}
+        """When this UAV's last plan means to serve each of its users (wall clock)."""
+        self._bound: tuple[str, float] | None = None
+        self._taken: set[str] = set()
+        """The users another member owned at the last tick."""
+        """The user a hold of this UAV serves now, and since when (wall clock)."""
         self.plan_msg: Plan | None = None
         if self.state.life.over:
             self.intake.closed_reason = self._closed_reason()
@@ -261,6 +272,7 @@ class Service:
     def _feed(self, event: ins.Input) -> None:
         before = self.state
         self.state, effects = self.logic.step(before, event, self._vehicle(), self.mono())
+        self._claim_binding(before)
         self._carry_out(before, effects)
 
     def _carry_out(self, before: Sortie, effects: list[fx.Effect]) -> None:
@@ -330,13 +342,13 @@ class Service:
     async def _plan(self, basis: fx.PlanBasis) -> ins.Input:
         fix = self._planning_fix(basis)
         try:
-            assembled = assemble(self.scenario, self.journal.users(), self.journal.pending(),
+            assembled = assemble(self.scenario, self._users(), self.world.pending(),
                                  self.journal.services(), fix, self.state.schedule.last_hover_index)
         except JournalError as err:
             return ins.PlanFailed(basis, f"journal: {err}")
         if basis.at_point is not None:
             assembled = after_hold(assembled, basis.at_point, basis.serving, basis.serving_reward)
-        newest = max((r.request_id for r in self.journal.pending()), default=0)
+        newest = max((r.request_id for r in self.world.pending()), default=0)
         t0 = time.perf_counter()
         try:
             _, path = await asyncio.get_running_loop().run_in_executor(self.executor, self.planner.decide, assembled)
@@ -346,6 +358,12 @@ class Service:
         planner_ms = (time.perf_counter() - t0) * 1e3
         log.info("decision (%s): %s in %.0f ms", basis.reason, [p.hover_index for p in path.points], planner_ms)
         return ins.Planned(basis, path, planner_ms, newest)
+
+    def _users(self) -> list[UserRow]:
+        """Every user heard from, with its services as the world counts them (in a fleet,
+        the other members' too: the fairness rule spans the fleet)."""
+        counts = self.world.service_counts()
+        return [replace(u, services=counts.get(u.user_id, 0)) for u in self.journal.users()]
 
     async def _upload(self, up: fx.Upload) -> ins.Input:
         t0 = self.mono()
@@ -396,6 +414,7 @@ class Service:
         return None if authority.granted else f"the authority ended ({authority.detail})"
 
     def _record_service(self, e: fx.RecordService) -> None:
+        self._tell_fleet_served(e)  # flown, whatever the journal says
         battery_j = (self._vehicle().battery_fraction or 0.0) * self.scenario.battery_j
         try:
             self.world.record_service(e.request_id, e.user_id, e.tasks, e.hover_index, e.xyz, e.bits, e.reward,
@@ -408,6 +427,27 @@ class Service:
                       "battery %.0f J, at %.3f", e.request_id, err, e.user_id, e.tasks, e.bound_tasks,
                       e.hover_index, *e.xyz, e.bits, e.reward, e.held_s, battery_j, self.wall())
             self._check_journal()
+
+    def _tell_fleet_served(self, e: fx.RecordService) -> None:
+        if self.fleet is not None and self.fleet.joined:
+            self.fleet.ledger.served(e.user_id, e.tasks, self.wall())
+
+    def _hear_fleet(self) -> None:
+        """Count the services the other members flew (docs/OPERATIONS.md, "A fleet")."""
+        if self.fleet is None or not isinstance(self.world, FleetWorld):
+            return
+        taken = self.fleet.ledger.taken()
+        freed = self._taken - taken  # a member gone, or its plan changed: plan these users again
+        self._taken = taken
+        for user in sorted(freed):
+            row = self.world.request_for(user)
+            if row is not None:
+                self._feed(ins.RequestIn(user, row.backlog))
+        for done in self.fleet.ledger.take_served():
+            held = self.world.count_remote(done.user_id, done.tasks)
+            log.info("fleet: %s served %s %d tasks%s", done.vehicle, done.user_id, done.tasks,
+                     "" if held else " (no request of that user in force here)")
+            self._event(ev.UserServed(f"by {done.vehicle}: {done.tasks} tasks", user_id=done.user_id))
 
     # --- the vehicle as the logic sees it ----------------------------------------------------------
     def _vehicle(self) -> VehicleSnapshot:
@@ -441,6 +481,7 @@ class Service:
     # --- loops ---------------------------------------------------------------------------------------
     async def _tick_loop(self) -> None:
         while True:
+            self._hear_fleet()
             self._feed(ins.Tick(self.mono()))
             await asyncio.sleep(TICK_S)
 
@@ -571,8 +612,37 @@ class Service:
             log.error("plan %d: users' places not published: %s", held.plan_id, err)
             return
         self.intake.set_places(places)
+        self._intend(places, v.time_rate)
         for message in messages:
             self.zio.publish(message)
+
+    def _intend(self, places: dict[str, Place], time_rate: float | None) -> None:
+        """Tell the fleet which users this plan means to serve and when (wall clock)."""
+        now, rate = self.wall(), time_rate if time_rate and time_rate > 0 else 1.0
+        self._plan_dues = {u: now + p.eta_s / rate for u, p in places.items()}
+        self._tell_intentions()
+
+    def _tell_intentions(self) -> None:
+        """The plan's users and, claimed from the moment it is bound, the user a hold serves
+        (the binding serves the nearest eligible user, which may not be the planned one): the
+        other members neither plan nor bind it from then on (docs/OPERATIONS.md, "A fleet")."""
+        if self.fleet is None or not self.fleet.joined:
+            return
+        due, now = dict(self._plan_dues), self.wall()
+        if self._bound is not None:
+            due[self._bound[0]] = min(due.get(self._bound[0], math.inf), self._bound[1])
+        self.fleet.ledger.intend(due, now)
+        log.debug("fleet: intends %s; others own %s", {u: round(d - now, 2) for u, d in due.items()},
+                  sorted(self.fleet.ledger.taken()))
+
+    def _claim_binding(self, before: Sortie) -> None:
+        b = self.state.holds.binding
+        if b == before.holds.binding:
+            return
+        bound = b.user_id if b is not None and b.request_id is not None else None
+        if bound != (self._bound[0] if self._bound else None):
+            self._bound = None if bound is None else (bound, self.wall())
+            self._tell_intentions()
 
     # --- failing loud -------------------------------------------------------------------------------
     def _on_failure(self, name: str, error: BaseException) -> None:
@@ -597,9 +667,7 @@ class Service:
     def _end_sortie(self, why: str) -> None:
         """Close the sortie: every pending request is reported not served, with its reason;
         the intake refuses requests until the next sortie begins."""
-        counts: dict[str, int] = {}
-        for s in self.journal.services():
-            counts[s.user_id] = counts.get(s.user_id, 0) + 1
+        counts = self.world.service_counts()  # in a fleet, the other members' services too
         reasons = {r.request_id: not_served_reason(self.scenario, r.backlog, counts.get(r.user_id, 0),
                                                    f"sortie ended before its turn ({why})")
                    for r in self.journal.pending()}
@@ -610,6 +678,8 @@ class Service:
         for rid, reason in reasons.items():
             self._event(ev.RequestRejected(f"not served: {reason}", request_id=rid))
         self.intake.closed_reason = self._closed_reason()
+        self._bound = None
+        self._intend({}, None)  # nothing more this sortie: the users are the others' to serve
         self._event(ev.Landed(f"sortie {self.state.life.number}: {why}"))
         log.info("sortie %d over: %s; %d services, %d requests not served", self.state.life.number, why,
                  len(self.journal.services()), len(reasons))

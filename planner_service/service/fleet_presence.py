@@ -36,6 +36,7 @@ from protocol import FleetKeys
 from protocol.messages import FleetMember, encode
 from protocol.text import printable
 
+from ..fleet_ledger import FleetLedger
 from ..fleet_roster import Change, FleetRoster
 from ..fleet_separation import MIN_HORIZONTAL_M, STALE_S, Judgement
 from .errors import ServiceError
@@ -82,6 +83,8 @@ class FleetPresence:
         self._conflicts: set[str] = set()
         self._unknown: set[str] = set()
         self.roster = FleetRoster(keys, self._on_change)
+        self.ledger = FleetLedger(keys, own.vehicle, lambda: self.roster.members().keys())
+        """Intentions and services exchanged with the other members (opened on joining)."""
         self.joined = False
         """A member now (``join`` went through, ``leave`` not called)."""
         self._publisher: Any = None
@@ -109,6 +112,7 @@ class FleetPresence:
         if clashes:
             self.leave()
             raise MembershipError("fleet: " + "; ".join(printable(c, 200) for c in clashes))
+        self.ledger.open(session)
         self.joined = True
         others = self._others()
         log.info("fleet: joined as %s, layer %g m; %s", v, self.own.layer_m,
@@ -156,6 +160,7 @@ class FleetPresence:
     def leave(self) -> None:
         """Withdraw the token and the announcement, stop following the others."""
         self.joined = False
+        self.ledger.close()
         for thing in (self._token, self._publisher):
             if thing is not None:
                 try:

@@ -33,7 +33,7 @@ import time
 from dataclasses import dataclass
 from typing import Callable, Mapping
 
-from protocol import MAX_PAYLOAD_BYTES, Area, ErrorReply, Keys, ProtocolError, TaskAck, decode_request, printable
+from protocol import MAX_PAYLOAD_BYTES, Area, ErrorReply, FleetKeys, Keys, ProtocolError, TaskAck, decode_request, printable
 
 from ..model import Scenario, pack
 from ..model._jit import py
@@ -143,13 +143,18 @@ class Intake:
 
     def __init__(self, journal: Journal, area: Area, clock: Callable[[], float],
                  limits: IntakeConfig = IntakeConfig(), *, keys: Keys = Keys(),
-                 monotonic: Callable[[], float] = time.monotonic, unservable: Unservable = no_tasks) -> None:
+                 monotonic: Callable[[], float] = time.monotonic, unservable: Unservable = no_tasks,
+                 fleet_keys: FleetKeys | None = None, vehicle: str = "") -> None:
         self.journal = journal
         self.area = area
         self.clock = clock
         self.monotonic = monotonic
         self.limits = limits
         self.keys = keys
+        self.fleet_keys = fleet_keys
+        """A fleet member's: requests on the fleet's request keys are taken too."""
+        self.vehicle = vehicle
+        """Named in every ack (a fleet's user reads which member answered)."""
         self.unservable = unservable
         self.closed_reason: str | None = None
         """When set, every request is refused with this message (shutdown, sortie over)."""
@@ -178,7 +183,7 @@ class Intake:
         if self.closed_reason is not None:
             return Rejected(ErrorReply(field="service", message=self.closed_reason, client_ref=ref))
         try:
-            key_user = None if key is None else self.keys.request_user(key)
+            key_user = None if key is None else self._key_user(key)
         except ProtocolError as err:
             return Rejected(ErrorReply(field=err.field, message=_sendable(err.message), client_ref=ref))
         if payload is None:
@@ -189,7 +194,7 @@ class Intake:
             return Rejected(ErrorReply(field=_sendable(err.field), message=_sendable(err.message), client_ref=ref))
         if key_user is not None and request.user_id != key_user:
             return Rejected(ErrorReply(field="user_id", client_ref=request.client_ref, message=(
-                f"this request key is user {key_user}'s ({self.keys.user_request(key_user)}); "
+                f"this request key is user {key_user}'s ({key}); "
                 f"a request on it must carry that user_id")))
         try:
             services = self.journal.service_counts()
@@ -218,8 +223,15 @@ class Intake:
         ack = TaskAck(request_id=request_id, user_id=request.user_id, accepted_at_s=now, queue_position=position,
                       client_ref=request.client_ref, sortie=sortie, served_tasks=served,
                       place=None if place is None else place.place, eta_s=None if place is None else place.eta_s,
-                      note="" if why_not is None else f"cannot be served in this sortie: {why_not}"[:256])
+                      note="" if why_not is None else f"cannot be served in this sortie: {why_not}"[:256],
+                      vehicle=self.vehicle)
         return Accepted(request_id, request.user_id, request.tasks, tuple(replaced), ack, why_not, backlog, seen)
+
+    def _key_user(self, key: str) -> str | None:
+        fk = self.fleet_keys
+        if fk is not None and (key == fk.request or key.startswith(fk.request + "/")):
+            return fk.request_user(key)
+        return self.keys.request_user(key)
 
     def _over_limit(self, user_id: str, servable: bool, pending: list[RequestRow],
                     services: dict[str, int]) -> str | None:

@@ -16,6 +16,7 @@ also on record there.)
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from typing import Callable
 
 from .errors import JournalError
 from .journal import Journal
@@ -84,3 +85,35 @@ class JournalWorld:
     def pending(self) -> list[RequestRow]:
         rows = [self._counted(r) for r in self.journal.pending()]
         return [r for r in rows if r is not None]
+
+
+class FleetWorld(JournalWorld):
+    """A fleet member's view (docs/OPERATIONS.md, "A fleet"): the journal's, less the users
+    another live member owns (``fleet_ledger.owned_by_others``: this member neither plans nor binds
+    them), with the other members' services counted as its own (``remote``): each takes
+    its tasks off the user's request in force here, as a service recorded here would."""
+
+    def __init__(self, journal: Journal, taken: Callable[[], set[str]]) -> None:
+        super().__init__(journal)
+        self.taken = taken
+        self.remote: list[Unrecorded] = []
+
+    def count_remote(self, user_id: str, tasks: int) -> bool:
+        """Count another member's service of ``user_id``; False when the user has no request
+        in force here (nothing to take it off: its services still count)."""
+        row = self.journal.request_in_force(user_id)
+        self.remote.append(Unrecorded(self.journal.sortie, row.request_id if row else 0, user_id, tasks))
+        return row is not None
+
+    def _now(self) -> list[Unrecorded]:
+        return [u for u in (*self.unrecorded, *self.remote) if u.sortie == self.journal.sortie]
+
+    def request_for(self, user_id: str) -> RequestRow | None:
+        return None if user_id in self.taken() else super().request_for(user_id)
+
+    def pending_count(self) -> int:
+        return len(self.pending())
+
+    def pending(self) -> list[RequestRow]:
+        taken = self.taken()
+        return [r for r in super().pending() if r.user_id not in taken]

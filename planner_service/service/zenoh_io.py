@@ -100,6 +100,7 @@ class ZenohIO:
         """The operator's own bound: a flood of users' queries never answers a hold busy."""
         self._request_q: Any = None
         self._user_request_q: Any = None
+        self._fleet_request_qs: list[Any] = []
         self._state_q: Any = None
         self._operator_q: Any = None
         self._pubs: dict[str, Any] = {}
@@ -163,6 +164,10 @@ class ZenohIO:
         # that user's certificate; the same handler (it reads the user id from the key)
         self._user_request_q = s.declare_queryable(self.keys.user_requests,
                                                    self._hand_over(loop, on_request, self.keys.user_requests))
+        if self.fleet is not None:  # a request to the fleet: every member holds it
+            fk = self.fleet.keys
+            self._fleet_request_qs = [s.declare_queryable(k, self._hand_over(loop, on_request, k))
+                                      for k in (fk.request, fk.user_requests)]
         if on_operator is not None:
             self._operator_q = s.declare_queryable(
                 self.keys.operator, self._hand_over(loop, on_operator, self.keys.operator, self.operator_in_flight))
@@ -226,10 +231,11 @@ class ZenohIO:
 
     def stop_intake(self) -> None:
         """Undeclare the request queryables: no new request reaches the service."""
-        for q in (self._request_q, self._user_request_q):
+        for q in (self._request_q, self._user_request_q, *self._fleet_request_qs):
             if q is not None:
                 q.undeclare()
         self._request_q = self._user_request_q = None
+        self._fleet_request_qs = []
 
     def close(self) -> None:
         self.stop_intake()

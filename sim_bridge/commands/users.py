@@ -45,6 +45,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
                              "user_move_range_m moves it: 0.07,0.22 for the field preset)")
     parser.add_argument("--speedup", type=positive_float, default=1.0,
                         help="simulated seconds per wall second (default 1)")
+    parser.add_argument("--fleet", action="store_true",
+                        help="submit to the fleet ({prefix}/fleet/request/{user}): every member holds each request, "
+                             "the one that plans it soonest answers for it (docs/OPERATIONS.md, section A fleet)")
     parser.add_argument("--seed", type=int, default=0, help="seed of the walks and task draws (default 0)")
     parser.add_argument("--duration", type=positive_float, default=None, help="stop after this many wall seconds")
     add_client_arguments(parser)
@@ -81,10 +84,11 @@ def run(args: argparse.Namespace) -> int:
         return 1
     with client:
         logging.getLogger("sim_bridge.users").info("%d users waiting for the service at %s", args.count, keys.alive)
-        while not client.wait_for_service(1.0):
+        while not (client.wait_for_fleet(1.0) if args.fleet else client.wait_for_service(1.0)):
             if stop.is_set():
                 return 0
         tasks = TaskParams(interval_s=args.interval, law=args.tasks, resend_m=args.resend_m, retry_s=args.interval,
+                           fleet=args.fleet,
                            backlog_max=scenario.task_max if args.backlog_max is None else args.backlog_max)
         walkers = run_users(client, scenario, args.count, tasks, args.speedup, args.seed, stop, args.duration,
                             args.walk_speed)

@@ -1,0 +1,113 @@
+"""A fleet on loopback for the end-to-end tests: two zenoh routers meshed, and for each UAV a
+vehicle stub and its own ``serve`` (its journal, its layer), a client of both routers; the
+simulated users submit to the fleet through one router. Every process is stopped at the end."""
+
+from __future__ import annotations
+
+import socket
+import sqlite3
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import zenoh
+
+from planner_service.harness.processes import Child, free_port
+from planner_service.service.config import OriginConfig, build_config, to_toml
+from protocol import GeoOrigin, local_to_global
+from protocol.zenoh_config import session_config
+
+
+@dataclass
+class Uav:
+    vehicle: str
+    folder: Path
+    stub: Child
+    service: Child
+
+    @property
+    def journal(self) -> Path:
+        return self.folder / "journal.sqlite"
+
+    def rows(self, sql: str) -> list[tuple[Any, ...]]:
+        """Its journal, read as another process would (read-only, beside the WAL writer)."""
+        db = sqlite3.connect(f"file:{self.journal}?mode=ro", uri=True)
+        try:
+            return db.execute(sql).fetchall()
+        finally:
+            db.close()
+
+    def services(self) -> list[tuple[str, int]]:
+        """(user id, tasks) of every service it recorded."""
+        return self.rows("SELECT r.user_id, s.tasks FROM services s JOIN requests r USING (request_id) "
+                         "ORDER BY s.service_id")
+
+
+class FleetStack:
+    """Two meshed routers (``endpoints``), and UAVs added with ``uav``."""
+
+    def __init__(self, tmp: Path) -> None:
+        self.tmp = tmp
+        self.endpoints = [f"tcp/127.0.0.1:{free_port()}" for _ in range(2)]
+        first = zenoh.open(session_config("router", listen=[self.endpoints[0]]))
+        second = zenoh.open(session_config("router", listen=[self.endpoints[1]], connect=[self.endpoints[0]]))
+        self.routers: list[Any] = [first, second]
+        self.children: list[Child] = []
+        self.uavs: dict[str, Uav] = {}
+
+    def uav(self, vehicle: str, altitude_m: float, speedup: str, home_east_m: float = 0.0, **overrides: str) -> Uav:
+        """A vehicle stub standing ``home_east_m`` east of the fleet's origin (two UAVs cannot
+        stand on one spot, nor climb through each other's layers there) and its service, a
+        fleet member in its own layer, in the fleet's one local frame."""
+        folder = self.tmp / vehicle
+        folder.mkdir()
+        port = free_port(socket.SOCK_DGRAM)
+        stub = Child("sim_bridge", ["vehicle", "--mavlink", f"udpin:127.0.0.1:{port}", "--speedup", speedup,
+                                    "--gps-delay-s", "2", "--disarm-delay-s", "0",
+                                    "--origin", home(home_east_m), "--track", str(folder / "track.csv")],
+                     folder / "vehicle.log")
+        self.children.append(stub)
+        stub.wait_ready("listening")
+        settings = {"zenoh.mode": "peer", "zenoh.listen": f"tcp/127.0.0.1:{free_port()}", "zenoh.connect": ",".join(self.endpoints),
+                    "zenoh.vehicle": vehicle, "mavlink.url": f"udpout:127.0.0.1:{port}",
+                    "journal.path": str(folder / "journal.sqlite"), "planner.budget_ms": "100",
+                    "fleet.enabled": "true", "fleet.discovery_s": "1.0", "scenario.altitude_m": str(altitude_m),
+                    **overrides}
+        config = build_config({}, settings)
+        path = folder / "planner.toml"
+        path.write_text(to_toml(config))
+        service = Child("planner_service", ["serve", "--config", str(path)], folder / "service.log")
+        self.children.append(service)
+        service.wait_ready("ready:", 90.0)
+        self.uavs[vehicle] = Uav(vehicle, folder, stub, service)
+        return self.uavs[vehicle]
+
+    def users(self, *extra: str) -> Child:
+        """The simulated users, submitting to the fleet, connected to both routers."""
+        connect = [arg for e in self.endpoints for arg in ("--connect", e)]
+        child = Child("sim_bridge", ["users", "--fleet", *connect, *extra],
+                      self.tmp / "users.log")
+        self.children.append(child)
+        return child
+
+    def kill_router(self, index: int) -> None:
+        self.routers[index].close()
+
+    def logs(self) -> str:
+        return "\n".join(f"--- {c.name}\n{c.log()[-3000:]}" for c in self.children)
+
+    def close(self) -> None:
+        for child in reversed(self.children):
+            child.stop()
+        for router in self.routers:
+            try:
+                router.close()
+            except zenoh.ZError:
+                pass
+
+
+def home(east_m: float) -> str:
+    """The stub's ``--origin`` (its home) ``east_m`` east of the services' default origin."""
+    o = OriginConfig()
+    lat, lon, alt = local_to_global(GeoOrigin(o.lat_deg, o.lon_deg, o.alt_m), east_m, 0.0, 0.0)
+    return f"{lat:.7f},{lon:.7f},{alt:.2f}"
