@@ -2,8 +2,11 @@
 several UAVs without a coordinator (docs/OPERATIONS.md, "A fleet"):
 
 - **intentions** (``{prefix}/fleet/intentions/{vehicle}``): on every plan, the users of the
-  points still to fly and when each service should begin (wall clock). A user several
-  members mean to serve belongs to the earliest (ties: the smaller vehicle id); every
+  points still to fly and when each service should begin (wall clock), and its claims: the
+  next point's user, and the user a hold serves from the moment it is bound (``bound_due``:
+  before any plan's), as the offline ``claims`` planner commits (the rest of a plan may still
+  change, and claiming it would starve the others). A user several members claim belongs to
+  the earliest (ties: the smaller vehicle id); every
   member computes the same from the same messages, and a member plans and binds only the
   users no other live member owns. A member whose token goes loses its intentions at once:
   its users are planned by the others at their next decision (one interval).
@@ -35,6 +38,21 @@ SERVED_CACHE = 256
 HEARTBEAT_S = 1.0
 MAX_SERVED_QUEUED = 4096
 MAX_INTENTIONS = 256
+MAX_CLAIMS = 8
+MAX_MEMBERS = 1024
+"""Members whose intentions are kept: a peer announcing thousands of vehicle ids (a network
+without access control) cannot grow them without bound."""
+
+
+BOUND_LEAD_S = 1.0e10
+"""A user bound by a hold is claimed as due this long before its binding: a hold under way
+beats every plan's estimate (an ETA is a prediction, and may be early), and of two holds the
+one bound first wins."""
+
+
+def bound_due(at_s: float) -> float:
+    """The due of a user bound by a hold at ``at_s`` (wall clock): before any plan's."""
+    return at_s - BOUND_LEAD_S
 
 
 def owner(user: str, intentions: Mapping[str, Mapping[str, float]]) -> str | None:
@@ -62,6 +80,7 @@ class FleetLedger:
         self._alive = alive
         self._lock = threading.Lock()
         self._intentions: dict[str, dict[str, float]] = {}
+        self._claims: dict[str, dict[str, float]] = {}
         self._served: deque[FleetServed] = deque(maxlen=MAX_SERVED_QUEUED)
         self._seen: set[tuple[str, str, float]] = set()
         self.refused: deque[str] = deque(maxlen=16)
@@ -93,14 +112,17 @@ class FleetLedger:
         self._intent_pub = self._served_pub = None
 
     # --- this member's side ------------------------------------------------------------------
-    def intend(self, due: Mapping[str, float], now_s: float) -> None:
-        """Say which users this member's plan means to serve and when (wall clock)."""
+    def intend(self, due: Mapping[str, float], now_s: float, claims: Iterable[str] = ()) -> None:
+        """Say which users this member's plan means to serve and when (wall clock), and which
+        of them it claims (``claims``: the next point's user and the one a hold serves)."""
         users = sorted(due.items(), key=lambda kv: kv[1])[:MAX_INTENTIONS]
+        claimed = sorted(set(claims) & set(due))[:MAX_CLAIMS]
         with self._lock:
             self._intentions[self.vehicle] = dict(users)
+            self._claims[self.vehicle] = {u: due[u] for u in claimed}
         if self._intent_pub is not None:
             self._intent_pub.put(encode(FleetIntentions(
-                vehicle=self.vehicle, time_s=now_s, users=[Intention(u, d) for u, d in users])))
+                vehicle=self.vehicle, time_s=now_s, users=[Intention(u, d) for u, d in users], claims=claimed)))
 
     def served(self, user_id: str, tasks: int, at_s: float) -> None:
         """Tell the fleet of a service this member flew."""
@@ -111,8 +133,13 @@ class FleetLedger:
     def taken(self) -> set[str]:
         """The users another live member owns now."""
         with self._lock:
-            intentions = {v: dict(d) for v, d in self._intentions.items()}
-        return owned_by_others(self.vehicle, intentions, self._alive())
+            claims = {v: dict(d) for v, d in self._claims.items()}
+        return owned_by_others(self.vehicle, claims, self._alive())
+
+    def claims(self) -> dict[str, dict[str, float]]:
+        """Every member's last claims (vehicle -> user -> due), live or not."""
+        with self._lock:
+            return {v: dict(d) for v, d in self._claims.items()}
 
     def intentions(self) -> dict[str, dict[str, float]]:
         """Every member's last intentions (vehicle -> user -> due), live or not."""
@@ -144,8 +171,12 @@ class FleetLedger:
     def _on_intentions(self, sample: Any) -> None:
         message = self._read(sample, FleetIntentions)
         if message is not None:
+            due = {i.user_id: i.due_s for i in message.users}
             with self._lock:
-                self._intentions[message.vehicle] = {i.user_id: i.due_s for i in message.users}
+                if message.vehicle not in self._intentions and len(self._intentions) >= MAX_MEMBERS:
+                    return
+                self._intentions[message.vehicle] = due
+                self._claims[message.vehicle] = {u: due[u] for u in message.claims if u in due}
 
     def _on_served(self, sample: Any) -> None:
         message = self._read(sample, FleetServed)

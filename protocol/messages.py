@@ -356,11 +356,15 @@ class Intention(msgspec.Struct, frozen=True, array_like=True, forbid_unknown_fie
 class FleetIntentions(_Message, tag="fleet_intentions"):
     """What a member's plan means to do (``FleetKeys.intentions``), published on every plan
     with a cache of one: each user of the points still to fly and when its service should
-    begin. A user several members mean to serve belongs to the earliest (docs/OPERATIONS.md, "A fleet")."""
+    begin, and the users it claims. A user several members claim belongs to the earliest
+    (docs/OPERATIONS.md, "A fleet")."""
 
     vehicle: VehicleId
     time_s: float
     users: Annotated[list[Intention], msgspec.Meta(max_length=256)] = []
+    claims: Annotated[list[UserId], msgspec.Meta(max_length=8)] = []
+    """The users of ``users`` it is committed to: the next point's and the one a hold serves.
+    Only these keep the others off (the rest of the plan may still change)."""
 
 
 class FleetServed(_Message, tag="fleet_served"):

@@ -25,7 +25,7 @@ ALLOWED: dict[str, set[str] | None] = {
     "planner_service.experiments": {SETTINGS, MODEL, POLICY, MCTS, SORTIE, "planner_service.fleet"},
     SERVICE: {"protocol", SETTINGS, MODEL, POLICY, MCTS, "planner_service.fleet_roster",
               "planner_service.fleet_separation", "planner_service.fleet_ledger"},
-    HARNESS: {"protocol", SETTINGS, MODEL, POLICY, SORTIE, SERVICE},
+    HARNESS: {"protocol", SETTINGS, MODEL, POLICY, SORTIE, SERVICE, "planner_service.fleet"},
     "planner_service.bench": EVERYTHING,
     "planner_service.commands": EVERYTHING,
     "planner_service.cli": EVERYTHING,

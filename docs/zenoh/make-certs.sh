@@ -75,7 +75,7 @@ if [ "${1:-}" = "--user" ]; then
     sign "$user" "$user" "extendedKeyUsage=clientAuth"
     k="uavmec/uav1"
     echo "add to the access_control of service-tls-acl.json5 (prefix uavmec, vehicle uav1: change them with yours):"
-    echo "rules: { id: \"$user-in\", permission: \"allow\", flows: [\"ingress\"], messages: [\"query\", \"declare_subscriber\"], key_exprs: [\"$k/request/$user\", \"$k/users/$user\"] }, { id: \"$user-out\", permission: \"allow\", flows: [\"egress\"], messages: [\"reply\", \"put\"], key_exprs: [\"$k/request/$user\", \"$k/users/$user\"] },"
+    echo "rules: { id: \"$user-in\", permission: \"allow\", flows: [\"ingress\"], messages: [\"query\", \"declare_subscriber\"], key_exprs: [\"$k/request/$user\", \"$k/users/$user\", \"uavmec/fleet/request/$user\"] }, { id: \"$user-out\", permission: \"allow\", flows: [\"egress\"], messages: [\"reply\", \"put\"], key_exprs: [\"$k/request/$user\", \"$k/users/$user\", \"uavmec/fleet/request/$user\"] },"
     echo "subjects: { id: \"$user\", cert_common_names: [\"$user\"] },"
     echo "policies: { id: \"$user\", rules: [\"user-asks\", \"user-follows\", \"user-checks-alive\", \"to-users\", \"$user-in\", \"$user-out\"], subjects: [\"$user\"] },"
     exit 0
@@ -90,9 +90,9 @@ if [ "${1:-}" = "--vehicle" ]; then
     sign "$v" "uavmec-vehicle-$v" "extendedKeyUsage=clientAuth"
     k="uavmec"
     echo "add to the access_control of fleet-router-tls-acl.json5 (prefix uavmec: change it with yours):"
-    echo "rules: { id: \"$v-speaks\", permission: \"allow\", flows: [\"ingress\"], messages: [\"put\", \"delete\", \"declare_queryable\", \"reply\", \"liveliness_token\"], key_exprs: [\"$k/$v/**\", \"$k/fleet/members/$v\", \"$k/fleet/uavs/$v\", \"$k/fleet/uavs/$v/@adv/**\"] }, { id: \"$v-asked\", permission: \"allow\", flows: [\"egress\"], messages: [\"query\", \"declare_subscriber\"], key_exprs: [\"$k/$v/**\", \"$k/fleet/uavs/$v\", \"$k/fleet/uavs/$v/@adv/**\"] },"
+    echo "rules: { id: \"$v-speaks\", permission: \"allow\", flows: [\"ingress\"], messages: [\"put\", \"delete\", \"declare_queryable\", \"reply\", \"liveliness_token\"], key_exprs: [\"$k/$v/**\", \"$k/fleet/members/$v\", \"$k/fleet/uavs/$v\", \"$k/fleet/uavs/$v/@adv/**\", \"$k/fleet/intentions/$v\", \"$k/fleet/intentions/$v/@adv/**\", \"$k/fleet/served/$v\", \"$k/fleet/served/$v/@adv/**\"] }, { id: \"$v-asked\", permission: \"allow\", flows: [\"egress\"], messages: [\"query\", \"declare_subscriber\"], key_exprs: [\"$k/$v/**\", \"$k/fleet/uavs/$v\", \"$k/fleet/uavs/$v/@adv/**\", \"$k/fleet/intentions/$v\", \"$k/fleet/intentions/$v/@adv/**\", \"$k/fleet/served/$v\", \"$k/fleet/served/$v/@adv/**\"] },"
     echo "subjects: { id: \"$v\", cert_common_names: [\"uavmec-vehicle-$v\"] },"
-    echo "policies: { id: \"$v\", rules: [\"fleet-follows\", \"to-fleet\", \"$v-speaks\", \"$v-asked\"], subjects: [\"$v\"] },"
+    echo "policies: { id: \"$v\", rules: [\"fleet-follows\", \"to-fleet\", \"fleet-serves\", \"fleet-asked\", \"$v-speaks\", \"$v-asked\"], subjects: [\"$v\"] },"
     exit 0
 fi
 

@@ -48,7 +48,12 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--fleet", action="store_true",
                         help="instead: every fleet planner's decision time per UAV (median, p95) and message size "
                              "for N = 3 and 5 at K=20/I=10 and K=200/I=1000, --iterations per decision "
-                             "(--decisions each, default 30; with --quick the paper's size only, 10 decisions)")
+                             "(--decisions each, default 30; with --quick the paper's size only, 10 decisions); "
+                             "with --flight: fleets of --uavs flown on loopback against the offline fleet planner, "
+                             "the traffic each UAV sends and the decision time (medians over --seeds; --quick: 1 seed)")
+    parser.add_argument("--uavs", default="1,2,3", metavar="N,N,...",
+                        help="fleet sizes with --fleet --flight (default 1,2,3)")
+    parser.add_argument("--users", type=int, default=12, help="simulated users with --fleet --flight (default 12)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -56,6 +61,8 @@ def run(args: argparse.Namespace) -> int:
         return _run_e2e(args)
     if args.link:
         return _run_link(args)
+    if args.fleet and args.flight:
+        return _run_fleet_flight(args)
     if args.flight:
         return _run_flight(args)
     if args.fleet:
@@ -105,6 +112,31 @@ def _run_link(args: argparse.Namespace) -> int:
         return 2
     results = run_link_bench(uploads, progress=lambda msg: print(msg, file=sys.stderr, flush=True))
     print(json.dumps(results, indent=1) if args.json else format_link(results))
+    return 0
+
+
+def _run_fleet_flight(args: argparse.Namespace) -> int:
+    from ..bench.fleet_flight import format_fleet_flight, run_fleet_flight
+
+    try:
+        lo, _, hi = args.seeds.partition("-")
+        seeds = list(range(int(lo), int(hi or lo) + 1))
+        counts = [int(n) for n in args.uavs.split(",") if n]
+    except ValueError:
+        print(f"error: --seeds {args.seeds!r} or --uavs {args.uavs!r} is not a number list", file=sys.stderr)
+        return 2
+    if not seeds or not counts or any(not 1 <= n <= 8 for n in counts) or args.users < 1 or not args.speedup > 0:
+        print("error: --uavs 1 to 8 each, --seeds, --users and --speedup positive", file=sys.stderr)
+        return 2
+    from ..harness.demo import DemoError
+
+    try:
+        results = run_fleet_flight(counts, seeds[:1] if args.quick else seeds, args.users, args.speedup,
+                                   args.budget_ms, progress=lambda msg: print(msg, file=sys.stderr, flush=True))
+    except DemoError as err:
+        print(f"error: a fleet flight failed: {err}", file=sys.stderr)
+        return 1
+    print(json.dumps(results, indent=1) if args.json else format_fleet_flight(results))
     return 0
 
 

@@ -21,7 +21,12 @@ HELP = "the main job on the embedded default (writes summary.json, trajectory.pn
 
 def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", default="demo-out", help="output folder (default: demo-out)")
-    parser.add_argument("--users", type=positive_int, default=10, help="simulated users (default 10)")
+    parser.add_argument("--users", type=positive_int, default=None,
+                        help="simulated users (default 10; 12 with --uavs)")
+    parser.add_argument("--uavs", type=positive_int, default=1,
+                        help="UAVs: with 2 or more, a fleet (a stub and a service each, two meshed zenoh routers, "
+                             "the users submitting to the fleet; docs/OPERATIONS.md, A fleet); writes summary.json "
+                             "and paths.png (default 1)")
     parser.add_argument("--speedup", type=positive_float, default=25.0, help="simulated seconds per wall second (default 25)")
     parser.add_argument("--budget-ms", type=positive_float, default=150.0, help="planner budget per decision (default 150)")
     parser.add_argument("--backend", default="pymavlink", choices=["pymavlink", "mavsdk"], help="MAVLink library")
@@ -54,8 +59,10 @@ def run(args: argparse.Namespace) -> int:
     from ..harness.demo import DemoError, run_demo
 
     out = Path(args.out)
+    if args.uavs > 1:
+        return run_fleet(args, out)
     try:
-        summary = run_demo(out, users=args.users, speedup=args.speedup, budget_ms=args.budget_ms, backend=args.backend,
+        summary = run_demo(out, users=args.users or 10, speedup=args.speedup, budget_ms=args.budget_ms, backend=args.backend,
                            flavour=args.flavour, seed=args.seed, timeout_s=args.timeout, mavlink=args.mavlink,
                            algo=args.algo, config=Path(args.config) if args.config else None, echo=_echo)
     except DemoError as err:
@@ -84,3 +91,43 @@ _lock = threading.Lock()
 def _echo(line: str) -> None:
     with _lock:
         print(line, flush=True)
+
+
+def run_fleet(args: argparse.Namespace, out: Path) -> int:
+    """``demo --uavs N``: the fleet's sortie, its summary per UAV and for the fleet."""
+    from ..harness.demo import DemoError
+    from ..harness.fleet_demo import run_fleet_demo
+
+    alone = [flag for flag, given in (("--mavlink", args.mavlink), ("--config", args.config),
+                                      ("--flavour", args.flavour), ("--algo", args.algo != "mcts"),
+                                      ("--backend", args.backend != "pymavlink")) if given]
+    if alone:
+        print(f"error: {', '.join(alone)} fly one UAV; --uavs {args.uavs} flies the stubs with the defaults",
+              file=sys.stderr)
+        return 2
+    try:
+        summary = run_fleet_demo(out, uavs=args.uavs, users=args.users or 12, speedup=args.speedup,
+                                 budget_ms=args.budget_ms, seed=args.seed, timeout_s=max(args.timeout, 300.0),
+                                 echo=_echo)
+    except DemoError as err:
+        print(f"demo failed: {err}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        print("demo interrupted; every process stopped", file=sys.stderr)
+        return 130
+    for vehicle, s in summary["per_uav"].items():
+        traffic = summary["traffic_bytes_per_s"][vehicle]
+        print(f"{vehicle}: {s['intervals']} services to {s['served_users']} users, "
+              f"{s['throughput_tasks_per_interval']:.1f} tasks/interval, requests {json.dumps(s['requests'])}; "
+              f"sent {traffic['fleet_keys']:.0f} B/s on the fleet keys, {traffic['status']:.0f} B/s of status")
+    f = summary["fleet"]
+    print(f"fleet: {f['intervals']} services to {f['users_served']} users, {f['throughput_tasks_per_interval']:.1f} "
+          f"tasks/interval (sum of the UAVs'), users served by two UAVs {f['users_served_by_two_uavs'] or 0}, "
+          f"fairness violations {f['fairness_violations']}, energy violations {f['energy_violations']}")
+    if summary.get("flown_to_offline") is not None:
+        off = summary["offline"]
+        print(f"planned offline by the fleet planner {off['algo']} on the same scenario and seed: "
+              f"{off['throughput_tasks_per_interval']:.1f} tasks/interval; flown / offline: "
+              f"{summary['flown_to_offline']:.2f}")
+    print(f"{summary['wall_s']:.1f} s wall; wrote {out / 'summary.json'}, {out / 'paths.png'}")
+    return 0

@@ -40,6 +40,7 @@ from protocol.messages import FleetMember
 from protocol.operator_proof import ProofCheck, load_or_create_key
 from protocol.text import printable
 
+from ..fleet_ledger import bound_due
 from ..mcts import MctsConfig
 from .allocator import ARENAS, cap_arenas
 from .config import ServiceConfig
@@ -152,9 +153,11 @@ class Service:
         self._plan_dues: dict[str, float] = {}
         """When this UAV's last plan means to serve each of its users (wall clock)."""
         self._bound: tuple[str, float] | None = None
+        """The user a hold of this UAV serves now, and since when (wall clock)."""
+        self._next_user: str | None = None
+        """The user of this UAV's next point (its claim, with the bound one)."""
         self._taken: set[str] = set()
         """The users another member owned at the last tick."""
-        """The user a hold of this UAV serves now, and since when (wall clock)."""
         self.plan_msg: Plan | None = None
         if self.state.life.over:
             self.intake.closed_reason = self._closed_reason()
@@ -620,6 +623,7 @@ class Service:
         """Tell the fleet which users this plan means to serve and when (wall clock)."""
         now, rate = self.wall(), time_rate if time_rate and time_rate > 0 else 1.0
         self._plan_dues = {u: now + p.eta_s / rate for u, p in places.items()}
+        self._next_user = next((u for u, p in places.items() if p.place == 1), None)
         self._tell_intentions()
 
     def _tell_intentions(self) -> None:
@@ -629,9 +633,11 @@ class Service:
         if self.fleet is None or not self.fleet.joined:
             return
         due, now = dict(self._plan_dues), self.wall()
-        if self._bound is not None:
-            due[self._bound[0]] = min(due.get(self._bound[0], math.inf), self._bound[1])
-        self.fleet.ledger.intend(due, now)
+        claims = {self._next_user} if self._next_user is not None else set()
+        if self._bound is not None:  # a hold under way beats any plan's estimate
+            due[self._bound[0]] = bound_due(self._bound[1])
+            claims.add(self._bound[0])
+        self.fleet.ledger.intend(due, now, claims)
         log.debug("fleet: intends %s; others own %s", {u: round(d - now, 2) for u, d in due.items()},
                   sorted(self.fleet.ledger.taken()))
 

@@ -6,9 +6,11 @@ docs/zenoh/vehicle-tls.json5 with its own certificate.
 Each UAV joins the fleet under its own name and reads the others' layers and statuses. A
 certificate taken from one UAV speaks for that UAV only: its token, announcement and status
 in another vehicle's name reach nobody, so it can neither bar that vehicle from the fleet nor
-give it a false layer or position. A user's certificate joins nobody's fleet: its token and
-announcement go nowhere. And a real ``serve`` behind the routers serves its user and is
-watched by the operator, each with their own certificates."""
+give it a false layer or position, nor intentions nor services (which would take users from
+it, or close their requests). A user's certificate joins nobody's fleet: its token and
+announcement go nowhere. And a real ``serve`` behind the routers serves its user, on its
+vehicle's keys and through the fleet's, and is watched by the operator, each with their own
+certificates."""
 
 from __future__ import annotations
 
@@ -22,9 +24,10 @@ import pytest
 import zenoh
 
 from planner_service.harness.processes import REPO, Child, free_port
-from planner_service.service.fleet_presence import FleetPresence
+from planner_service.service.fleet_presence import FleetPresence, MembershipError
 from protocol import FleetKeys, Keys, Status, decode, encode
-from protocol.client import PlannerClient, client_config
+from protocol.client import PlannerClient, client_config, request_for
+from protocol.messages import FleetIntentions, FleetServed, Intention
 from tests.support.fleet import member, wait_until
 from tests.support.stack import Stack
 from tests.support.zenoh_tls import VEHICLE_MARKS, add_entries, make_certs, shipped
@@ -81,13 +84,13 @@ def test_each_uav_certificate_speaks_for_its_own_vehicle_only(tmp_path: Path) ->
         for _ in range(10):
             thief.put(KEYS.announce("uav2"), encode(member("uav2", 80.0)))
             time.sleep(0.05)
-        # a user's certificate joins as uav4: it hears no member, so it finds no clash...
+        # a user's certificate tries to join as uav4: it sees the members' tokens (a user waits
+        # for the fleet's) but not their layers, so it refuses itself; its token reached nobody
         user = FleetPresence(KEYS, member("uav4", 120.0))
-        user.join(session("u-1"), DISCOVERY_S)
-        presences.append(user)
-        assert user.members() == {"uav4": member("uav4", 120.0)}
+        with pytest.raises(MembershipError, match="uav1 is a member but its layer is unknown"):
+            user.join(session("u-1"), DISCOVERY_S)
 
-        # ...and nobody hears it; the real uav2 and uav3 join, each layer read as its own
+        # the real uav2 and uav3 join, each layer read as its own
         uav2 = FleetPresence(KEYS, member("uav2", 90.0))
         uav2.join(uav2_session, DISCOVERY_S)
         presences.append(uav2)
@@ -98,6 +101,21 @@ def test_each_uav_certificate_speaks_for_its_own_vehicle_only(tmp_path: Path) ->
         for p in (uav1, uav2, uav3):
             wait_until(lambda p=p: p.members() == every, 10.0,
                        lambda p=p: f"{p.own.vehicle} reads the three members: {p.members()}")
+
+        # intentions and services in uav2's name: uav2's own reach uav1 (across the two
+        # routers), the thief's none (it would take users from uav2, or close their requests)
+        uav2.ledger.intend({"u-real": 1.0e9}, 0.0)
+        uav2.ledger.served("u-real", 3, 1.0)
+        for _ in range(20):
+            thief.put(KEYS.intentions("uav2"), encode(FleetIntentions(vehicle="uav2", time_s=0.0,
+                                                                      users=[Intention("u-forged", 0.0)])))
+            thief.put(KEYS.served("uav2"), encode(FleetServed(vehicle="uav2", user_id="u-forged", tasks=9, at_s=2.0)))
+            time.sleep(0.05)
+        wait_until(lambda: "u-real" in uav1.ledger.intentions().get("uav2", {}), 10.0,
+                   lambda: f"uav2's intentions at uav1: {uav1.ledger.intentions()}")
+        heard_served = [(d.vehicle, d.user_id) for d in uav1.ledger.take_served()]
+        assert uav1.ledger.intentions()["uav2"] == {"u-real": 1.0e9}
+        assert heard_served == [("uav2", "u-real")], heard_served
 
         # a status in uav2's name: uav2's own reaches uav1, the thief's none
         status_key = Keys("uavmec", "uav2").status
@@ -152,6 +170,9 @@ def test_a_fleet_service_behind_the_routers_access_control(stack: Stack, tmp_pat
     assert "fleet: joined as uav1, layer 100 m" in service.log()
     ack = stack.client.submit("u-1", 100.0, 120.0, 9)
     assert ack.request_id == 1
+    assert stack.client.wait_for_fleet(10.0)  # the user's certificate may see the members...
+    answer = stack.client.submit_to_fleet(request_for("u-1", 100.0, 130.0, 9))  # ...and ask the fleet
+    assert answer.holders == ("uav1",) and answer.ack.request_id == 2, answer
     watch = subprocess.run([sys.executable, "-m", "planner_service", "operator", "watch", "--once", "--plain",
                             "--connect", endpoint, "--zenoh-config", str(operator_conf),
                             "--operator-key", str(stack.operator_key_path)],

@@ -76,10 +76,11 @@ class Intentions:
         with self._lock:
             self.seen.append((time.monotonic(), message))
 
-    def last(self) -> dict[str, dict[str, float]]:
-        """Each vehicle's latest intentions (vehicle -> user -> due)."""
+    def claims(self) -> dict[str, dict[str, float]]:
+        """Each vehicle's latest claims (vehicle -> user -> due)."""
         with self._lock:
-            return {m.vehicle: {i.user_id: i.due_s for i in m.users} for _, m in self.seen}
+            last = {m.vehicle: m for _, m in self.seen}
+        return {v: {i.user_id: i.due_s for i in m.users if i.user_id in m.claims} for v, m in last.items()}
 
     def since(self, vehicle: str, t: float) -> list[tuple[float, set[str]]]:
         with self._lock:
@@ -128,8 +129,10 @@ def fly_and_lose_one(fleet: FleetStack, uav1: Uav, uav2: Uav, wire: Intentions) 
     assert answer.holders and len(answer.holders) + len(answer.refusals) == 2, answer
 
     # uav2's service dies mid-sortie: its users become uav1's
-    mine = wire.last()
-    owned = {u for u in mine.get("uav2", {}) if owner(u, mine) == "uav2"}
+    wait_until(lambda: any(owner(u, wire.claims()) == "uav2" for u in wire.claims().get("uav2", {})), 30.0,
+               lambda: f"uav2 claiming a user of its own: {wire.claims()}")
+    claims = wire.claims()
+    owned = {u for u in claims.get("uav2", {}) if owner(u, claims) == "uav2"}
     assert "over:" not in uav2.service.log(), "uav2 landed before its service could be killed in flight"
     uav2.service.proc.send_signal(signal.SIGKILL)
     lost_at = time.monotonic()

@@ -1,0 +1,306 @@
+"""The demo of a fleet (``demo --uavs N``): two meshed zenoh routers, N vehicle stubs each
+with its own service (its journal, its layer, its home), and the simulated users submitting
+once to the fleet, all real processes on loopback; nothing central. Then a summary per UAV
+and for the fleet, the fleet flown against the offline fleet planner on the same scenario and
+seed, the coordination traffic each UAV sent, and one figure with every path."""
+
+from __future__ import annotations
+
+import json
+import socket
+import threading
+import time
+from collections import Counter, defaultdict
+from pathlib import Path
+from typing import Any, Callable
+
+import zenoh
+
+from protocol import Event, FleetKeys, GeoOrigin, Keys, Status, decode, local_to_global
+from protocol.zenoh_config import session_config
+
+from ..fleet.sortie import run_fleet_sortie
+from ..model import Scenario
+from ..model.fairness import fairness_violations
+from ..model.fleet import Fleet, uav_scenarios
+from ..policy import PolicySpec
+from ..service.config import build_config, to_toml
+from ..service.errors import ServiceError
+from ..service.journal import Journal
+from .demo import DemoError
+from .processes import Child, free_port
+from .report import sortie_summary
+
+LAYER_M = 20.0
+"""The layers' spacing: twice the services' default ``fleet.min_layer_gap_m``."""
+BASE_STEP_M = 40.0
+"""UAV j's home lies j times this east of the origin: twice ``fleet.min_horizontal_m``,
+since the UAVs climb through each other's layers above their homes."""
+OFFLINE_ALGO = "claims"
+"""The offline fleet planner the flight is held against: the rule the services fly (a user
+is the UAV's that claims it first, docs/PLANNER.md)."""
+
+
+def fleet_of(uavs: int) -> Fleet:
+    return Fleet(uavs=uavs, layer_m=LAYER_M, base_step_m=BASE_STEP_M)
+
+
+def lowest_layer_m(default: Scenario, uavs: int, max_altitude_m: float) -> float:
+    """UAV 0's layer: the services' default altitude, lowered so that the highest of ``uavs``
+    layers stays within ``safety.max_altitude_m`` (120 m: the usual legal ceiling)."""
+    return min(default.altitude_m, max_altitude_m - (uavs - 1) * LAYER_M)
+
+
+def scenario_settings(base: Scenario, own: Scenario) -> dict[str, str]:
+    """The ``scenario.*`` settings that make a service fly ``own`` (a UAV's of ``base``)."""
+    a, b = base.as_dict(), own.as_dict()
+    out = {}
+    for name, value in b.items():
+        if value != a.get(name):
+            out[f"scenario.{name}"] = ",".join(map(str, value)) if isinstance(value, (list, tuple)) else str(value)
+    return out
+
+
+class Watch:
+    """Every vehicle's statuses and events, and the bytes each member sent on the fleet's
+    keys, as a client of the routers sees them."""
+
+    def __init__(self, session: Any, prefix: str) -> None:
+        self.lock = threading.Lock()
+        self.statuses: dict[str, list[Status]] = defaultdict(list)
+        self.events: list[tuple[str, Event]] = []
+        self.fleet_bytes: Counter[str] = Counter()
+        self.status_bytes: Counter[str] = Counter()
+        self.fleet = FleetKeys(prefix)
+        self._calm_since: float | None = None
+        self._subs = [session.declare_subscriber(f"{prefix}/*/status", self._status),
+                      session.declare_subscriber(f"{prefix}/*/events", self._event),
+                      session.declare_subscriber(f"{prefix}/fleet/**", self._fleet)]
+
+    def _status(self, sample: Any) -> None:
+        vehicle = str(sample.key_expr).split("/")[1]
+        data = sample.payload.to_bytes()
+        with self.lock:
+            self.status_bytes[vehicle] += len(data)
+            self.statuses[vehicle].append(decode(data, Status))
+
+    def _event(self, sample: Any) -> None:
+        vehicle = str(sample.key_expr).split("/")[1]
+        with self.lock:
+            self.events.append((vehicle, decode(sample.payload.to_bytes(), Event)))
+
+    def _fleet(self, sample: Any) -> None:
+        # {prefix}/fleet/{kind}/{vehicle}[/@adv/...]: announcements, intentions, services
+        parts = str(sample.key_expr).split("/")
+        if len(parts) >= 4:
+            with self.lock:
+                self.fleet_bytes[parts[3]] += len(sample.payload.to_bytes())
+
+    def over(self, vehicles: list[str], calm_s: float = 3.0) -> bool:
+        """The sortie is over: a UAV has landed and none has been armed for ``calm_s`` (a
+        UAV whose share was empty never took off)."""
+        with self.lock:
+            last = [self.statuses[v][-1] if self.statuses[v] else None for v in vehicles]
+        armed = any(s is None or s.armed for s in last)
+        if armed or not self.landed():
+            self._calm_since = None
+            return False
+        self._calm_since = self._calm_since or time.monotonic()
+        return time.monotonic() - self._calm_since >= calm_s
+
+    def landed(self) -> set[str]:
+        with self.lock:
+            return {v for v, e in self.events if e.event == "landed"}
+
+    def close(self) -> None:
+        for sub in self._subs:
+            sub.undeclare()
+
+
+def run_fleet_demo(out: Path, *, uavs: int = 3, users: int = 12, speedup: float = 25.0, budget_ms: float = 150.0,
+                   seed: int = 1, timeout_s: float = 300.0, offline: bool = True,
+                   echo: Callable[[str], None] = print) -> dict[str, Any]:
+    """Fly one sortie with ``uavs`` UAVs; returns the summary (also ``out/summary.json``)."""
+    out.mkdir(parents=True, exist_ok=True)
+    defaults = build_config({}, {})
+    default = defaults.scenario()
+    lowest = lowest_layer_m(default, uavs, defaults.safety.max_altitude_m)
+    if lowest < defaults.safety.min_flight_altitude_m:
+        raise DemoError(f"{uavs} layers {LAYER_M:g} m apart do not fit between safety.min_flight_altitude_m "
+                        f"and safety.max_altitude_m ({defaults.safety.min_flight_altitude_m:g}, "
+                        f"{defaults.safety.max_altitude_m:g} m)")
+    base = default.replace(altitude_m=lowest, base_z_m=lowest)
+    fleet = fleet_of(uavs)
+    scenarios = uav_scenarios(base, fleet)
+    origin = defaults.origin_point()
+    routers = [f"tcp/127.0.0.1:{free_port()}" for _ in range(2)]
+    children: list[Child] = []
+    start = time.monotonic()
+    echo(f"demo: {uavs} UAVs (vehicle stubs x{speedup:g}), {uavs} services, 2 routers, {users} users "
+         f"submitting to the fleet; logs in {out}")
+    session = None
+    try:
+        for i, endpoint in enumerate(routers):
+            child = Child("sim_bridge", ["router", "--listen", endpoint, *(["--connect", routers[0]] if i else [])],
+                          out / f"router{i + 1}.log")
+            children.append(child)
+            child.wait_ready("router listening")
+        vehicles = [f"uav{j + 1}" for j in range(uavs)]
+        for j, (vehicle, sc) in enumerate(zip(vehicles, scenarios)):
+            folder = out / vehicle
+            folder.mkdir(exist_ok=True)
+            for stale in folder.glob("journal.sqlite*"):
+                stale.unlink()
+            port = free_port(socket.SOCK_DGRAM)
+            lat, lon, alt = local_to_global(GeoOrigin(origin.lat_deg, origin.lon_deg, origin.alt_m), sc.base_x_m,
+                                            sc.base_y_m, 0.0)
+            stub = Child("sim_bridge", ["vehicle", "--mavlink", f"udpin:127.0.0.1:{port}", "--speedup", str(speedup),
+                                        "--origin", f"{lat:.7f},{lon:.7f},{alt:.2f}"], folder / "vehicle.log")
+            children.append(stub)
+            stub.wait_ready("listening")
+            config = _config({
+                "zenoh.mode": "peer", "zenoh.listen": f"tcp/127.0.0.1:{free_port()}", "zenoh.connect": ",".join(routers),
+                "zenoh.vehicle": vehicle, "mavlink.url": f"udpout:127.0.0.1:{port}", "mavlink.start_mission": "true",
+                "planner.budget_ms": str(budget_ms), "planner.seed": str(seed + j),
+                "planner.min_requests": str(users), "journal.path": str(folder / "journal.sqlite"),
+                "fleet.enabled": "true", "fleet.discovery_s": "1.0", **scenario_settings(default, sc)})
+            (folder / "planner.toml").write_text(to_toml(config))
+            service = Child("planner_service", ["serve", "--config", str(folder / "planner.toml")], folder / "service.log")
+            children.append(service)
+            service.wait_ready("ready:", 120.0)
+            echo(f"  {vehicle}: layer {sc.altitude_m:g} m, home {sc.base_x_m:g} m east")
+        session = zenoh.open(session_config("client", connect=routers))
+        watch = Watch(session, Keys().prefix)
+        connect = [arg for e in routers for arg in ("--connect", e)]
+        children.append(Child("sim_bridge", ["users", "--fleet", *connect, "--count", str(users), "--speedup",
+                                             str(speedup), "--seed", str(seed),
+                                             *build_config({}, {}).scenario_arguments()], out / "users.log"))
+        users_started = time.monotonic()
+        last_print = 0.0
+        while not watch.over(vehicles):
+            now = time.monotonic()
+            if now - start > timeout_s:
+                raise DemoError(f"not every UAV landed within {timeout_s:g} s (landed: {sorted(watch.landed())}); "
+                                f"see {out}")
+            for child in children:
+                if child.proc.poll() is not None and child.name != "sim_bridge users":
+                    raise DemoError(f"{child.name} exited with {child.proc.returncode}:\n{child.log()[-1500:]}")
+            if now - last_print >= 2.0:
+                last_print = now
+                echo(_progress(watch, vehicles, now - start))
+            time.sleep(0.2)
+        flown_s = time.monotonic() - users_started
+        time.sleep(0.6)
+        watch.close()
+    finally:
+        if session is not None:
+            session.close()
+        codes = {f"{c.name} {c.log_path.parent.name}": c.stop() for c in reversed(children)}
+    bad = {name: code for name, code in codes.items() if code not in (0, -2, 130)}
+    if bad:
+        raise DemoError(f"children exited badly: {bad}")
+    summary = fleet_summary(out, vehicles, scenarios, base, watch, flown_s)
+    summary.update(uavs=uavs, users=users, speedup=speedup, budget_ms=budget_ms, seed=seed, layer_m=LAYER_M,
+                   base_step_m=BASE_STEP_M, wall_s=time.monotonic() - start)
+    if offline:
+        # the offline fleet draws arrivals per interval (task_arrival_period_s = 0): arrivals in
+        # time are not modelled for a fleet yet (model/fleet/env.py)
+        offline_world = base.replace(num_users=users, task_model="backlog", task_arrival_period_s=0.0)
+        planned = run_fleet_sortie(offline_world, fleet, OFFLINE_ALGO, seed,
+                                   PolicySpec(iterations=None, budget_ms=budget_ms))["fleet"]
+        summary["offline"] = {"algo": OFFLINE_ALGO, **{k: planned[k] for k in (
+            "throughput_tasks_per_interval", "intervals", "total_tasks", "users_served", "double_services")}}
+        off = planned["throughput_tasks_per_interval"]
+        summary["flown_to_offline"] = summary["fleet"]["throughput_tasks_per_interval"] / off if off else None
+    (out / "summary.json").write_text(json.dumps(summary, indent=1))
+    plot_paths(out / "paths.png", base, watch, summary)
+    return summary
+
+
+def _config(settings: dict[str, str]) -> Any:
+    try:
+        return build_config({}, settings)
+    except ServiceError as err:  # ConfigError: names the key
+        raise DemoError(f"configuration: {err}") from None
+
+
+def _progress(watch: Watch, vehicles: list[str], wall_s: float) -> str:
+    with watch.lock:
+        parts = []
+        for v in vehicles:
+            s = watch.statuses[v][-1] if watch.statuses[v] else None
+            served = sum(1 for w, e in watch.events if w == v and e.event == "user_served" and not
+                         e.detail.startswith("by "))
+            parts.append(f"{v} {s.phase if s else '?':8s} {served:2d} served" if s else f"{v} ?")
+    return f"[{wall_s:5.1f} s] " + " | ".join(parts)
+
+
+def fleet_summary(out: Path, vehicles: list[str], scenarios: list[Scenario], base: Scenario, watch: Watch,
+                  flown_s: float) -> dict[str, Any]:
+    """Each UAV's sortie from its own journal, and the fleet's: throughput the sum of the
+    UAVs' (as the offline fleet's), fairness over every service in the order flown, users
+    served by two UAVs, and the traffic each member sent on the fleet's keys."""
+    per_uav: dict[str, Any] = {}
+    merged: list[tuple[float, str, int, int | None]] = []
+    for vehicle, sc in zip(vehicles, scenarios):
+        journal = Journal(out / vehicle / "journal.sqlite")
+        try:
+            known = [s.battery_fraction for s in watch.statuses[vehicle] if s.battery_fraction is not None]
+            per_uav[vehicle] = sortie_summary(journal, sc, min(known) * sc.battery_j if known else None)
+            merged += [(s.time_s, s.user_id, s.tasks, s.bound) for s in journal.services()]
+        finally:
+            journal.close()
+    merged.sort()
+    by_user: dict[str, set[str]] = defaultdict(set)
+    for vehicle, summary in per_uav.items():
+        for user in summary["served"]:
+            by_user[user].add(vehicle)
+    return {
+        "per_uav": per_uav,
+        "fleet": {
+            "throughput_tasks_per_interval": float(sum(s["throughput_tasks_per_interval"] for s in per_uav.values())),
+            "intervals": len(merged),
+            "total_tasks": int(sum(t for _, _, t, _ in merged)),
+            "users_served": len({u for _, u, _, _ in merged}),
+            "users_served_by_two_uavs": sorted(u for u, v in by_user.items() if len(v) > 1),
+            "fairness_violations": fairness_violations(base, [(u, b) for _, u, _, b in merged]),
+            "energy_violations": sum(bool(s["energy_violation"]) for s in per_uav.values()),
+            "requests_accepted": {v: s["requests"]["accepted"] for v, s in per_uav.items()},
+        },
+        "traffic_bytes_per_s": {v: {"fleet_keys": watch.fleet_bytes[v] / flown_s,
+                                    "status": watch.status_bytes[v] / flown_s} for v in vehicles},
+    }
+
+
+def plot_paths(path: Path, scenario: Scenario, watch: Watch, summary: dict[str, Any]) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from ..model import hover_points
+
+    points = hover_points(scenario)
+    fig, ax = plt.subplots(figsize=(7, 6.5))
+    ax.scatter(points[:, 0], points[:, 1], marker="s", s=30, c="lightgrey", label="hovering points")
+    for vehicle, statuses in sorted(watch.statuses.items()):
+        flown = [s for s in statuses if s.phase != "lost"]
+        line, = ax.plot([s.x_m for s in flown], [s.y_m for s in flown], "-", lw=1.2,
+                        label=f"{vehicle}: {summary['per_uav'][vehicle]['intervals']} services")
+        ax.scatter([s.x_m for s in flown[:1]], [s.y_m for s in flown[:1]], marker="^", color=line.get_color(), s=60)
+    side = scenario.area_side_m
+    ax.set_xlim(-20, side + 20)
+    ax.set_ylim(-20, side + 20)
+    ax.set_aspect("equal")
+    ax.set_xlabel("x east (m)")
+    ax.set_ylabel("y north (m)")
+    f = summary["fleet"]
+    ax.set_title(f"{len(watch.statuses)} UAVs: {f['intervals']} services to {f['users_served']} users, "
+                 f"{f['throughput_tasks_per_interval']:.1f} tasks/interval (fleet)")
+    ax.legend(loc="upper right", fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+__all__ = ["run_fleet_demo", "fleet_of", "scenario_settings"]
