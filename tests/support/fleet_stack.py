@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import socket
 import sqlite3
+import threading
+import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -14,7 +16,8 @@ import zenoh
 
 from planner_service.harness.processes import Child, free_port
 from planner_service.service.config import OriginConfig, build_config, to_toml
-from protocol import GeoOrigin, local_to_global
+from protocol import FleetKeys, GeoOrigin, local_to_global
+from protocol.messages import FleetIntentions, decode
 from protocol.zenoh_config import session_config
 
 
@@ -22,7 +25,8 @@ from protocol.zenoh_config import session_config
 class Uav:
     vehicle: str
     folder: Path
-    stub: Child
+    stub: Child | None
+    """The vehicle stub; None: an autopilot of the test's own (SITL)."""
     service: Child
 
     @property
@@ -43,6 +47,36 @@ class Uav:
                          "ORDER BY s.service_id")
 
 
+class Intentions:
+    """Every member's intentions as published (``{prefix}/fleet/intentions/*``), with when
+    each arrived: what each UAV meant to do, read from the wire as any client would."""
+
+    def __init__(self, endpoint: str) -> None:
+        self.session = zenoh.open(session_config("client", connect=[endpoint]))
+        self.seen: list[tuple[float, FleetIntentions]] = []
+        self._lock = threading.Lock()
+        self._sub = self.session.declare_subscriber(FleetKeys().all_intentions, self._on)
+
+    def _on(self, sample: Any) -> None:
+        message = decode(sample.payload.to_bytes(), FleetIntentions)
+        with self._lock:
+            self.seen.append((time.monotonic(), message))
+
+    def claims(self) -> dict[str, dict[str, float]]:
+        """Each vehicle's latest claims (vehicle -> user -> due)."""
+        with self._lock:
+            last = {m.vehicle: m for _, m in self.seen}
+        return {v: {i.user_id: i.due_s for i in m.users if i.user_id in m.claims} for v, m in last.items()}
+
+    def since(self, vehicle: str, t: float) -> list[tuple[float, set[str]]]:
+        with self._lock:
+            return [(at, {i.user_id for i in m.users}) for at, m in self.seen if m.vehicle == vehicle and at >= t]
+
+    def close(self) -> None:
+        self._sub.undeclare()
+        self.session.close()
+
+
 class FleetStack:
     """Two meshed routers (``endpoints``), and UAVs added with ``uav``."""
 
@@ -55,21 +89,24 @@ class FleetStack:
         self.children: list[Child] = []
         self.uavs: dict[str, Uav] = {}
 
-    def uav(self, vehicle: str, altitude_m: float, speedup: str, home_east_m: float = 0.0, **overrides: str) -> Uav:
+    def uav(self, vehicle: str, altitude_m: float, speedup: str, home_east_m: float = 0.0, autopilot: str = "",
+            **overrides: str) -> Uav:
         """A vehicle stub standing ``home_east_m`` east of the fleet's origin (two UAVs cannot
         stand on one spot, nor climb through each other's layers there) and its service, a
         fleet member in its own layer, in the fleet's one local frame."""
         folder = self.tmp / vehicle
         folder.mkdir()
         port = free_port(socket.SOCK_DGRAM)
-        stub = Child("sim_bridge", ["vehicle", "--mavlink", f"udpin:127.0.0.1:{port}", "--speedup", speedup,
-                                    "--gps-delay-s", "2", "--disarm-delay-s", "0",
-                                    "--origin", home(home_east_m), "--track", str(folder / "track.csv")],
-                     folder / "vehicle.log")
-        self.children.append(stub)
-        stub.wait_ready("listening")
+        stub = None
+        if not autopilot:  # else the autopilot at that address (SITL), standing where it was started
+            stub = Child("sim_bridge", ["vehicle", "--mavlink", f"udpin:127.0.0.1:{port}", "--speedup", speedup,
+                                        "--gps-delay-s", "2", "--disarm-delay-s", "0",
+                                        "--origin", home(home_east_m), "--track", str(folder / "track.csv")],
+                         folder / "vehicle.log")
+            self.children.append(stub)
+            stub.wait_ready("listening")
         settings = {"zenoh.mode": "peer", "zenoh.listen": f"tcp/127.0.0.1:{free_port()}", "zenoh.connect": ",".join(self.endpoints),
-                    "zenoh.vehicle": vehicle, "mavlink.url": f"udpout:127.0.0.1:{port}",
+                    "zenoh.vehicle": vehicle, "mavlink.url": autopilot or f"udpout:127.0.0.1:{port}",
                     "journal.path": str(folder / "journal.sqlite"), "planner.budget_ms": "100",
                     "fleet.enabled": "true", "fleet.discovery_s": "1.0", "scenario.altitude_m": str(altitude_m),
                     **overrides}
@@ -107,7 +144,8 @@ class FleetStack:
 
 
 def home(east_m: float) -> str:
-    """The stub's ``--origin`` (its home) ``east_m`` east of the services' default origin."""
+    """LAT,LON,ALT ``east_m`` east of the services' default origin: a stub's ``--origin``, with
+    a heading (",0") SITL's ``--home``."""
     o = OriginConfig()
     lat, lon, alt = local_to_global(GeoOrigin(o.lat_deg, o.lon_deg, o.alt_m), east_m, 0.0, 0.0)
     return f"{lat:.7f},{lon:.7f},{alt:.2f}"

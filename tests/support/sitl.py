@@ -127,6 +127,8 @@ class Sitl:
     """SITL's ``--serialN`` devices, e.g. {1: "udpclient:127.0.0.1:14550"} (default: TCP)."""
     defaults: tuple[Path, ...] = ()
     """Parameter files loaded after ``copter.parm`` (e.g. docs/sitl-copter.parm)."""
+    home: str = HOME
+    """``--home`` LAT,LON,ALT,HEADING (a fleet's UAVs each stand on their own)."""
     proc: subprocess.Popen[bytes] | None = None
     texts: list[tuple[float, str]] = field(default_factory=list)
     _stop: threading.Event = field(default_factory=threading.Event)
@@ -146,7 +148,7 @@ class Sitl:
     # --- lifecycle ----------------------------------------------------------------------------
     def start(self) -> None:
         defaults = self.binary.parent / "copter.parm"
-        args = [str(self.binary), "--model", "+", "--speedup", str(self.speedup), "--home", HOME,
+        args = [str(self.binary), "--model", "+", "--speedup", str(self.speedup), "--home", self.home,
                 "-I", str(self.instance)]
         files = [str(defaults)] if defaults.is_file() else []
         files += [str(path) for path in self.defaults]
