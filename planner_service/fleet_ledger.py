@@ -62,12 +62,13 @@ def owner(user: str, intentions: Mapping[str, Mapping[str, float]]) -> str | Non
     return min(dues)[1] if dues else None
 
 
-def owned_by_others(own: str, intentions: Mapping[str, Mapping[str, float]], alive: Iterable[str]) -> set[str]:
-    """The users a live member other than ``own`` owns (``owner``): this member neither
-    plans nor binds them."""
+def owned_by_others(own: str, intentions: Mapping[str, Mapping[str, float]], alive: Iterable[str]) -> dict[str, str]:
+    """The users a live member other than ``own`` owns (``owner``), each with that member:
+    this member neither plans, binds nor records them."""
     live = {v: d for v, d in intentions.items() if v in set(alive) | {own}}
     users = {u for v, d in live.items() if v != own for u in d}
-    return {u for u in users if owner(u, live) != own}
+    owners = {u: owner(u, live) for u in users}
+    return {u: v for u, v in owners.items() if v is not None and v != own}
 
 
 class FleetLedger:
@@ -132,6 +133,10 @@ class FleetLedger:
     # --- what the others said ----------------------------------------------------------------
     def taken(self) -> set[str]:
         """The users another live member owns now."""
+        return set(self.owners())
+
+    def owners(self) -> dict[str, str]:
+        """The users another live member owns now, each with that member."""
         with self._lock:
             claims = {v: dict(d) for v, d in self._claims.items()}
         return owned_by_others(self.vehicle, claims, self._alive())

@@ -203,9 +203,8 @@ def run_fleet_demo(out: Path, *, uavs: int = 3, users: int = 12, speedup: float 
     summary.update(uavs=uavs, users=users, speedup=speedup, budget_ms=budget_ms, seed=seed, layer_m=LAYER_M,
                    base_step_m=BASE_STEP_M, wall_s=time.monotonic() - start)
     if offline:
-        # the offline fleet draws arrivals per interval (task_arrival_period_s = 0): arrivals in
-        # time are not modelled for a fleet yet (model/fleet/env.py)
-        offline_world = base.replace(num_users=users, task_model="backlog", task_arrival_period_s=0.0)
+        # the flown world: the users' tasks arrive in time, as sim_bridge users draws them
+        offline_world = base.replace(num_users=users, task_model="backlog")
         planned = run_fleet_sortie(offline_world, fleet, OFFLINE_ALGO, seed,
                                    PolicySpec(iterations=None, budget_ms=budget_ms))["fleet"]
         summary["offline"] = {"algo": OFFLINE_ALGO, **{k: planned[k] for k in (

@@ -138,7 +138,7 @@ class Service:
         self._waiting_for = ""
         s = config.safety
         self.world = JournalWorld(self.journal) if self.fleet is None else FleetWorld(self.journal,
-                                                                                      self.fleet.ledger.taken)
+                                                                                      self.fleet.ledger.owners)
         self.logic = SortieLogic(Rules(
             scenario=self.scenario, origin=self.origin, area=self.area, flavour=self.flavour,
             start_mission=config.mavlink.start_mission, min_requests=config.planner.min_requests,

@@ -70,6 +70,10 @@ class JournalWorld:
     def request_for(self, user_id: str) -> RequestRow | None:
         return self._counted(self.journal.request_in_force(user_id))
 
+    def served_elsewhere(self, user_id: str) -> str | None:
+        """A lone UAV serves its users alone: never."""
+        return None
+
     def services_of(self, user_id: str) -> int:
         return self.service_counts().get(user_id, 0)
 
@@ -93,10 +97,27 @@ class FleetWorld(JournalWorld):
     them), with the other members' services counted as its own (``remote``): each takes
     its tasks off the user's request in force here, as a service recorded here would."""
 
-    def __init__(self, journal: Journal, taken: Callable[[], set[str]]) -> None:
+    def __init__(self, journal: Journal, owners: Callable[[], dict[str, str]]) -> None:
         super().__init__(journal)
-        self.taken = taken
+        self.owners = owners
+        """The users another live member owns, each with that member (``FleetLedger.owners``)."""
         self.remote: list[Unrecorded] = []
+
+    def taken(self) -> set[str]:
+        return set(self.owners())
+
+    def served_elsewhere(self, user_id: str) -> str | None:
+        """Why a hold of this UAV that served ``user_id`` records nothing: another member
+        owns the user (it bound the user first: the user uploads to one UAV), or the other
+        members' services took the whole request in force while this hold lasted."""
+        other = self.owners().get(user_id)
+        if other is not None:
+            return f"{other} serves {user_id} (claimed it first)"
+        row = self.journal.request_in_force(user_id)
+        if row is not None and self._counted(row) is None and any(u.user_id == user_id for u in self._now()
+                                                                  if u in self.remote):
+            return f"another member served {user_id}'s request meanwhile"
+        return None
 
     def count_remote(self, user_id: str, tasks: int) -> bool:
         """Count another member's service of ``user_id``; False when the user has no request

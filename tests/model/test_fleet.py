@@ -209,8 +209,6 @@ def test_bad_fleet_parameters_name_the_field() -> None:
     assert err.value.field == "uavs"
     with pytest.raises(ScenarioError, match="base_step_m"):
         FleetEnv(preset("field"), Fleet(uavs=3, base_step_m=400.0))
-    with pytest.raises(FleetError, match="task_arrival_period_s"):
-        FleetEnv(preset("field").replace(task_model="backlog", task_arrival_period_s=55.0), Fleet(uavs=2))
     env = FleetEnv(preset("field"), Fleet(uavs=2))
     with pytest.raises(FleetError, match="reset"):
         env.due
@@ -225,3 +223,24 @@ def test_the_fleet_preset_is_field_with_users_ample_for_five() -> None:
     env = FleetEnv(fleet, Fleet(uavs=5))
     env.reset(seed=0)
     assert len(env.hover_points[0]) == 40 and env.state.users.shape == (60, 3)
+
+
+def test_a_fleets_arrivals_in_time_follow_one_clock() -> None:
+    """With arrivals in time, the users' new tasks are drawn up to the fleet's time (the clock
+    of the UAV whose turn it is), each span once: three UAVs meet the arrivals of one clock,
+    not three."""
+    scenario = preset("field").replace(task_model="backlog", task_arrival_period_s=55.0, num_users=10)
+    env = FleetEnv(scenario, Fleet(uavs=3, layer_m=20.0))
+    env.rng = np.random.default_rng(4)
+    env.reset()
+    drawn, steps = [], 0
+    while not env.done and steps < 40:
+        j = env.due
+        st = env.state
+        assert st is not None and env._arrivals_until_s == pytest.approx(float(st.clock_s[j]))
+        drawn.append(env._arrivals_until_s)
+        env.step(int(np.flatnonzero(env.action_mask(j))[0]))
+        steps += 1
+    assert steps > 3 and drawn == sorted(drawn)  # the fleet's time only goes on
+    # the fleet's time is the slowest active clock, never the sum of the UAVs' intervals
+    assert drawn[-1] <= max(float(c) for c in env.state.clock_s) + 1e-9

@@ -35,6 +35,9 @@ class NoRequests:
     def pending(self) -> list:
         return []
 
+    def served_elsewhere(self, user_id: str) -> None:
+        return None
+
 
 LOGIC = SortieLogic(Rules(preset("field"), GeoOrigin(), Area(500.0, 120.0, 10.0)), NoRequests())
 READY = VehicleSnapshot(connected=True, position_ok=True, boot_s=1.0, landed_known=True, mode="STABILIZE",

@@ -31,9 +31,14 @@ SCENARIO = preset("field")
 class FakeWorld:
     requests: dict[str, RequestRow] = field(default_factory=dict)
     served: dict[str, int] = field(default_factory=dict)
+    elsewhere: dict[str, str] = field(default_factory=dict)
+    """A fleet's: the users another member serves, and why."""
 
     def request_for(self, user_id: str) -> RequestRow | None:
         return self.requests.get(user_id)
+
+    def served_elsewhere(self, user_id: str) -> str | None:
+        return self.elsewhere.get(user_id)
 
     def services_of(self, user_id: str) -> int:
         return self.served.get(user_id, 0)
@@ -161,6 +166,21 @@ def test_a_sortie_records_only_holds_the_vehicle_was_seen_at() -> None:
     out = run.tick(seq=4, xyz=(300.0, 280.0, 100.0), boot_s=50.0)
     assert not only(out, fx.RecordService)
     assert [e.event.kind for e in only(out, fx.Emit)] == ["waypoint_skipped"]
+
+
+def test_a_hold_of_a_user_another_member_bound_first_records_nothing() -> None:
+    """Two fleet members bound one user at once (each before the other's claim reached it):
+    the user uploads to one UAV, the one that bound first; the other records nothing."""
+    world = FakeWorld()
+    run, _ = fly_to_first_point(world)
+    run.tick(seq=2, xyz=(120.0, 200.0, 100.0), boot_s=20.0)
+    b = run.s.holds.binding
+    assert b is not None and b.request_id is not None
+    world.elsewhere[b.user_id] = f"uav2 serves {b.user_id} (claimed it first)"
+    run.tick(seq=2, xyz=(120.0, 200.0, 100.0), boot_s=20.0 + b.needed_s + 1.0)
+    out = run.tick(seq=3, xyz=(200.0, 300.0, 100.0), boot_s=22.0 + b.needed_s)
+    assert not only(out, fx.RecordService)
+    assert any("nothing recorded: uav2 serves" in e.event.detail for e in only(out, fx.Emit))
 
 
 def test_a_hold_cut_short_serves_what_it_carried() -> None:

@@ -43,15 +43,13 @@ class FleetSnapshot:
     ended: dict[int, str]
     order_next: int
     waiting_since: dict[int, int]
+    arrivals_until_s: float = 0.0
 
 
 class FleetEnv:
     """N UAVs over one scenario's users (``Fleet`` says what differs between them)."""
 
     def __init__(self, scenario: Scenario, fleet: Fleet) -> None:
-        if fleet.uavs > 1 and in_time(pack(scenario)):
-            raise FleetError("task_arrival_period_s", "task_arrival_period_s > 0 (arrivals in time) is not modelled "
-                                                      "for a fleet of more than one UAV yet: set it to 0")
         self.scenario = scenario
         self.fleet = fleet
         self.scenarios = uav_scenarios(scenario, fleet)
@@ -64,6 +62,9 @@ class FleetEnv:
         self.ended: dict[int, str] = {}
         self._order_next = 0
         self._waiting_since: dict[int, int] = {}
+        self._arrivals_until_s = 0.0
+        """With arrivals in time and several UAVs: the fleet time up to which the users' new
+        tasks are drawn (``_arrivals_until``)."""
         self._views = [SortieEnv(s) for s in self.scenarios]
         self._claims_views = [SortieEnv(s) for s in self.scenarios]
 
@@ -133,6 +134,7 @@ class FleetEnv:
             task_table=table,
         )
         self.ended, self._order_next, self._waiting_since = {}, n, {}
+        self._arrivals_until_s = 0.0
         self._settle_turn()
         return self.observation(), {"due": None if self.done else self.due, "ended": dict(self.ended)}
 
@@ -175,10 +177,12 @@ class FleetEnv:
         st.order[j] = self._next_order()
         st.events[0] += 1
         chance = scene_of(self.params[0], hp, st.task_table)
-        if in_time(self.params[0]):  # one UAV only (__init__): the arrivals follow the interval's length
+        if in_time(self.params[0]) and self.num_uavs == 1:  # the arrivals follow the interval's length
             advance(chance, st.chance_world(j), moves, NO_NEWS)
             draw_timed_arrivals(self.params[0], news, duration, self.rng)
             advance(chance, st.chance_world(j), NO_MOVES, news)
+        elif in_time(self.params[0]):  # several UAVs: up to the fleet's time (``_settle_turn``)
+            advance(chance, st.chance_world(j), moves, NO_NEWS)
         else:
             advance(chance, st.chance_world(j), moves, news)
         check_joint(st)
@@ -271,13 +275,14 @@ class FleetEnv:
 
     def snapshot(self) -> FleetSnapshot:
         return FleetSnapshot(self._require_state().copy(), self.rng.bit_generator.state, dict(self.ended),
-                             self._order_next, dict(self._waiting_since))
+                             self._order_next, dict(self._waiting_since), self._arrivals_until_s)
 
     def restore(self, snap: FleetSnapshot) -> None:
         self.state = snap.state.copy()
         self.rng.bit_generator.state = snap.rng_state
         self.ended, self._order_next = dict(snap.ended), snap.order_next
         self._waiting_since = dict(snap.waiting_since)
+        self._arrivals_until_s = snap.arrivals_until_s
 
     # --- whose turn ---------------------------------------------------------------------------
     def _settle_turn(self) -> None:
@@ -290,6 +295,7 @@ class FleetEnv:
         limit = self.scenario.max_intervals
         while not self.done:
             j = self.due
+            self._arrivals_until(j)
             if limit and st.intervals[j] >= limit:
                 self._retire(j, RETIRED_TRUNCATED)
             elif self.action_mask(j).any():
@@ -303,6 +309,21 @@ class FleetEnv:
                 st.order[j] = self._next_order()
                 self._waiting_since[j] = int(st.events[0])
         check_joint(st)
+
+    def _arrivals_until(self, j: int) -> None:
+        """With arrivals in time and several UAVs, the users' new tasks up to the fleet's time,
+        the clock of UAV ``j`` whose turn it is (every other active UAV's is later): each span
+        of the fleet's time is drawn once, whichever UAV's interval covered it, so N UAVs meet
+        the arrivals of one clock, not N (one UAV: ``step`` draws them per interval, as
+        ``SortieEnv`` does)."""
+        st = self._require_state()
+        now = float(st.clock_s[j])
+        if self.num_uavs == 1 or not in_time(self.params[0]) or now <= self._arrivals_until_s:
+            return
+        news = np.empty_like(st.tasks)
+        draw_timed_arrivals(self.params[0], news, now - self._arrivals_until_s, self.rng)
+        advance(scene_of(self.params[0], self.hover_points[0], st.task_table), st.chance_world(j), NO_MOVES, news)
+        self._arrivals_until_s = now
 
     def _retire(self, j: int, why: str) -> None:
         st = self._require_state()

@@ -69,6 +69,10 @@ class JournalView(Protocol):
     def pending(self) -> list[RequestRow]:
         """The requests waiting (one per user: its request in force)."""
 
+    def served_elsewhere(self, user_id: str) -> str | None:
+        """Why a hold that served ``user_id`` records nothing (in a fleet: another member
+        serves it), or None."""
+
 
 @dataclass(frozen=True)
 class Tick:

@@ -443,6 +443,11 @@ class SortieLogic:
             return s
         if b is None or b.request_id is None:
             return s
+        elsewhere = self.world.served_elsewhere(b.user_id)
+        if elsewhere is not None:  # two members bound one user at once: the first keeps it
+            out.append(fx.Emit(ev.WaypointReached(f"point {point.hover_index}: nothing recorded: {elsewhere}",
+                                                   user_id=b.user_id, request_id=b.request_id)))
+            return s
         # What the hold carried, whatever the user said: a user whose upload is done ended the
         # hold early (``_maybe_end_hold``), but no more is recorded than the time held carries.
         covered = w.covered_s
