@@ -36,6 +36,19 @@ def check_user_id(value: str, field: str = "user_id") -> str:
     return value
 
 
+def _request_user(request: str, key_expr: str, names: str) -> str | None:
+    """The user id of ``key_expr``, a query's key: None for ``request`` itself, the user of
+    ``request/{user_id}``; ``ProtocolError("key", ...)`` for any other key."""
+    if key_expr == request:
+        return None
+    head = request + "/"
+    user = key_expr[len(head):] if key_expr.startswith(head) else None
+    if user is None or not _USER_ID.fullmatch(user):
+        raise ProtocolError("key", f"{key_expr!r} is neither {request} nor {head}USER_ID "
+                                   f"(a request names {names}, without wildcards)")
+    return user
+
+
 @dataclass(frozen=True)
 class Keys:
     """The key expressions of one vehicle under one prefix."""
@@ -72,14 +85,7 @@ class Keys:
         """Whose request key ``key_expr`` (a query's key) is: None for the plain request
         key, the user id for ``request/{user_id}``; ``ProtocolError("key", ...)`` for any
         other key (a wildcard, another vehicle's), which names no single user."""
-        if key_expr == self.request:
-            return None
-        head = self.request + "/"
-        user = key_expr[len(head):] if key_expr.startswith(head) else None
-        if user is None or not _USER_ID.fullmatch(user):
-            raise ProtocolError("key", f"{key_expr!r} is neither {self.request} nor {head}USER_ID "
-                                       f"(a request names one vehicle and at most one user, without wildcards)")
-        return user
+        return _request_user(self.request, key_expr, "one vehicle and at most one user")
 
     def user(self, user_id: str) -> str:
         """Publication: ``user_id``'s place in the plan (``user_place``)."""
@@ -197,14 +203,7 @@ class FleetKeys:
 
     def request_user(self, key_expr: str) -> str | None:
         """As ``Keys.request_user``, for the fleet's request keys."""
-        if key_expr == self.request:
-            return None
-        head = self.request + "/"
-        user = key_expr[len(head):] if key_expr.startswith(head) else None
-        if user is None or not _USER_ID.fullmatch(user):
-            raise ProtocolError("key", f"{key_expr!r} is neither {self.request} nor {head}USER_ID "
-                                       f"(a request names at most one user, without wildcards)")
-        return user
+        return _request_user(self.request, key_expr, "at most one user")
 
     def intentions(self, vehicle: str) -> str:
         """Publication with a cache: the users ``vehicle``'s plan means to serve, and when

@@ -180,12 +180,7 @@ def plot_trajectory(path: Path, scenario: Any, statuses: list[Status], requests:
     for n, s in enumerate(services, 1):
         ax.annotate(str(n), (s.x_m, s.y_m), textcoords="offset points", xytext=(4, 4), fontsize=8)
     ax.scatter([s.x_m for s in services], [s.y_m for s in services], c="tab:red", s=40, zorder=3, label="services")
-    side = scenario.area_side_m
-    ax.set_xlim(-20, side + 20)
-    ax.set_ylim(-20, side + 20)
-    ax.set_aspect("equal")
-    ax.set_xlabel("x east (m)")
-    ax.set_ylabel("y north (m)")
+    area_axes(ax, scenario.area_side_m)
     ax.set_title(f"{summary['intervals']} services to {summary['served_users']} users, "
                  f"{summary['throughput_tasks_per_interval']:.1f} tasks/interval")
     ax.legend(loc="upper right", fontsize=7)
@@ -205,4 +200,13 @@ def plot_trajectory(path: Path, scenario: Any, statuses: list[Status], requests:
     plt.close(fig)
 
 
-__all__ = ["DemoError", "run_demo", "plot_trajectory"]
+def area_axes(ax: Any, side_m: float) -> None:
+    """The area's square, metres east and north, with a margin."""
+    ax.set_xlim(-20, side_m + 20)
+    ax.set_ylim(-20, side_m + 20)
+    ax.set_aspect("equal")
+    ax.set_xlabel("x east (m)")
+    ax.set_ylabel("y north (m)")
+
+
+__all__ = ["DemoError", "area_axes", "run_demo", "plot_trajectory"]

@@ -27,7 +27,7 @@ from ..policy import PolicySpec
 from ..service.config import build_config, to_toml
 from ..service.errors import ServiceError
 from ..service.journal import Journal
-from .demo import DemoError
+from .demo import DemoError, area_axes
 from .processes import Child, free_port
 from .report import sortie_summary
 
@@ -162,7 +162,9 @@ def run_fleet_demo(out: Path, *, uavs: int = 3, users: int = 12, speedup: float 
                 "zenoh.mode": "peer", "zenoh.listen": f"tcp/127.0.0.1:{free_port()}", "zenoh.connect": ",".join(routers),
                 "zenoh.vehicle": vehicle, "mavlink.url": f"udpout:127.0.0.1:{port}", "mavlink.start_mission": "true",
                 "planner.budget_ms": str(budget_ms), "planner.seed": str(seed + j),
-                "planner.min_requests": str(users), "journal.path": str(folder / "journal.sqlite"),
+                # a member's first plan waits for its share of the users (the others' claims
+                # are not its to count: waiting for all, a late member would never fly)
+                "planner.min_requests": str(max(1, users // uavs)), "journal.path": str(folder / "journal.sqlite"),
                 "fleet.enabled": "true", "fleet.discovery_s": "1.0", **scenario_settings(default, sc)})
             (folder / "planner.toml").write_text(to_toml(config))
             service = Child("planner_service", ["serve", "--config", str(folder / "planner.toml")], folder / "service.log")
@@ -287,12 +289,7 @@ def plot_paths(path: Path, scenario: Scenario, watch: Watch, summary: dict[str, 
         line, = ax.plot([s.x_m for s in flown], [s.y_m for s in flown], "-", lw=1.2,
                         label=f"{vehicle}: {summary['per_uav'][vehicle]['intervals']} services")
         ax.scatter([s.x_m for s in flown[:1]], [s.y_m for s in flown[:1]], marker="^", color=line.get_color(), s=60)
-    side = scenario.area_side_m
-    ax.set_xlim(-20, side + 20)
-    ax.set_ylim(-20, side + 20)
-    ax.set_aspect("equal")
-    ax.set_xlabel("x east (m)")
-    ax.set_ylabel("y north (m)")
+    area_axes(ax, scenario.area_side_m)
     f = summary["fleet"]
     ax.set_title(f"{len(watch.statuses)} UAVs: {f['intervals']} services to {f['users_served']} users, "
                  f"{f['throughput_tasks_per_interval']:.1f} tasks/interval (fleet)")

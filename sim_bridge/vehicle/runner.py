@@ -544,6 +544,11 @@ class Vehicle:
         if item.command == M.MAV_CMD_NAV_LAND and item.x == 0 and item.y == 0:
             return None  # land where it is
         x, y, z = item_local(item, self.config.origin)
+        if item.command == M.MAV_CMD_NAV_TAKEOFF:
+            # ArduCopter climbs where it stands, whatever the item's latitude and longitude
+            # (mode_auto.cpp takeoff_start); a fleet's UAV standing away from the fleet's
+            # origin sends the origin's: only the altitude is the takeoff's own
+            x, y = 0.0, 0.0
         if not -margin <= x <= side + margin:
             return M.MAV_MISSION_INVALID_PARAM5_X, f"item {item.seq}: x {x:.0f} m outside the geofence"
         if not -margin <= y <= side + margin:

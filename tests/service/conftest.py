@@ -1,4 +1,5 @@
-"""Fixtures of the service's end-to-end tests (see tests/support/stack.py)."""
+"""Fixtures of the service's end-to-end tests (see tests/support/stack.py and, for a fleet,
+tests/support/fleet_stack.py)."""
 
 from __future__ import annotations
 
@@ -7,6 +8,7 @@ from typing import Iterator
 
 import pytest
 
+from tests.support.fleet_stack import FleetStack
 from tests.support.stack import Stack
 
 
@@ -17,3 +19,13 @@ def stack(tmp_path: Path) -> Iterator[Stack]:
         yield s
     finally:
         s.close()
+
+
+@pytest.fixture
+def fleet(tmp_path: Path) -> Iterator[FleetStack]:
+    """Two meshed routers; UAVs (a stub or an autopilot, and a service each) added by the test."""
+    f = FleetStack(tmp_path)
+    try:
+        yield f
+    finally:
+        f.close()

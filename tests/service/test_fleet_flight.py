@@ -14,8 +14,6 @@ import csv
 import signal
 import time
 from collections import Counter
-from pathlib import Path
-from typing import Iterator
 
 import pytest
 
@@ -30,15 +28,6 @@ SPEEDUP = "20"
 INTERVAL_S = build_config({}, {}).scenario().task_arrival_period_s
 """One interval of the service's scenario, vehicle seconds."""
 START = {"mavlink.start_mission": "true", "planner.min_requests": "3"}
-
-
-@pytest.fixture
-def fleet(tmp_path: Path) -> Iterator[FleetStack]:
-    f = FleetStack(tmp_path)
-    try:
-        yield f
-    finally:
-        f.close()
 
 
 def served_by(fleet: FleetStack) -> dict[str, Counter[str]]:
@@ -142,3 +131,19 @@ def landed(uav: Uav) -> bool:
         rows = list(csv.DictReader(f))
     return len(rows) > 10 and rows[-1]["armed"] == "0" and float(rows[-1]["z_m"]) < 1.0 and \
         any(r["armed"] == "1" for r in rows)
+
+
+@pytest.mark.timeout(240)
+def test_a_uav_that_joins_mid_sortie_takes_a_share(fleet: FleetStack) -> None:
+    """uav1 flies the users alone; uav2 joins after uav1's first service, reads the requests
+    its users send from then on, claims users uav1 does not, and serves some: the fleet rule
+    (fairness across both journals) holds."""
+    uav1 = fleet.uav("uav1", 100.0, SPEEDUP, **START)
+    users = fleet.users("--count", "8", "--speedup", SPEEDUP, "--seed", "5")
+    wait_until(lambda: bool(uav1.services()), 60.0, lambda: f"uav1's first service\n{fleet.logs()}")
+    uav2 = fleet.uav("uav2", 120.0, SPEEDUP, home_east_m=60.0, **{**START, "planner.min_requests": "1"})
+    wait_until(lambda: bool(uav2.services()), 90.0,
+               lambda: f"a service by uav2, joined mid-sortie: {served_by(fleet)}\n{fleet.logs()}")
+    print(f"joined mid-sortie: {served_by(fleet)}")
+    check_fairness(fleet)
+    assert users.stop() == 0

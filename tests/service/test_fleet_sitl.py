@@ -15,7 +15,7 @@ import time
 import tomllib
 from collections import Counter
 from pathlib import Path
-from typing import Callable, Iterator
+from typing import Callable
 
 import pytest
 
@@ -45,15 +45,6 @@ def sitl_settings() -> dict[str, str]:
         raw = tomllib.load(handle)
     return {f"{section}.{key}": str(value).lower() if isinstance(value, bool) else str(value)
             for section, values in raw.items() for key, value in values.items() if key != "url"}
-
-
-@pytest.fixture
-def fleet(tmp_path: Path) -> Iterator[FleetStack]:
-    f = FleetStack(tmp_path)
-    try:
-        yield f
-    finally:
-        f.close()
 
 
 def test_three_copters_share_the_users_and_take_over_a_lost_ones(make_sitl: Callable[..., Sitl],
