@@ -90,6 +90,7 @@ class FleetLedger:
         self._served_pub: Any = None
 
     def open(self, session: Any) -> None:
+        """A member's side: its publishers, and ``follow``."""
         miss = zext.MissDetectionConfig(heartbeat=HEARTBEAT_S)
         self._intent_pub = zext.declare_advanced_publisher(
             session, self.keys.intentions(self.vehicle), cache=zext.CacheConfig(max_samples=1),
@@ -98,6 +99,10 @@ class FleetLedger:
             session, self.keys.served(self.vehicle), cache=zext.CacheConfig(max_samples=SERVED_CACHE),
             sample_miss_detection=miss, publisher_detection=True)
         self._decl += [self._intent_pub, self._served_pub]
+        self.follow(session)
+
+    def follow(self, session: Any) -> None:
+        """Read every member's intentions and services (a watcher's side: ``vehicle`` "")."""
         for key, handler in ((self.keys.all_intentions, self._on_intentions), (self.keys.all_served, self._on_served)):
             self._decl.append(zext.declare_advanced_subscriber(
                 session, key, handler, history=zext.HistoryConfig(detect_late_publishers=True),

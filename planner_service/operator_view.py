@@ -43,6 +43,8 @@ class WatchView:
     empty for a lone UAV."""
     separation: Judgement | None = None
     """The fleet's separation on the members' own positions (None for a lone UAV)."""
+    claims: dict[str, list[str]] = field(default_factory=dict)
+    """The users each live member claims (its next point's and its hold's)."""
 
 
 def _t(text: object, limit: int = 80) -> str:
@@ -103,6 +105,10 @@ def _fleet_lines(view: WatchView) -> list[str]:
         return f"{_t(vehicle, 64)} {layer}" + (" (this)" if vehicle == this else "")
     lines = [f"fleet      {len(view.fleet)} member{'s' if len(view.fleet) != 1 else ''}: "
              + ", ".join(one(v, m) for v, m in sorted(view.fleet.items()))]
+    claimed = [f"{_t(v, 64)} {', '.join(_t(u, 64) for u in users)}" for v, users in sorted(view.claims.items())
+               if v in view.fleet and users]
+    if claimed:
+        lines.append("claims     " + "; ".join(claimed))
     j = view.separation
     if j is not None:
         lines += [f"SEPARATION LOST {_t(c, 120)}" for c in j.conflicts]

@@ -143,6 +143,7 @@ def _watch(client: Any, args: argparse.Namespace, stop: threading.Event) -> int:
     from protocol import FleetKeys, ProtocolError
     from protocol.client import ClientError
 
+    from ..fleet_ledger import FleetLedger
     from ..fleet_roster import FleetRoster
     from ..operator_view import WatchView, render
 
@@ -168,6 +169,8 @@ def _watch(client: Any, args: argparse.Namespace, stop: threading.Event) -> int:
     alive_sub = client.session.liveliness().declare_subscriber(client.keys.alive, on_alive, history=True)
     roster = FleetRoster(FleetKeys(client.keys.prefix))
     roster.follow(client.session)
+    ledger = FleetLedger(FleetKeys(client.keys.prefix), "", lambda: roster.members().keys())
+    ledger.follow(client.session)
     term = os.environ.get("TERM", "")
     plain = args.plain or not sys.stdout.isatty() or term in ("", "dumb", "unknown")
     last: list[str] | None = None
@@ -193,7 +196,8 @@ def _watch(client: Any, args: argparse.Namespace, stop: threading.Event) -> int:
                 update(alive=True)  # the token's history may reach the subscriber after the state's answer
             if args.once:  # one view: with the layers and positions of the members the roster knows of
                 roster.settle(min(args.timeout, 2.0), positions=True)
-            update(fleet=roster.members(), separation=roster.separation())
+            update(fleet=roster.members(), separation=roster.separation(),
+                   claims={v: sorted(c) for v, c in ledger.claims().items()})
             with lock:
                 lines = render(view, time.monotonic())
             if plain:
@@ -208,6 +212,7 @@ def _watch(client: Any, args: argparse.Namespace, stop: threading.Event) -> int:
             stop.wait(args.refresh)
     finally:
         alive_sub.undeclare()
+        ledger.close()
         roster.close()
     if not plain:
         print()

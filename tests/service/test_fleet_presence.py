@@ -15,6 +15,7 @@ import pytest
 import zenoh
 
 from planner_service.fleet_roster import FleetRoster
+from planner_service.operator_view import WatchView, render
 from planner_service.harness.processes import free_port
 from planner_service.service.fleet_presence import MembershipError, FleetPresence, layer_clashes
 from protocol import FleetKeys, Keys, ProtocolError, Status, encode
@@ -279,3 +280,15 @@ def test_of_two_services_started_at_once_for_one_vehicle_one_at_most_goes_on(mes
     roster.follow(mesh())
     wait_until(lambda: roster.publishers("uav1") == len(members) and len(roster.members()) == len(members), 5.0,
                "only the member's token and announcement left")
+
+
+def test_the_operators_view_shows_each_live_members_claims() -> None:
+    """``operator watch``: under the members, what each live member claims (its next point's
+    user and its hold's); a gone member's last claims are not shown, control characters in a
+    member's words are escaped."""
+    view = WatchView(vehicle="fleettest/uav1", fleet={"uav1": member("uav1", 100.0), "uav2": member("uav2", 120.0)},
+                     claims={"uav1": ["u-3"], "uav2": ["u-7", "u\x1b[2J"], "uav9": ["u-1"]})
+    lines = render(view, 0.0)
+    (claims,) = [line for line in lines if line.startswith("claims")]
+    assert claims.startswith("claims     uav1 u-3; uav2 u-7, u")
+    assert "uav9" not in claims and "\x1b" not in claims
