@@ -75,13 +75,18 @@ class FleetLedger:
     """One member's side of the exchange: ``open`` on a session, ``intend`` on every plan,
     ``served`` on every service, ``take_served`` to read the others'."""
 
-    def __init__(self, keys: FleetKeys, vehicle: str, alive: Callable[[], Iterable[str]]) -> None:
+    def __init__(self, keys: FleetKeys, vehicle: str, alive: Callable[[], Iterable[str]],
+                 lost: Callable[[], Iterable[str]] = lambda: ()) -> None:
         self.keys = keys
         self.vehicle = vehicle
         self._alive = alive
+        self._lost = lost
+        """The members gone while their vehicles were armed (``FleetRoster.lost``)."""
         self._lock = threading.Lock()
         self._intentions: dict[str, dict[str, float]] = {}
         self._claims: dict[str, dict[str, float]] = {}
+        self._points: dict[str, set[int]] = {}
+        self._routes: dict[str, set[int]] = {}
         self._served: deque[FleetServed] = deque(maxlen=MAX_SERVED_QUEUED)
         self._seen: set[tuple[str, str, float]] = set()
         self.refused: deque[str] = deque(maxlen=16)
@@ -118,17 +123,22 @@ class FleetLedger:
         self._intent_pub = self._served_pub = None
 
     # --- this member's side ------------------------------------------------------------------
-    def intend(self, due: Mapping[str, float], now_s: float, claims: Iterable[str] = ()) -> None:
-        """Say which users this member's plan means to serve and when (wall clock), and which
-        of them it claims (``claims``: the next point's user and the one a hold serves)."""
+    def intend(self, due: Mapping[str, float], now_s: float, claims: Iterable[str] = (),
+               points: Iterable[int] = (), route: Iterable[int] = ()) -> None:
+        """Say which users this member's plan means to serve and when (wall clock), which of
+        them it claims (``claims``: the next point's user and the one a hold serves) and the
+        hovering points it claims (``points``: its next point, its hold's)."""
         users = sorted(due.items(), key=lambda kv: kv[1])[:MAX_INTENTIONS]
         claimed = sorted(set(claims) & set(due))[:MAX_CLAIMS]
+        held = sorted(set(int(k) for k in points))[:MAX_CLAIMS]
         with self._lock:
             self._intentions[self.vehicle] = dict(users)
             self._claims[self.vehicle] = {u: due[u] for u in claimed}
+            self._points[self.vehicle] = set(held)
         if self._intent_pub is not None:
             self._intent_pub.put(encode(FleetIntentions(
-                vehicle=self.vehicle, time_s=now_s, users=[Intention(u, d) for u, d in users], claims=claimed)))
+                vehicle=self.vehicle, time_s=now_s, users=[Intention(u, d) for u, d in users], claims=claimed,
+                points=held, route=sorted(set(int(k) for k in route))[:512])))
 
     def served(self, user_id: str, tasks: int, at_s: float) -> None:
         """Tell the fleet of a service this member flew."""
@@ -145,6 +155,15 @@ class FleetLedger:
         with self._lock:
             claims = {v: dict(d) for v, d in self._claims.items()}
         return owned_by_others(self.vehicle, claims, self._alive())
+
+    def blocked_points(self) -> frozenset[int]:
+        """The hovering points this member plans without: those the other live members claim,
+        and every point still to fly of a member gone with its vehicle armed (its vehicle
+        flies its mission home: it keeps that airspace until its service is back)."""
+        alive, lost = set(self._alive()), set(self._lost()) - {self.vehicle}
+        with self._lock:
+            claimed = {k for v, ks in self._points.items() if v != self.vehicle and v in alive for k in ks}
+            return frozenset(claimed | {k for v in lost for k in self._routes.get(v, ())})
 
     def claims(self) -> dict[str, dict[str, float]]:
         """Every member's last claims (vehicle -> user -> due), live or not."""
@@ -187,6 +206,8 @@ class FleetLedger:
                     return
                 self._intentions[message.vehicle] = due
                 self._claims[message.vehicle] = {u: due[u] for u in message.claims if u in due}
+                self._points[message.vehicle] = set(message.points)
+                self._routes[message.vehicle] = set(message.route)
 
     def _on_served(self, sample: Any) -> None:
         message = self._read(sample, FleetServed)

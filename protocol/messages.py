@@ -365,6 +365,13 @@ class FleetIntentions(_Message, tag="fleet_intentions"):
     claims: Annotated[list[UserId], msgspec.Meta(max_length=8)] = []
     """The users of ``users`` it is committed to: the next point's and the one a hold serves.
     Only these keep the others off (the rest of the plan may still change)."""
+    points: Annotated[list[Annotated[int, msgspec.Meta(ge=0, le=100_000)]], msgspec.Meta(max_length=8)] = []
+    """The hovering points it is committed to (its next point, the point of its hold): the
+    others plan without them."""
+    route: Annotated[list[Annotated[int, msgspec.Meta(ge=0, le=100_000)]], msgspec.Meta(max_length=512)] = []
+    """Every hovering point of the mission it flies, still to fly: if its service is lost with
+    its vehicle armed, the vehicle flies them home, and the others plan without them until
+    it is back."""
 
 
 class FleetServed(_Message, tag="fleet_served"):

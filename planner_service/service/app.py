@@ -156,6 +156,11 @@ class Service:
         """The user a hold of this UAV serves now, and since when (wall clock)."""
         self._next_user: str | None = None
         """The user of this UAV's next point (its claim, with the bound one)."""
+        self._next_point: int | None = None
+        """This UAV's next hovering point (claimed, with its hold's)."""
+        self._route: tuple[int, ...] = ()
+        """The hovering points of the mission on board still to fly (its airspace if this
+        service is lost while the vehicle flies)."""
         self._taken: set[str] = set()
         """The users another member owned at the last tick."""
         self.plan_msg: Plan | None = None
@@ -354,7 +359,9 @@ class Service:
         newest = max((r.request_id for r in self.world.pending()), default=0)
         t0 = time.perf_counter()
         try:
-            _, path = await asyncio.get_running_loop().run_in_executor(self.executor, self.planner.decide, assembled)
+            blocked = self.fleet.ledger.blocked_points() if self.fleet is not None else frozenset()
+            _, path = await asyncio.get_running_loop().run_in_executor(self.executor, self.planner.decide, assembled,
+                                                                       blocked)
         except Exception as err:  # noqa: BLE001 - a planner bug must not stop the sortie
             log.exception("the planner failed")
             return ins.PlanFailed(basis, f"planner: {err}")
@@ -615,12 +622,17 @@ class Service:
             log.error("plan %d: users' places not published: %s", held.plan_id, err)
             return
         self.intake.set_places(places)
-        self._intend(places, v.time_rate)
+        self._intend(places, v.time_rate, ahead[0].hover_index if ahead else None,
+                     tuple(p.hover_index for p in ahead))
         for message in messages:
             self.zio.publish(message)
 
-    def _intend(self, places: dict[str, Place], time_rate: float | None) -> None:
-        """Tell the fleet which users this plan means to serve and when (wall clock)."""
+    def _intend(self, places: dict[str, Place], time_rate: float | None, next_point: int | None = None,
+                route: tuple[int, ...] = ()) -> None:
+        """Tell the fleet which users this plan means to serve and when (wall clock), and the
+        point it flies to next."""
+        self._next_point = next_point
+        self._route = route
         now, rate = self.wall(), time_rate if time_rate and time_rate > 0 else 1.0
         self._plan_dues = {u: now + p.eta_s / rate for u, p in places.items()}
         self._next_user = next((u for u, p in places.items() if p.place == 1), None)
@@ -634,10 +646,12 @@ class Service:
             return
         due, now = dict(self._plan_dues), self.wall()
         claims = {self._next_user} if self._next_user is not None else set()
+        points = {self._next_point} if self._next_point is not None else set()
         if self._bound is not None:  # a hold under way beats any plan's estimate
             due[self._bound[0]] = bound_due(self._bound[1])
             claims.add(self._bound[0])
-        self.fleet.ledger.intend(due, now, claims)
+            points.add(self.state.schedule.last_hover_index)
+        self.fleet.ledger.intend(due, now, claims, {k for k in points if k >= 0}, self._route)
         log.debug("fleet: intends %s; others own %s", {u: round(d - now, 2) for u, d in due.items()},
                   sorted(self.fleet.ledger.taken()))
 

@@ -83,7 +83,7 @@ class FleetPresence:
         self._conflicts: set[str] = set()
         self._unknown: set[str] = set()
         self.roster = FleetRoster(keys, self._on_change)
-        self.ledger = FleetLedger(keys, own.vehicle, lambda: self.roster.members().keys())
+        self.ledger = FleetLedger(keys, own.vehicle, lambda: self.roster.members().keys(), self.roster.lost)
         """Intentions and services exchanged with the other members (opened on joining)."""
         self.joined = False
         """A member now (``join`` went through, ``leave`` not called)."""

@@ -284,6 +284,9 @@ class Planner:
         self.rng = np.random.default_rng(seed)
         self._planner: MctsPlanner | PaperMctsPlanner | None = None
         self._users = -1
+        self._keep = np.arange(len(self.points))
+        """The hovering points the planner was built on (a fleet's: without the points the
+        other members claim), as indices of ``points``."""
 
     def new_sortie(self) -> None:
         """Forget the search tree: a new sortie starts from the base with fresh counts, which
@@ -294,20 +297,33 @@ class Planner:
     def scenario_for(self, num_users: int) -> Scenario:
         return self.base.replace(num_users=max(num_users, 1))
 
-    def decide(self, assembled: Assembled) -> tuple[Decision | None, PlannedPath]:
+    def decide(self, assembled: Assembled, blocked: frozenset[int] = frozenset()) -> tuple[Decision | None, PlannedPath]:
         """The next decision and the predicted path; (None, empty path) when nothing is
-        allowed (the sortie is over for now). Runs in a worker thread: CPU-bound, nogil."""
+        allowed (the sortie is over for now). ``blocked``: hovering points the planner may
+        not use (in a fleet, the others' next points and holds: the offline ``claims``
+        planner's rule); the planner is then built on the others, renumbered, and its tree
+        is lost whenever they change. Runs in a worker thread: CPU-bound, nogil."""
         n = len(assembled.user_ids)
         scenario = self.scenario_for(n)
-        if n != self._users or (self._planner is None and self.algo in ("mcts", "ts-mcts", "mcts-paper")):
-            self._planner = self._build(scenario)
+        keep = np.setdiff1d(np.arange(len(self.points)), np.array(sorted(blocked), dtype=np.int64))
+        if n != self._users or not np.array_equal(keep, self._keep) or (
+                self._planner is None and self.algo in ("mcts", "ts-mcts", "mcts-paper")):
+            self._keep = keep
+            self._planner = self._build(scenario, self.points[keep])
             self._users = n
-        if n == 0:
+        if n == 0 or len(keep) == 0:
             return None, predict_path(scenario, self.points, assembled, ())
+        state = assembled.state
+        if len(keep) < len(self.points):  # the view without the blocked points
+            state = state.copy()
+            where = np.flatnonzero(keep == state.hover_index)
+            state.hover_index = int(where[0]) if len(where) else AT_BASE
         try:
-            decision = self._plan(scenario, assembled.state)
+            decision = self._plan(scenario, state, self.points[keep])
         except ValueError:  # no hovering point allowed: nobody eligible or no energy
             return None, predict_path(scenario, self.points, assembled, ())
+        decision = replace(decision, action=int(keep[decision.action]),
+                           line=tuple(int(keep[a]) for a in decision.line))
         return decision, predict_path(scenario, self.points, assembled, decision.line, self.max_points)
 
     def warm_up(self) -> None:
@@ -319,23 +335,23 @@ class Planner:
         probe.decide(warm_up_assembled(self.base))
         planning_battery_j(self.base, self.base.battery_j, 1.0, 0.0)
 
-    def _build(self, scenario: Scenario) -> MctsPlanner | PaperMctsPlanner | None:
+    def _build(self, scenario: Scenario, points: np.ndarray) -> MctsPlanner | PaperMctsPlanner | None:
         if self.algo == "mcts":
-            return MctsPlanner(scenario, self.points, self.config, self.rng)
+            return MctsPlanner(scenario, points, self.config, self.rng)
         if self.algo in ("mcts-paper", "ts-mcts"):
             n = self.config.iterations or PAPER_ITERATIONS
             schedule = "timesaving" if self.algo == "ts-mcts" else "paper"
-            return PaperMctsPlanner(scenario, self.points, n, self.rng, schedule=schedule)
+            return PaperMctsPlanner(scenario, points, n, self.rng, schedule=schedule)
         return None
 
-    def _plan(self, scenario: Scenario, state: SortieState) -> Decision:
+    def _plan(self, scenario: Scenario, state: SortieState, points: np.ndarray) -> Decision:
         if self._planner is not None:
             return self._planner.plan(state)
         start = time.perf_counter()
         if self.algo == "greedy":
-            line = one_step_line(scenario, self.points, state, lambda q: int(np.argmax(q)), self.max_points)
+            line = one_step_line(scenario, points, state, lambda q: int(np.argmax(q)), self.max_points)
         else:
-            line = one_step_line(scenario, self.points, state,
+            line = one_step_line(scenario, points, state,
                                  lambda q: int(self.rng.choice(np.flatnonzero(np.isfinite(q)))), self.max_points)
         if not line:
             raise ValueError("no hovering point is allowed in this state: the sortie is over")

@@ -187,3 +187,23 @@ def test_random_draws_among_the_allowed_points() -> None:
     q = np.empty(len(HP))
     evaluate(scene_of(P, HP, a.state.task_table), a.state.world(), q)
     assert len(firsts) > 3 and all(np.isfinite(q[k]) for k in firsts)
+
+
+@pytest.mark.parametrize("algo", FLIGHT_ALGOS)
+def test_a_fleet_members_planner_plans_without_the_points_the_others_claim(algo: str) -> None:
+    """In a fleet each member plans without the hovering points the other live members claim
+    (their next points and holds): its decision and line are indices of every point, none of
+    them claimed; with every point claimed there is nothing to decide."""
+    a = crowd()
+    planner = Planner(S, MctsConfig(iterations=300), seed=4, max_points=4, algo=algo)
+    free, _ = planner.decide(a)
+    assert free is not None
+    blocked = frozenset({free.action, *free.line[1:2]})
+    decision, path = planner.decide(a, blocked)
+    assert decision is not None and decision.action not in blocked and not blocked & set(decision.line)
+    assert decision.line[0] == decision.action and 0 <= decision.action < len(HP)
+    assert [pt.hover_index for pt in path.points] == list(decision.line[:len(path.points)])
+    q = np.empty(len(HP))
+    evaluate(scene_of(P, HP, a.state.task_table), a.state.world(), q)
+    assert np.isfinite(q[decision.action]), "an allowed point of the whole set"
+    assert planner.decide(a, frozenset(range(len(HP))))[0] is None
