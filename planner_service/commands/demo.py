@@ -13,6 +13,7 @@ import json
 import sys
 import threading
 from pathlib import Path
+from typing import Any, Callable
 
 from protocol.arguments import positive_float, positive_int
 
@@ -55,22 +56,32 @@ def _mavlink_url(text: str) -> str:
     return text
 
 
-def run(args: argparse.Namespace) -> int:
-    from ..harness.demo import DemoError, run_demo
+def _flown(fly: Callable[[], dict[str, Any]]) -> dict[str, Any] | int:
+    """The demo's summary, or the exit status when it failed or was interrupted (said)."""
+    from ..harness.demo import DemoError
 
-    out = Path(args.out)
-    if args.uavs > 1:
-        return run_fleet(args, out)
     try:
-        summary = run_demo(out, users=args.users or 10, speedup=args.speedup, budget_ms=args.budget_ms, backend=args.backend,
-                           flavour=args.flavour, seed=args.seed, timeout_s=args.timeout, mavlink=args.mavlink,
-                           algo=args.algo, config=Path(args.config) if args.config else None, echo=_echo)
+        return fly()
     except DemoError as err:
         print(f"demo failed: {err}", file=sys.stderr)
         return 1
     except KeyboardInterrupt:
         print("demo interrupted; every process stopped", file=sys.stderr)
         return 130
+
+
+def run(args: argparse.Namespace) -> int:
+    from ..harness.demo import run_demo
+
+    out = Path(args.out)
+    if args.uavs > 1:
+        return run_fleet(args, out)
+    summary = _flown(lambda: run_demo(
+        out, users=args.users or 10, speedup=args.speedup, budget_ms=args.budget_ms, backend=args.backend,
+        flavour=args.flavour, seed=args.seed, timeout_s=args.timeout, mavlink=args.mavlink, algo=args.algo,
+        config=Path(args.config) if args.config else None, echo=_echo))
+    if isinstance(summary, int):
+        return summary
     print(f"\n{summary['intervals']} services to {summary['served_users']} users, "
           f"{summary['throughput_tasks_per_interval']:.1f} tasks/interval, average reward {summary['average_reward']:.3f}, "
           f"energy {summary['energy_used_j'] / 1e3:.1f} of {summary['energy_budget_j'] / 1e3:.1f} kJ, "
@@ -95,7 +106,6 @@ def _echo(line: str) -> None:
 
 def run_fleet(args: argparse.Namespace, out: Path) -> int:
     """``demo --uavs N``: the fleet's sortie, its summary per UAV and for the fleet."""
-    from ..harness.demo import DemoError
     from ..harness.fleet_demo import run_fleet_demo
 
     alone = [flag for flag, given in (("--mavlink", args.mavlink), ("--config", args.config),
@@ -105,16 +115,11 @@ def run_fleet(args: argparse.Namespace, out: Path) -> int:
         print(f"error: {', '.join(alone)} fly one UAV; --uavs {args.uavs} flies the stubs with the defaults",
               file=sys.stderr)
         return 2
-    try:
-        summary = run_fleet_demo(out, uavs=args.uavs, users=args.users or 12, speedup=args.speedup,
-                                 budget_ms=args.budget_ms, seed=args.seed, timeout_s=max(args.timeout, 300.0),
-                                 echo=_echo)
-    except DemoError as err:
-        print(f"demo failed: {err}", file=sys.stderr)
-        return 1
-    except KeyboardInterrupt:
-        print("demo interrupted; every process stopped", file=sys.stderr)
-        return 130
+    summary = _flown(lambda: run_fleet_demo(out, uavs=args.uavs, users=args.users or 12, speedup=args.speedup,
+                                            budget_ms=args.budget_ms, seed=args.seed, timeout_s=args.timeout,
+                                            echo=_echo))
+    if isinstance(summary, int):
+        return summary
     for vehicle, s in summary["per_uav"].items():
         traffic = summary["traffic_bytes_per_s"][vehicle]
         print(f"{vehicle}: {s['intervals']} services to {s['served_users']} users, "

@@ -350,13 +350,14 @@ class Service:
     async def _plan(self, basis: fx.PlanBasis) -> ins.Input:
         fix = self._planning_fix(basis)
         try:
-            assembled = assemble(self.scenario, self._users(), self.world.pending(),
-                                 self.journal.services(), fix, self.state.schedule.last_hover_index)
+            pending = self.world.pending()
+            assembled = assemble(self.scenario, self._users(), pending, self.journal.services(), fix,
+                                 self.state.schedule.last_hover_index)
         except JournalError as err:
             return ins.PlanFailed(basis, f"journal: {err}")
         if basis.at_point is not None:
             assembled = after_hold(assembled, basis.at_point, basis.serving, basis.serving_reward)
-        newest = max((r.request_id for r in self.world.pending()), default=0)
+        newest = max((r.request_id for r in pending), default=0)
         t0 = time.perf_counter()
         try:
             blocked = self.fleet.ledger.blocked_points() if self.fleet is not None else frozenset()

@@ -114,8 +114,9 @@ class FleetWorld(JournalWorld):
         if other is not None:
             return f"{other} serves {user_id} (claimed it first)"
         row = self.journal.request_in_force(user_id)
-        if row is not None and self._counted(row) is None and any(u.user_id == user_id for u in self._now()
-                                                                  if u in self.remote):
+        sortie = self.journal.sortie
+        if row is not None and self._counted(row) is None and any(u.user_id == user_id and u.sortie == sortie
+                                                                  for u in self.remote):
             return f"another member served {user_id}'s request meanwhile"
         return None
 
