@@ -41,6 +41,9 @@ NEAR_M = 3.0
 NAV_ACC_RAD default is 2 m)."""
 FAR_M = 20.0
 """How far the vehicle must stay from a point it must not have flown to."""
+WINDOW_S = 3 * max(spec.interval_s for spec in stream_plan("px4"))
+"""How long the streams' rates are measured, in PX4's time: three of the slowest's intervals,
+so that even it arrives at least twice."""
 PX4_UNASKED_HZ = {"GLOBAL_POSITION_INT": 50.0, "SYS_STATUS": 5.0, "EXTENDED_SYS_STATE": 5.0}
 """What PX4 sends of these on its onboard link unasked, per simulated second
 (test_conformance_px4.ONBOARD_HZ): the link's requests bring them down."""
@@ -56,19 +59,29 @@ def link_for(px4: Px4, backend: str, events: Recorder) -> VehicleLink:
     return open_link(backend, LinkSettings(px4.url, "px4", item_timeout_s=0.5, retries=10, link_timeout_s=2.0), events)
 
 
-def tap(link: VehicleLink) -> Counter[int]:
+def tap(link: VehicleLink, arrivals: dict[int, list[float]] | None = None) -> Counter[int]:
     """Count every message the link takes from the autopilot, by message id (both backends
-    tell ``streams.heard`` of each): what PX4 really sends on this link."""
+    tell ``streams.heard`` of each): what PX4 really sends on this link. ``arrivals``: each
+    message's arrival times too, in the vehicle's time (the link's last ``boot_s``)."""
     counts: Counter[int] = Counter()
     streams = link.state.streams
     heard = streams.heard
 
     def counting(msg_id: int) -> bool:
         counts[msg_id] += 1
+        if arrivals is not None and link.telemetry.boot_s is not None:
+            arrivals.setdefault(msg_id, []).append(link.telemetry.boot_s)
         return heard(msg_id)
 
     streams.heard = counting  # type: ignore[method-assign]
     return counts
+
+
+def rate_hz(arrivals: list[float]) -> float:
+    """A stream's rate from its arrival times: intervals over the time they span (0: fewer
+    than two arrivals)."""
+    span = arrivals[-1] - arrivals[0] if len(arrivals) > 1 else 0.0
+    return (len(arrivals) - 1) / span if span > 0 else 0.0
 
 
 def fixes_local(px4: Px4, since: float = 0.0) -> list[tuple[float, float, float]]:
@@ -92,7 +105,8 @@ def test_telemetry_from_px4s_streams_position_awaited_and_a_refused_arm(make_px4
     async def run() -> dict[str, Any]:
         events = Recorder()
         link = link_for(px4, backend, events)
-        counts = tap(link)
+        arrivals: dict[int, list[float]] = {}
+        counts = tap(link, arrivals)
         connecting = asyncio.ensure_future(link.connect(30.0))
         await asyncio.to_thread(px4.start)
         await connecting
@@ -122,12 +136,17 @@ def test_telemetry_from_px4s_streams_position_awaited_and_a_refused_arm(make_px4
             await until("the telemetry arriving", lambda: link.telemetry.landed_source == "EXTENDED_SYS_STATE"
                         and link.telemetry.battery_fraction is not None and link.telemetry.missing == (), 20.0, link)
             assert link.telemetry.battery_fraction == 1.0  # SIH's pack, full while disarmed
-            # Rates as asked, in PX4's time: count for a while once the requests are answered.
+            # Rates as asked, in PX4's time, once the requests are answered: each stream's
+            # arrivals over whole intervals, so that where a window of 4 s begins is no matter
+            # (counted in one, a 0.5 Hz stream 5 % late on a busy machine showed one message
+            # in 4 s: half its rate).
             counts.clear()
-            clock0, wall0 = link.telemetry.boot_s, time.monotonic()
-            await asyncio.sleep(4.0)
-            vehicle_s = (link.telemetry.boot_s or 0.0) - (clock0 or 0.0)
-            rates = {s.name: counts[s.msg_id] / vehicle_s for s in stream_plan("px4")}
+            arrivals.clear()
+            clock0, wall0 = link.telemetry.boot_s or 0.0, time.monotonic()
+            await until("the window's end in PX4's time", lambda: (link.telemetry.boot_s or 0.0) - clock0 >= WINDOW_S,
+                        30.0, link)
+            vehicle_s = (link.telemetry.boot_s or 0.0) - clock0
+            rates = {s.name: rate_hz(arrivals.get(s.msg_id, [])) for s in stream_plan("px4")}
             total_hz = sum(counts.values()) / (time.monotonic() - wall0)
             return {"reason": reason, "rates": rates, "vehicle_s": vehicle_s, "total_hz": total_hz,
                     "refusals": [r.getMessage() for r in caplog.records if "SET_MESSAGE_INTERVAL refused" in
