@@ -30,6 +30,7 @@ import msgspec
 import zenoh
 
 from .errors import ProtocolError
+from .fleet_places import FleetPlaces
 from .keys import FleetKeys, Keys
 from .messages import (ErrorReply, Event, OperatorCommand, OperatorReply, Plan, State, Status, TaskAck, TaskRequest,
                        UserPlace, decode, decode_operator_reply, decode_reply, encode)
@@ -271,6 +272,34 @@ class PlannerClient:
         """Every user's place (a simulator of many users; under access control a user may
         follow only its own)."""
         self._follow_places(self.keys.users, callback)
+
+    def follow_fleet_place(self, user_id: str,
+                           callback: Callable[[FleetPlaces], None] | None = None) -> FleetPlaces:
+        """``user_id``'s place across the fleet (``protocol.fleet_places``): every member's
+        ``user_place`` for it (``{prefix}/*/users/{user_id}``), a member forgotten when its
+        token goes (``{prefix}/fleet/members/*``). The returned ``FleetPlaces`` is kept up to
+        date on zenoh's threads (``where()``: the member whose plan has the user soonest);
+        ``callback`` runs after each change, on those threads."""
+        places = FleetPlaces(user_id)
+        fleet = FleetKeys(self.keys.prefix)
+
+        def on_place(sample: Any) -> None:
+            vehicle = fleet.place_vehicle(str(sample.key_expr), user_id)
+            try:
+                place = decode(sample.payload.to_bytes(), UserPlace)
+            except ProtocolError:
+                return
+            if vehicle is not None and places.update(vehicle, place) and callback is not None:
+                callback(places)
+
+        def on_token(sample: Any) -> None:
+            vehicle = fleet.vehicle_of(str(sample.key_expr))
+            if vehicle is not None and sample.kind == zenoh.SampleKind.DELETE and places.forget(vehicle) \
+                    and callback is not None:
+                callback(places)
+        self._subs.append(self.session.liveliness().declare_subscriber(fleet.members, on_token))
+        self._subs.append(self.session.declare_subscriber(fleet.user_places(user_id), on_place))
+        return places
 
     def _follow_places(self, key: str, callback: Callable[[UserPlace], None]) -> None:
         def checked(place: UserPlace, key_user: str | None) -> None:

@@ -179,9 +179,21 @@ class FleetKeys:
 
     def status_vehicle(self, key_expr: str) -> str | None:
         """The vehicle id of a ``{prefix}/{vehicle}/status`` key; None for any other key."""
+        return self._vehicle_key(key_expr, "status")
+
+    def user_places(self, user_id: str) -> str:
+        """``user_id``'s place on every member's key (``Keys.user`` of each vehicle): each
+        member that journalled the user publishes it, with a place if its plan has the user."""
+        return f"{self.prefix}/*/users/{check_user_id(user_id)}"
+
+    def place_vehicle(self, key_expr: str, user_id: str) -> str | None:
+        """The vehicle id of a ``{prefix}/{vehicle}/users/{user_id}`` key; None for any other key."""
+        return self._vehicle_key(key_expr, "users", user_id)
+
+    def _vehicle_key(self, key_expr: str, *leaf: str) -> str | None:
+        """The vehicle id of ``{prefix}/{vehicle}/{leaf...}``; None for any other key."""
         parts = key_expr.split("/")
-        if len(parts) == 3 and parts[0] == self.prefix and parts[2] == "status" and parts[1] != FLEET \
-                and _CHUNK.fullmatch(parts[1]):
+        if parts[0] == self.prefix and parts[2:] == list(leaf) and parts[1] != FLEET and _CHUNK.fullmatch(parts[1]):
             return parts[1]
         return None
 

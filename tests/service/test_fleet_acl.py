@@ -27,7 +27,7 @@ from planner_service.harness.processes import REPO, Child, free_port
 from planner_service.service.fleet_presence import FleetPresence, MembershipError
 from protocol import FleetKeys, Keys, Status, decode, encode
 from protocol.client import PlannerClient, client_config, request_for
-from protocol.messages import FleetIntentions, FleetServed, Intention
+from protocol.messages import FleetIntentions, FleetServed, Intention, UserPlace
 from tests.support.fleet import member, wait_until
 from tests.support.stack import Stack
 from tests.support.zenoh_tls import VEHICLE_MARKS, add_entries, make_certs, shipped
@@ -171,8 +171,11 @@ def test_a_fleet_service_behind_the_routers_access_control(stack: Stack, tmp_pat
     ack = stack.client.submit("u-1", 100.0, 120.0, 9)
     assert ack.request_id == 1
     assert stack.client.wait_for_fleet(10.0)  # the user's certificate may see the members...
+    places = stack.client.follow_fleet_place("u-1")  # ...follow its place on every member's key...
     answer = stack.client.submit_to_fleet(request_for("u-1", 100.0, 130.0, 9))  # ...and ask the fleet
     assert answer.holders == ("uav1",) and answer.ack.request_id == 2, answer
+    wait_until(lambda: places.members().get("uav1", UserPlace("u-1")).request_id == 2, 20.0,
+               lambda: f"u-1's place from uav1, through the router: {places.members()}\n{service.log()[-2000:]}")
     watch = subprocess.run([sys.executable, "-m", "planner_service", "operator", "watch", "--once", "--plain",
                             "--connect", endpoint, "--zenoh-config", str(operator_conf),
                             "--operator-key", str(stack.operator_key_path)],

@@ -21,6 +21,7 @@ from planner_service.fleet_ledger import owner
 from planner_service.model import field
 from planner_service.service.config import build_config
 from protocol.client import PlannerClient, request_for
+from protocol.fleet_places import FleetPlaces
 from tests.support.fleet import wait_until
 from tests.support.fleet_stack import FleetStack, Intentions, Uav
 
@@ -88,26 +89,20 @@ def fly_and_lose_one(fleet: FleetStack, uav1: Uav, uav2: Uav, wire: Intentions) 
     claims = wire.claims()
     owned = {u for u in claims.get("uav2", {}) if owner(u, claims) == "uav2"}
     assert "over:" not in uav2.service.log(), "uav2 landed before its service could be killed in flight"
-    uav2.service.proc.send_signal(signal.SIGKILL)
-    lost_at = time.monotonic()
-    wait_until(lambda: "fleet: uav2 left" in uav1.service.log(), 30.0, lambda: f"uav1 seeing uav2 go\n{fleet.logs()}")
-    served_before = set(served_by(fleet)["uav1"])
-
-    # uav1 flies its sortie out; uav2's vehicle, its service gone, flies its uploaded mission home
-    wait_until(lambda: "over:" in uav1.service.log(), 120.0, lambda: f"uav1's landing\n{fleet.logs()}")
-    wait_until(lambda: landed(uav2), 120.0, lambda: f"uav2's vehicle home\n{uav2.stub.log()[-2000:] if uav2.stub else ''}")
-    first = min((at for at, users in wire.since("uav1", lost_at) if users & owned), default=None)
-    print(f"uav2 owned {sorted(owned)} when it was killed; uav1's first plan with them "
-          f"{'-' if first is None else f'{first - lost_at:.2f}'} s wall after (one interval: "
-          f"{INTERVAL_S / float(SPEEDUP):.2f} s)")
-    after = {u for u, _ in uav1.rows(f"SELECT user_id, tasks FROM services WHERE service_id > {len(served_before)}")}
-    reasons = dict(uav1.rows("SELECT user_id, reason FROM requests WHERE status = 'not_served'"))
-    print(f"of uav2's users, uav1 served {sorted(owned & after)}; not served: "
-          f"{ {u: reasons[u] for u in sorted(owned - after) if u in reasons} }")
-    # each of uav2's users served by uav1, or left out by the fleet-wide fairness rule (its
-    # services by uav2 counted), or by the sortie's end: never silently dropped
-    assert all(u in after or reasons.get(u) for u in owned), (owned, after, reasons)
-    assert owned & after or all(reasons[u].startswith("fairness") for u in owned), (owned, after, reasons)
+    follower = PlannerClient([fleet.endpoints[1]])  # each of them follows its place across the fleet
+    try:
+        moved = follow_places(follower, owned)
+        uav2.service.proc.send_signal(signal.SIGKILL)
+        lost_at = time.monotonic()
+        wait_until(lambda: "fleet: uav2 left" in uav1.service.log(), 30.0,
+                   lambda: f"uav1 seeing uav2 go\n{fleet.logs()}")
+        after = take_over(fleet, uav1, uav2, wire, owned, lost_at)
+        # a user that uav1 took over was told so: its place moved to uav1 (uav2's word forgotten)
+        print(f"the places of uav2's users, member after member: {moved}")
+        for u in owned & after:
+            assert "uav1" in moved[u] and "uav2" not in moved[u][moved[u].index("uav1"):], (u, moved)
+    finally:
+        follower.close()
     check_fairness(fleet)
     for uav, layer in ((uav1, 100.0), (uav2, 120.0)):  # each cruised its own layer, by its own positions
         heights = Counter(round(z) for z, mode in track(uav) if mode == "AUTO" and z > 50.0)
@@ -117,6 +112,42 @@ def fly_and_lose_one(fleet: FleetStack, uav1: Uav, uav2: Uav, wire: Intentions) 
         assert "SEPARATION LOST" not in uav.service.log()
     assert users.stop() == 0
     assert uav1.service.stop() == 0
+
+
+def follow_places(client: PlannerClient, users: set[str]) -> dict[str, list[str]]:
+    """user -> the members that held its place in turn (``PlannerClient.follow_fleet_place``)."""
+    moved: dict[str, list[str]] = {u: [] for u in users}
+
+    def note(places: FleetPlaces) -> None:
+        here, seen = places.where(), moved[places.user_id]
+        if here is not None and (not seen or seen[-1] != here.vehicle):
+            seen.append(here.vehicle)
+    for u in users:
+        client.follow_fleet_place(u, note)
+    return moved
+
+
+def take_over(fleet: FleetStack, uav1: Uav, uav2: Uav, wire: Intentions, owned: set[str], lost_at: float) -> set[str]:
+    """uav1 flies its sortie out after uav2's service was lost, and serves uav2's users (or
+    leaves them out by a rule, never silently); the users uav1 served since, returned."""
+    served_before = len(uav1.services())
+
+    # uav1 flies its sortie out; uav2's vehicle, its service gone, flies its uploaded mission home
+    wait_until(lambda: "over:" in uav1.service.log(), 120.0, lambda: f"uav1's landing\n{fleet.logs()}")
+    wait_until(lambda: landed(uav2), 120.0, lambda: f"uav2's vehicle home\n{uav2.stub.log()[-2000:] if uav2.stub else ''}")
+    first = min((at for at, users in wire.since("uav1", lost_at) if users & owned), default=None)
+    print(f"uav2 owned {sorted(owned)} when it was killed; uav1's first plan with them "
+          f"{'-' if first is None else f'{first - lost_at:.2f}'} s wall after (one interval: "
+          f"{INTERVAL_S / float(SPEEDUP):.2f} s)")
+    after = {u for u, _ in uav1.rows(f"SELECT user_id, tasks FROM services WHERE service_id > {served_before}")}
+    reasons = dict(uav1.rows("SELECT user_id, reason FROM requests WHERE status = 'not_served'"))
+    print(f"of uav2's users, uav1 served {sorted(owned & after)}; not served: "
+          f"{ {u: reasons[u] for u in sorted(owned - after) if u in reasons} }")
+    # each of uav2's users served by uav1, or left out by the fleet-wide fairness rule (its
+    # services by uav2 counted), or by the sortie's end: never silently dropped
+    assert all(u in after or reasons.get(u) for u in owned), (owned, after, reasons)
+    assert owned & after or all(reasons[u].startswith("fairness") for u in owned), (owned, after, reasons)
+    return after
 
 
 def track(uav: Uav) -> list[tuple[float, str]]:
