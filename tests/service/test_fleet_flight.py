@@ -5,7 +5,8 @@ their intentions and services (``planner_service.fleet_ledger``).
 
 Proves: every request is held by every live member; both UAVs serve; no user is served more
 often than the fairness rule allows across the fleet; a service killed mid-sortie leaves its
-users to the other, which serves them; a router killed costs no request (the users and the
+users to the other, which serves them, and each of them sees its place move there
+(``PlannerClient.follow_fleet_place``); a router killed costs no request (the users and the
 services reach the other)."""
 
 from __future__ import annotations
