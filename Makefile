@@ -23,9 +23,10 @@ demo: $(STAMP)
 	$(PY) -m planner_service demo --out demo-out
 
 # Timed tests (marker `alone`) run after the rest, by themselves: beside another test
-# process on two cores their figures measure the neighbour, not the code.
+# process on two cores their figures measure the neighbour, not the code. The slowest
+# tests are listed at the end: the suite's budget is 15 minutes on two cores.
 test: $(STAMP)
-	$(PY) -m pytest -q -n $(JOBS) --dist loadfile -m 'not slow and not soak and not alone'
+	$(PY) -m pytest -q -n $(JOBS) --dist loadfile -m 'not slow and not soak and not alone' --durations=15
 	$(PY) -m pytest -q -m alone
 
 bench: $(STAMP)

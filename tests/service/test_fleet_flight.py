@@ -21,6 +21,7 @@ import pytest
 from planner_service.fleet_ledger import owner
 from planner_service.model import field
 from planner_service.service.config import build_config
+from protocol import Keys
 from protocol.client import PlannerClient, request_for
 from protocol.fleet_places import FleetPlaces
 from tests.support.fleet import wait_until
@@ -60,6 +61,17 @@ def test_two_uavs_share_the_users_and_one_takes_over_a_lost_ones(fleet: FleetSta
 
 
 def fly_and_lose_one(fleet: FleetStack, uav1: Uav, uav2: Uav, wire: Intentions) -> None:
+    # each user follows its place across the fleet from the start (the subscriptions are long
+    # in place when the plans that matter come), and uav1's plans are read as they go out
+    follower = PlannerClient([fleet.endpoints[1]], keys=Keys(vehicle="uav1"))
+    try:
+        places = Places(follower, {f"user-{i}" for i in range(8)})
+        fly_lose_and_follow(fleet, uav1, uav2, wire, places)
+    finally:
+        follower.close()
+
+
+def fly_lose_and_follow(fleet: FleetStack, uav1: Uav, uav2: Uav, wire: Intentions, places: "Places") -> None:
     users = fleet.users("--count", "8", "--speedup", SPEEDUP, "--seed", "3")
 
     # every request held by both members: the users' requests in both journals
@@ -90,20 +102,20 @@ def fly_and_lose_one(fleet: FleetStack, uav1: Uav, uav2: Uav, wire: Intentions) 
     claims = wire.claims()
     owned = {u for u in claims.get("uav2", {}) if owner(u, claims) == "uav2"}
     assert "over:" not in uav2.service.log(), "uav2 landed before its service could be killed in flight"
-    follower = PlannerClient([fleet.endpoints[1]])  # each of them follows its place across the fleet
-    try:
-        moved = follow_places(follower, owned)
-        uav2.service.proc.send_signal(signal.SIGKILL)
-        lost_at = time.monotonic()
-        wait_until(lambda: "fleet: uav2 left" in uav1.service.log(), 30.0,
-                   lambda: f"uav1 seeing uav2 go\n{fleet.logs()}")
-        after = take_over(fleet, uav1, uav2, wire, owned, lost_at)
-        # a user that uav1 took over was told so: its place moved to uav1 (uav2's word forgotten)
-        print(f"the places of uav2's users, member after member: {moved}")
-        for u in owned & after:
-            assert "uav1" in moved[u] and "uav2" not in moved[u][moved[u].index("uav1"):], (u, moved)
-    finally:
-        follower.close()
+    uav2.service.proc.send_signal(signal.SIGKILL)
+    lost_at = time.monotonic()
+    wait_until(lambda: "fleet: uav2 left" in uav1.service.log(), 30.0, lambda: f"uav1 seeing uav2 go\n{fleet.logs()}")
+    # the users' view: uav2's word forgotten once its token is gone...
+    wait_until(lambda: all("uav2" not in places.followed[u].members() for u in owned), 30.0,
+               lambda: f"uav2's places forgotten: { {u: places.followed[u].members() for u in owned} }")
+    take_over(fleet, uav1, uav2, wire, owned, lost_at)
+    # ...and each of its users that uav1 planned since was told its place there (a user served
+    # by a hold's binding, never planned, has no place to be told)
+    planned = places.planned_by_uav1_since(lost_at)
+    print(f"uav2's users in uav1's plans since: {sorted(owned & planned)}; their places, member after "
+          f"member: { {u: places.moved[u] for u in sorted(owned)} }")
+    for u in owned & planned:
+        assert places.placed_by(u, "uav1"), (u, places.moved[u])
     check_fairness(fleet)
     for uav, layer in ((uav1, 100.0), (uav2, 120.0)):  # each cruised its own layer, by its own positions
         heights = Counter(round(z) for z, mode in track(uav) if mode == "AUTO" and z > 50.0)
@@ -115,22 +127,37 @@ def fly_and_lose_one(fleet: FleetStack, uav1: Uav, uav2: Uav, wire: Intentions) 
     assert uav1.service.stop() == 0
 
 
-def follow_places(client: PlannerClient, users: set[str]) -> dict[str, list[str]]:
-    """user -> the members that held its place in turn (``PlannerClient.follow_fleet_place``)."""
-    moved: dict[str, list[str]] = {u: [] for u in users}
+class Places:
+    """What the users see of their places (``PlannerClient.follow_fleet_place``), beside what
+    uav1's plans say (its ``plan`` publication): two publications of the service to hold
+    against each other."""
 
-    def note(places: FleetPlaces) -> None:
-        here, seen = places.where(), moved[places.user_id]
+    def __init__(self, client: PlannerClient, users: set[str]) -> None:
+        self.moved: dict[str, list[str]] = {u: [] for u in users}
+        """user -> the members that held its place (``where()``) in turn."""
+        self._placed: dict[str, set[str]] = {u: set() for u in users}
+        """user -> every member that ever said it plans the user."""
+        self._plans: list[tuple[float, set[str]]] = []
+        self.followed = {u: client.follow_fleet_place(u, self._note) for u in users}
+        client.follow_plans(lambda plan: self._plans.append(
+            (time.monotonic(), {p.user_id for p in plan.points if p.user_id})))
+
+    def _note(self, places: FleetPlaces) -> None:
+        self._placed[places.user_id] |= {v for v, p in places.members().items() if p.place is not None}
+        here, seen = places.where(), self.moved[places.user_id]
         if here is not None and (not seen or seen[-1] != here.vehicle):
             seen.append(here.vehicle)
-    for u in users:
-        client.follow_fleet_place(u, note)
-    return moved
+
+    def placed_by(self, user: str, vehicle: str) -> bool:
+        return vehicle in self._placed[user]
+
+    def planned_by_uav1_since(self, t: float) -> set[str]:
+        return {u for at, users in list(self._plans) if at >= t for u in users}
 
 
-def take_over(fleet: FleetStack, uav1: Uav, uav2: Uav, wire: Intentions, owned: set[str], lost_at: float) -> set[str]:
+def take_over(fleet: FleetStack, uav1: Uav, uav2: Uav, wire: Intentions, owned: set[str], lost_at: float) -> None:
     """uav1 flies its sortie out after uav2's service was lost, and serves uav2's users (or
-    leaves them out by a rule, never silently); the users uav1 served since, returned."""
+    leaves them out by a rule, never silently)."""
     served_before = len(uav1.services())
 
     # uav1 flies its sortie out; uav2's vehicle, its service gone, flies its uploaded mission home
@@ -148,7 +175,6 @@ def take_over(fleet: FleetStack, uav1: Uav, uav2: Uav, wire: Intentions, owned: 
     # services by uav2 counted), or by the sortie's end: never silently dropped
     assert all(u in after or reasons.get(u) for u in owned), (owned, after, reasons)
     assert owned & after or all(reasons[u].startswith("fairness") for u in owned), (owned, after, reasons)
-    return after
 
 
 def track(uav: Uav) -> list[tuple[float, str]]:

@@ -114,9 +114,13 @@ def test_a_fleet_split_in_two_plans_on_what_each_side_knows_and_agrees_once_heal
     wait_until(heard, APART_S, lambda: f"the services flown apart: {a_heard}, {b_heard}")
     assert a_heard == [FleetServed(vehicle="uav2", user_id="v", tasks=3, at_s=61.0)]
     assert b_heard == [FleetServed(vehicle="uav1", user_id="w", tasks=4, at_s=60.0)]
+    # ...and so does what each said: its last intentions (a cache of one), which claim u on both sides
+    wait_until(lambda: a.ledger.intentions().get("uav2") == {"u": 100.0}
+               and b.ledger.intentions().get("uav1") == {"w": 50.0, "u": 150.0}, APART_S,
+               lambda: f"the intentions said apart: {a.ledger.intentions()}, {b.ledger.intentions()}")
     # both claimed u apart; healed, both sides give it to the same member: uav2's claim is earlier
-    wait_until(lambda: owner("u", a.ledger.claims()) == owner("u", b.ledger.claims()) == "uav2", APART_S,
-               lambda: f"one owner of u on both sides: {a.ledger.claims()}, {b.ledger.claims()}")
+    assert b.ledger.claims()["uav1"] == {"w": 50.0, "u": 150.0}
+    assert owner("u", a.ledger.claims()) == owner("u", b.ledger.claims()) == "uav2"
     assert a.ledger.owners() == {"u": "uav2"} and b.ledger.owners() == {"w": "uav1"}
     # nobody is lost any more: only the points the other claims now are kept out
     assert a.roster.lost() == [] and b.roster.lost() == []
