@@ -39,7 +39,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--offline-only", action="store_true",
                         help="with --flight: plan the two offline worlds only, no flights (seconds per seed), "
                              "mcts on --iterations per decision (the same decisions every run) instead of the clock")
-    parser.add_argument("--seeds", default="1-12", metavar="A-B",
+    parser.add_argument("--seeds", type=seed_range, default="1-12", metavar="A-B",
                         help="seeds with --flight (default 1-12: one seed's flight differs from another's by more "
                              "than one planner's from another's; 3 algorithms take about 16 minutes)")
     parser.add_argument("--algos", default="mcts,greedy,random", help="algorithms with --flight (default mcts,greedy,random)")
@@ -54,6 +54,18 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--uavs", default="1,2,3", metavar="N,N,...",
                         help="fleet sizes with --fleet --flight (default 1,2,3)")
     parser.add_argument("--users", type=int, default=12, help="simulated users with --fleet --flight (default 12)")
+
+
+def seed_range(text: str) -> list[int]:
+    """``A-B`` (or ``A``): the seeds A to B."""
+    lo, _, hi = text.partition("-")
+    try:
+        seeds = list(range(int(lo), int(hi or lo) + 1))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not A-B") from None
+    if not seeds:
+        raise argparse.ArgumentTypeError(f"{text!r}: no seed from A to B")
+    return seeds
 
 
 def run(args: argparse.Namespace) -> int:
@@ -118,15 +130,14 @@ def _run_link(args: argparse.Namespace) -> int:
 def _run_fleet_flight(args: argparse.Namespace) -> int:
     from ..bench.fleet_flight import format_fleet_flight, run_fleet_flight
 
+    seeds = args.seeds
     try:
-        lo, _, hi = args.seeds.partition("-")
-        seeds = list(range(int(lo), int(hi or lo) + 1))
         counts = [int(n) for n in args.uavs.split(",") if n]
     except ValueError:
-        print(f"error: --seeds {args.seeds!r} or --uavs {args.uavs!r} is not a number list", file=sys.stderr)
+        print(f"error: --uavs {args.uavs!r} is not a number list", file=sys.stderr)
         return 2
-    if not seeds or not counts or any(not 1 <= n <= 8 for n in counts) or args.users < 1 or not args.speedup > 0:
-        print("error: --uavs 1 to 8 each, --seeds, --users and --speedup positive", file=sys.stderr)
+    if not counts or any(not 1 <= n <= 8 for n in counts) or args.users < 1 or not args.speedup > 0:
+        print("error: --uavs 1 to 8 each, --users and --speedup positive", file=sys.stderr)
         return 2
     from ..harness.demo import DemoError
 
@@ -143,15 +154,10 @@ def _run_fleet_flight(args: argparse.Namespace) -> int:
 def _run_flight(args: argparse.Namespace) -> int:
     from ..bench.flight import ALGOS, format_flight, run_flight_bench
 
-    try:
-        lo, _, hi = args.seeds.partition("-")
-        seeds = list(range(int(lo), int(hi or lo) + 1))
-    except ValueError:
-        print(f"error: --seeds: {args.seeds!r} is not A-B", file=sys.stderr)
-        return 2
+    seeds = args.seeds
     algos = [a for a in args.algos.split(",") if a]
-    if not seeds or any(a not in ALGOS + ("ts-mcts", "mcts-paper") for a in algos) or not args.speedup > 0:
-        print("error: --seeds, --algos (mcts, greedy, random, ts-mcts, mcts-paper) or --speedup invalid",
+    if any(a not in ALGOS + ("ts-mcts", "mcts-paper") for a in algos) or not args.speedup > 0:
+        print("error: --algos (mcts, greedy, random, ts-mcts, mcts-paper) or --speedup invalid",
               file=sys.stderr)
         return 2
     if args.quick:

@@ -653,8 +653,9 @@ class Service:
             claims.add(self._bound[0])
             points.add(self.state.schedule.last_hover_index)
         self.fleet.ledger.intend(due, now, claims, {k for k in points if k >= 0}, self._route)
-        log.debug("fleet: intends %s; others own %s", {u: round(d - now, 2) for u, d in due.items()},
-                  sorted(self.fleet.ledger.taken()))
+        if log.isEnabledFor(logging.DEBUG):  # the others' owners are worked out for the line alone
+            log.debug("fleet: intends %s; others own %s", {u: round(d - now, 2) for u, d in due.items()},
+                      sorted(self.fleet.ledger.taken()))
 
     def _claim_binding(self, before: Sortie) -> None:
         b = self.state.holds.binding
