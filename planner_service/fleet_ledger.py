@@ -65,7 +65,8 @@ def owner(user: str, intentions: Mapping[str, Mapping[str, float]]) -> str | Non
 def owned_by_others(own: str, intentions: Mapping[str, Mapping[str, float]], alive: Iterable[str]) -> dict[str, str]:
     """The users a live member other than ``own`` owns (``owner``), each with that member:
     this member neither plans, binds nor records them."""
-    live = {v: d for v, d in intentions.items() if v in set(alive) | {own}}
+    members = set(alive) | {own}
+    live = {v: d for v, d in intentions.items() if v in members}
     users = {u for v, d in live.items() if v != own for u in d}
     owners = {u: owner(u, live) for u in users}
     return {u: v for u, v in owners.items() if v is not None and v != own}
@@ -152,9 +153,7 @@ class FleetLedger:
 
     def owners(self) -> dict[str, str]:
         """The users another live member owns now, each with that member."""
-        with self._lock:
-            claims = {v: dict(d) for v, d in self._claims.items()}
-        return owned_by_others(self.vehicle, claims, self._alive())
+        return owned_by_others(self.vehicle, self.claims(), self._alive())
 
     def blocked_points(self) -> frozenset[int]:
         """The hovering points this member plans without: those the other live members claim,

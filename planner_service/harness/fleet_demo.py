@@ -73,12 +73,14 @@ class Watch:
         self.status_bytes: Counter[str] = Counter()
         self.fleet = FleetKeys(prefix)
         self._calm_since: float | None = None
-        self._subs = [session.declare_subscriber(f"{prefix}/*/status", self._status),
+        self._subs = [session.declare_subscriber(self.fleet.statuses, self._status),
                       session.declare_subscriber(f"{prefix}/*/events", self._event),
                       session.declare_subscriber(f"{prefix}/fleet/**", self._fleet)]
 
     def _status(self, sample: Any) -> None:
-        vehicle = str(sample.key_expr).split("/")[1]
+        vehicle = self.fleet.status_vehicle(str(sample.key_expr))
+        if vehicle is None:
+            return
         data = sample.payload.to_bytes()
         with self.lock:
             self.status_bytes[vehicle] += len(data)
