@@ -309,9 +309,16 @@ def test_a_stop_asked_while_the_users_process_finishes_never_kills_it(python_env
         proc = subprocess.Popen([python, "-m", "sim_bridge", "users", "--count", "1", "--connect", endpoint],
                                 env=python_env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
         assert proc.stderr is not None
-        proc.stderr.readline()  # "1 users waiting for the service": its handlers are installed
+        # "1 users waiting for the service": its handlers are installed. Not any first line: a
+        # line written before them (a library's warning at import) would let the SIGINT meet
+        # Python's default handler (once on CI: -2 with a traceback)
+        said = [proc.stderr.readline().decode(errors="replace")]
+        while said[-1] and "users waiting for the service" not in said[-1]:
+            said.append(proc.stderr.readline().decode(errors="replace"))
+        assert said[-1], f"the users exited before waiting: {said}"
         deadline = time.monotonic() + 30.0
         while proc.poll() is None and time.monotonic() < deadline:
             proc.send_signal(signal.SIGINT)  # the first stops it; the rest land while it exits
             time.sleep(0.002)
-        assert proc.wait(5.0) == 0
+        code = proc.wait(5.0)
+        assert code == 0, (code, said, proc.stderr.read().decode(errors="replace")[-3000:])
