@@ -28,6 +28,14 @@ class CurrentChanged:
 
 
 @dataclass(frozen=True)
+class CurrentUnnamed:
+    """A new mission marking no item current replaced the active one: PX4's mission manager
+    names no item (MISSION_CURRENT seq UINT16_MAX, its ``_current_seq`` -1 from the
+    upload) until the navigator settles on an index. PX4 sends that report only when its
+    1 Hz stream falls in between; the stub always does, so what reads it meets it."""
+
+
+@dataclass(frozen=True)
 class MissionDone:
     """The last item, ``seq``, is complete: the mission is over."""
 
@@ -116,7 +124,7 @@ class HomeSet:
 
 
 FlightEvent = Union[
-    ItemComplete, CurrentChanged, MissionDone, CommandStarted, MissionRestarted, MissionRestartFailed,
+    ItemComplete, CurrentChanged, CurrentUnnamed, MissionDone, CommandStarted, MissionRestarted, MissionRestartFailed,
     ModeChangedItself, TouchedDown, Armed, Disarmed, BatteryLow, BatterySwapped, GpsFix, OriginSet, UsingGps,
     HomeSet,
 ]

@@ -57,7 +57,7 @@ from .behaviour import Behaviour, behaviour_for
 from .errors import VehicleError
 from .estimator import Stage, stage_at
 from .events import (
-    Armed, CommandStarted, CurrentChanged, Disarmed, FlightEvent, GpsFix, HomeSet, TouchedDown,
+    Armed, CommandStarted, CurrentChanged, CurrentUnnamed, Disarmed, FlightEvent, GpsFix, HomeSet, TouchedDown,
     MissionDone, MissionRestarted, MissionRestartFailed, ModeChangedItself, OriginSet, ItemComplete,
     UsingGps, BatteryLow, BatterySwapped,
 )
@@ -440,6 +440,8 @@ class Flight:
         self.mission = list(items)
         marked = next((i for i, item in enumerate(items) if item.current), None)
         self.current = marked if marked is not None else min(max(self.current, 0), max(len(items) - 1, 0))
+        if marked is None and items:
+            self._events.append(CurrentUnnamed())
         self.loaded = None
         self.hold_left = self.climb_out = None
         if not items:

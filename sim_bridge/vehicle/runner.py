@@ -29,7 +29,7 @@ from .errors import VehicleError
 from .behaviour import BEHAVIOURS, behaviour_for
 from .estimator import DEFAULT_GPS_DELAY_S
 from .events import (
-    Armed, BatteryLow, BatterySwapped, CommandStarted, CurrentChanged, Disarmed, FlightEvent, GpsFix, HomeSet,
+    Armed, BatteryLow, BatterySwapped, CommandStarted, CurrentChanged, CurrentUnnamed, Disarmed, FlightEvent, GpsFix, HomeSet,
     TouchedDown, MissionDone, MissionRestarted, MissionRestartFailed, ModeChangedItself, OriginSet, ItemComplete, UsingGps,
 )
 from .flight import Flight, MissionState, Refusal
@@ -333,6 +333,8 @@ class Vehicle:
                     self._reached_repeat = (seq, b.reached_repeats, self.clock() + 1.0)
             case CurrentChanged(seq=seq):
                 self._mission_current(tm.mission_current(f, seq))
+            case CurrentUnnamed():
+                self._mission_current(tm.mission_current(f, tm.NO_ITEM))
             case MissionDone(seq=seq):
                 log.info("mission complete at item %d", seq)
                 self._mission_current(tm.mission_current(f, seq, M.MISSION_STATE_COMPLETE))

@@ -233,6 +233,10 @@ def mission_state(flight: Flight) -> int:
     return mavlink.MISSION_STATE_PAUSED
 
 
+NO_ITEM = 0xFFFF
+"""MISSION_CURRENT.seq naming no item (PX4, ``events.CurrentUnnamed``)."""
+
+
 def mission_current(flight: Flight, seq: int | None = None, state: int | None = None) -> Any:
     """MISSION_CURRENT now, or as it was when an event of this step happened (``seq`` and
     ``state``): at a high speed-up one step can pass several items, and each report must
@@ -255,7 +259,8 @@ def _ardupilot_mission_current(flight: Flight, seq: int, state: int) -> Any:
 def _px4_mission_current(flight: Flight, seq: int, state: int) -> Any:
     mode = 1 if flight.mode is Mode.AUTO else 2
     total = len(flight.mission) if flight.mission else 0xFFFF  # UINT16_MAX: no mission (MAVLink)
-    seq = min(seq, max(len(flight.mission) - 1, 0))
+    if seq != NO_ITEM:
+        seq = min(seq, max(len(flight.mission) - 1, 0))
     # PX4 names its mission (MavlinkMissionManager::send_mission_current): mission_id
     return MissionCurrent(seq, total, state, mode, px4_mission_id(flight.mission))
 

@@ -64,8 +64,8 @@ class Reached:
 
 @dataclass(frozen=True)
 class Current:
-    """The vehicle flies item ``seq`` of ``total`` (0: it holds no mission, -1: it does not
-    say); ``mission``: the generation it is about."""
+    """The vehicle flies item ``seq`` (-1: the report names none) of ``total`` (0: it holds
+    no mission, -1: it does not say); ``mission``: the generation it is about."""
 
     seq: int
     total: int

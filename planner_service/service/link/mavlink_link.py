@@ -52,6 +52,7 @@ from .base import CURRENT_WAIT_S, LinkSettings, VehicleLink  # noqa: E402
 from .events import Current, LinkEvent, Reached  # noqa: E402
 from .extensions import (MISSION_ACK_ID_OFFSET, MISSION_COUNT_ID_OFFSET, MISSION_CURRENT_ID_OFFSET,  # noqa: E402
                          extension_u32)
+from .progress import mission_progress  # noqa: E402
 from .reports import Begin, Pass, ReportSequencer  # noqa: E402
 from .rtt import RetryTimer  # noqa: E402
 from .streams import INTERVAL_CMD, QUIET_INTERVAL_US, Request  # noqa: E402
@@ -402,20 +403,19 @@ class PymavlinkLink(VehicleLink):
             if self.state.new_reach(mission, int(msg.seq)):
                 self.on_event(Reached(int(msg.seq), mission))
             return
-        raw = int(getattr(msg, "total", 0) or 0)
-        # MAVLink: 0 when the autopilot does not say, UINT16_MAX when it has no mission.
-        total = -1 if raw == 0 else 0 if raw == 0xFFFF else raw
+        seq, total = mission_progress(msg)
         if mission != self.generation:
-            self.on_event(Current(int(msg.seq), total, mission))
+            self.on_event(Current(seq, total, mission))
             return
         t = self.telemetry
         mission_id = extension_u32(msg, "mission_id", MISSION_CURRENT_ID_OFFSET)
-        changed = (msg.seq, total, mission_id) != (t.mission_seq, t.mission_total, t.mission_id)
-        self._set_progress(int(msg.seq), total, mission_id)
-        self._current = (mission, int(msg.seq))
-        self._current_moved.set()
+        changed = (seq, total, mission_id) != (t.mission_seq, t.mission_total, t.mission_id)
+        self._set_progress(seq, total, mission_id)
+        if seq >= 0:  # an item named: the answer to whoever waits for the index
+            self._current = (mission, seq)
+            self._current_moved.set()
         if changed:
-            self.on_event(Current(int(msg.seq), total, mission))
+            self.on_event(Current(seq, total, mission))
 
     def _apply(self, decisions: Sequence[Pass[Any] | Begin]) -> None:
         """Carry out the sequencer's decisions in order (``reports``)."""

@@ -44,6 +44,7 @@ from protocol import MissionItem
 from ..errors import LinkError
 from .base import CURRENT_WAIT_S, LinkSettings, VehicleLink
 from .events import Current, LinkEvent, Reached
+from .progress import mission_progress
 from .streams import INTERVAL_CMD, QUIET_INTERVAL_US, Request
 
 _log = logging.getLogger("mavsdk")
@@ -221,8 +222,7 @@ class MavsdkLink(VehicleLink):
             if self.state.new_reach(self.generation, int(msg.seq)):
                 self.on_event(Reached(int(msg.seq), self.generation))
             return
-        raw = int(getattr(msg, "total", 0) or 0)
-        total = -1 if raw == 0 else 0 if raw == 0xFFFF else raw
+        seq, total = mission_progress(msg)
         mission_id = int(getattr(msg, "mission_id", 0) or 0)
         expect = self._expect_total
         if expect is not None and time.monotonic() < self._expect_until:
@@ -232,12 +232,13 @@ class MavsdkLink(VehicleLink):
                 return  # about the mission before the last upload
             self._expect_total = None  # the first report of the mission moved: what follows is news
         t = self.telemetry
-        changed = (int(msg.seq), total, mission_id) != (t.mission_seq, t.mission_total, t.mission_id)
-        self.state.set_progress(int(msg.seq), total, mission_id)
-        self._current = (self.generation, int(msg.seq))
-        self._current_moved.set()
+        changed = (seq, total, mission_id) != (t.mission_seq, t.mission_total, t.mission_id)
+        self.state.set_progress(seq, total, mission_id)
+        if seq >= 0:  # an item named: the answer to whoever waits for the index
+            self._current = (self.generation, seq)
+            self._current_moved.set()
         if changed:
-            self.on_event(Current(int(msg.seq), total, self.generation))
+            self.on_event(Current(seq, total, self.generation))
 
     def _on_restart(self) -> None:
         self.generation += 1

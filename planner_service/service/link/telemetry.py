@@ -74,6 +74,8 @@ class Telemetry:
     altitude, climb)" where the autopilot gives no landed state; '' before either."""
     mode: str = ""
     mission_seq: int = 0
+    """The item flown, as MISSION_CURRENT names it; -1: the last report named none
+    (``progress``)."""
     mission_total: int = -1
     """Items of the mission held, as MISSION_CURRENT counts them (ArduPilot: less home);
     0: none; -1: not said (yet, or since an upload or a restart)."""
