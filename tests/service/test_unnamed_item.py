@@ -40,9 +40,9 @@ def test_another_stations_upload_marking_no_item_is_never_read_as_item_65535(bac
     MAVSDK refuses to send a mission without one): PX4 keeps the index, 2."""
     port = free_port(socket.SOCK_DGRAM)
     stub = Child("sim_bridge", ["vehicle", "--flavour", "px4", "--mavlink", f"udpin:127.0.0.1:{port}",
-                                "--speedup", "5"], tmp_path / "vehicle.log")
-    a, b, c = HoverPoint(0.0, 40.0, 20.0), HoverPoint(0.0, 200.0, 20.0), HoverPoint(0.0, 300.0, 20.0)
-    d = HoverPoint(40.0, 200.0, 20.0)
+                                "--speedup", "10"], tmp_path / "vehicle.log")
+    a, b, c = HoverPoint(0.0, 20.0, 10.0), HoverPoint(0.0, 450.0, 10.0), HoverPoint(0.0, 480.0, 10.0)
+    d = HoverPoint(40.0, 450.0, 10.0)
     first = encode_path([a, b, c], ORIGIN, "px4")
     second = [replace(item, current=0) for item in replacement_items(first, 1, [d], ORIGIN, "px4")[0]]
 
