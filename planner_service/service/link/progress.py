@@ -7,7 +7,8 @@ index, and a MISSION_CURRENT from its 1 Hz stream can fall between (seen once in
 of PX4 SITL 1.18, an upload in flight: 65535, then 2, 2, ...). Read as an item it is past
 every mission's end: a hold would end as "item 65535 flown next" and every point still to
 fly would count as skipped. It is read as -1, not said, and answers nobody waiting for the
-vehicle's index (docs/VEHICLE.md, "MISSION_CURRENT naming no item").
+vehicle's index (docs/VEHICLE.md, "MISSION_CURRENT naming no item"). The service marks an
+item current in each upload of its own, so it meets this after another station's upload.
 """
 
 from __future__ import annotations
