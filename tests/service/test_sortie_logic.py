@@ -168,6 +168,20 @@ def test_a_sortie_records_only_holds_the_vehicle_was_seen_at() -> None:
     assert [e.event.kind for e in only(out, fx.Emit)] == ["waypoint_skipped"]
 
 
+def test_a_report_naming_no_item_ends_no_hold_and_skips_no_point() -> None:
+    """PX4's MISSION_CURRENT 65535 after an upload marking no item, read by the link as -1
+    (``link.progress``): between the vehicle's reports of item 2 it changes nothing."""
+    world = FakeWorld()
+    run, _ = fly_to_first_point(world)
+    out = run.tick(seq=-1, xyz=(60.0, 100.0, 100.0), boot_s=10.0)
+    assert not only(out, fx.Emit) and run.s.holds.judged == frozenset()
+    run.tick(seq=2, xyz=(119.0, 200.5, 100.0), boot_s=12.0)
+    assert run.s.holds.watch.phase == "holding"
+    out = run.tick(seq=-1, xyz=(120.0, 200.0, 100.0), boot_s=13.0)
+    assert run.s.holds.watch.phase == "holding" and not only(out, fx.RecordService), out
+    assert not [e for e in only(out, fx.Emit) if e.event.kind == "waypoint_skipped"]
+
+
 def test_a_hold_of_a_user_another_member_bound_first_records_nothing() -> None:
     """Two fleet members bound one user at once (each before the other's claim reached it):
     the user uploads to one UAV, the one that bound first; the other records nothing."""
