@@ -45,6 +45,14 @@ def fleet_of(uavs: int) -> Fleet:
     return Fleet(uavs=uavs, layer_m=LAYER_M, base_step_m=BASE_STEP_M)
 
 
+def offline_fleet(base: Scenario, users: int, fleet: Fleet, seed: int, budget_ms: float) -> dict[str, Any]:
+    """The fleet's sortie planned offline by ``OFFLINE_ALGO`` in the flown world (the users'
+    tasks arriving in time, as ``sim_bridge users`` draws them): ``run_fleet_sortie``'s
+    ``fleet`` summary."""
+    world = base.replace(num_users=users, task_model="backlog")
+    return run_fleet_sortie(world, fleet, OFFLINE_ALGO, seed, PolicySpec(iterations=None, budget_ms=budget_ms))["fleet"]
+
+
 def lowest_layer_m(default: Scenario, uavs: int, max_altitude_m: float) -> float:
     """UAV 0's layer: the services' default altitude, lowered so that the highest of ``uavs``
     layers stays within ``safety.max_altitude_m`` (120 m: the usual legal ceiling)."""
@@ -207,10 +215,7 @@ def run_fleet_demo(out: Path, *, uavs: int = 3, users: int = 12, speedup: float 
     summary.update(uavs=uavs, users=users, speedup=speedup, budget_ms=budget_ms, seed=seed, layer_m=LAYER_M,
                    base_step_m=BASE_STEP_M, wall_s=time.monotonic() - start)
     if offline:
-        # the flown world: the users' tasks arrive in time, as sim_bridge users draws them
-        offline_world = base.replace(num_users=users, task_model="backlog")
-        planned = run_fleet_sortie(offline_world, fleet, OFFLINE_ALGO, seed,
-                                   PolicySpec(iterations=None, budget_ms=budget_ms))["fleet"]
+        planned = offline_fleet(base, users, fleet, seed, budget_ms)
         summary["offline"] = {"algo": OFFLINE_ALGO, **{k: planned[k] for k in (
             "throughput_tasks_per_interval", "intervals", "total_tasks", "users_served", "double_services")}}
         off = planned["throughput_tasks_per_interval"]

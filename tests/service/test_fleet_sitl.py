@@ -19,12 +19,10 @@ from typing import Callable
 
 import pytest
 
-from planner_service.fleet.sortie import run_fleet_sortie
 from planner_service.fleet_ledger import owner
-from planner_service.harness.fleet_demo import OFFLINE_ALGO, fleet_of, scenario_settings
+from planner_service.harness.fleet_demo import OFFLINE_ALGO, fleet_of, offline_fleet, scenario_settings
 from planner_service.harness.report import sortie_summary
 from planner_service.model.fleet import uav_scenarios
-from planner_service.policy import PolicySpec
 from planner_service.service.config import load_config
 from planner_service.service.journal import Journal
 from tests.support.fleet import wait_until
@@ -170,8 +168,7 @@ def test_three_copters_fly_near_the_offline_fleet_planner(make_sitl: Callable[..
         finally:
             journal.close()
     flown = sum(per_uav)
-    offline = run_fleet_sortie(base.replace(num_users=USERS, task_model="backlog"), layout, OFFLINE_ALGO, 1,
-                               PolicySpec(iterations=None, budget_ms=config.planner.budget_ms))["fleet"]
+    offline = offline_fleet(base, USERS, layout, 1, config.planner.budget_ms)
     ratio = flown / offline["throughput_tasks_per_interval"]
     print(f"\nflown {flown:.1f} tasks/interval (per UAV {[round(t, 1) for t in per_uav]}, services "
           f"{[len(u.services()) for u in uavs]}) against the offline {OFFLINE_ALGO} planner's "
