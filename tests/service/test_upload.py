@@ -177,3 +177,24 @@ def test_error_after_the_last_item_means_the_ack_was_lost() -> None:
     early.on_message(req(0))
     done = early.on_message(ack(M.MAV_MISSION_ERROR))
     assert done is not None and not done.maybe_committed, "an ERROR before the last item is a refusal"
+
+
+def test_error_after_a_stale_request_had_an_earlier_item_sent_again_may_be_committed() -> None:
+    # On a lossy link a duplicated request for item 1 came late, after the last item went
+    # out: item 1 went again, and PX4, its upload over, answered "IGN MISSION_ITEM: No
+    # transfer" (ERROR). The vehicle had every item: the link reads the mission back.
+    up, sent = machine()
+    up.begin()
+    for seq in range(len(ITEMS)):
+        up.on_message(req(seq))
+    assert up.on_message(req(1)) is None and sent[-1].seq == 1
+    done = up.on_message(ack(M.MAV_MISSION_ERROR))
+    assert done is not None and not done.accepted and done.maybe_committed
+    silent, _ = machine(retries=1)
+    silent.begin()
+    for seq in range(len(ITEMS)):
+        silent.on_message(req(seq))
+    silent.on_message(req(1))
+    assert silent.on_timeout() is None
+    done = silent.on_timeout()
+    assert done is not None and done.maybe_committed, "silence after the last item went out: maybe committed"

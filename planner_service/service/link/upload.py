@@ -117,10 +117,12 @@ class MissionUpload:
                 # so does this upload. The vehicle answered: it is not silent.
                 self.silence.answered()
                 return None
-            if msg.type == mavlink.MAV_MISSION_ERROR and self.last_sent == len(self.items) - 1:
-                # ArduPilot answers ERROR to an item that comes after the upload ended: our
-                # repeat of the last item crossed its ACCEPTED, which was lost. Committed
-                # most likely, not certainly: the caller reads the mission back.
+            if msg.type == mavlink.MAV_MISSION_ERROR and self.sent_last:
+                # Both autopilots answer ERROR to an item that comes after the upload ended:
+                # our repeat of the last item crossed its ACCEPTED, which was lost, or a late
+                # duplicate of an earlier request had an earlier item sent again (PX4 SITL
+                # through the lossy proxy: "IGN MISSION_ITEM: No transfer"). Committed most
+                # likely, not certainly: the caller reads the mission back.
                 self.done = UploadDone(False, result_name(msg.type), self.sent, maybe_committed=True)
                 return self.done
             self.done = UploadDone(msg.type == mavlink.MAV_MISSION_ACCEPTED, result_name(msg.type), self.sent)
@@ -142,7 +144,7 @@ class MissionUpload:
         if self.silence.ran_out():
             where = "MISSION_COUNT" if self.last_sent is None else f"item {self.last_sent}"
             result = f"NO_ANSWER after {self.silence.repeats - 1} repeats of {where}{self.silence.over()}"
-            self.done = UploadDone(False, result, self.sent, maybe_committed=self.last_sent == len(self.items) - 1)
+            self.done = UploadDone(False, result, self.sent, maybe_committed=self.sent_last)
             return self.done
         if self.last_sent is None:
             self._send(self._count())
