@@ -2,7 +2,7 @@
 restarts, and a signature check that follows the specification.
 
 The key is 32 secret bytes kept as 64 hex characters in a file only its owner may read
-(refused otherwise, as ssh refuses a private key others can read). ``write_key`` makes one.
+(refused otherwise, or if another user owns it, as ssh refuses such a private key). ``write_key`` makes one.
 
 A signature carries a 48-bit timestamp (10 µs units since 2015-01-01 UTC) that a receiver
 requires to grow on every stream ``(link id, system, component)``: a restarted sender that
@@ -69,7 +69,8 @@ def key_from_passphrase(passphrase: str) -> bytes:
 # --- the key file ------------------------------------------------------------------------------
 def load_key(path: str | os.PathLike[str]) -> bytes:
     """The 32-byte key in ``path``: 64 hex characters, an optional trailing newline.
-    ``SigningError`` naming the file if it is missing, malformed, or open to group or others."""
+    ``SigningError`` naming the file if it is missing, malformed, open to group or others,
+    or owned by another user than this process's."""
     name = str(path)
     try:
         fd = os.open(name, os.O_RDONLY | getattr(os, "O_NOFOLLOW", 0))
@@ -84,6 +85,12 @@ def load_key(path: str | os.PathLike[str]) -> bytes:
         if info.st_mode & 0o077:
             raise SigningError(name, f"permissions {stat.S_IMODE(info.st_mode):04o} are too open: the key must be "
                                      f"readable by its owner only (chmod 600 {name})")
+        if info.st_uid != os.geteuid():
+            # a key someone else owns may have been planted beside the journal (root reads any
+            # file): ssh refuses such a private key too
+            raise SigningError(name, f"is owned by uid {info.st_uid}, not by this process's user (uid "
+                                     f"{os.geteuid()}): a key must belong to whoever uses it (chown it, or make "
+                                     f"a new one)")
         raw = os.read(fd, 4 * KEY_BYTES)
     finally:
         os.close(fd)

@@ -95,3 +95,22 @@ def test_a_key_file_others_may_read_stops_the_service_at_start(tmp_path: Path) -
     assert not (tmp_path / "j.sqlite").exists()
 
 
+
+
+@pytest.mark.skipif(os.geteuid() != 0, reason="only root can give a file to another user")
+def test_a_key_file_another_user_owns_stops_the_service_at_start(tmp_path: Path) -> None:
+    """Issue 34, finding 9: a service running as root took an ``operator.key`` planted beside
+    its journal by another user (mode 0600, owned by them): whoever planted it could then
+    prove any command. Now refused at start, naming the owner."""
+    key = tmp_path / "operator.key"
+    key.write_text("ab" * 32 + "\n")
+    os.chmod(key, 0o600)
+    os.chown(key, 65534, 65534)  # nobody
+    out = subprocess.run([sys.executable, "-m", "planner_service", "serve", "--journal", str(tmp_path / "j.sqlite"),
+                          "--mavlink", "udpout:127.0.0.1:9", "--listen", "tcp/127.0.0.1:9"],
+                         cwd=REPO, capture_output=True, text=True, timeout=60)
+    lines = out.stderr.strip().splitlines()
+    assert out.returncode == 2 and len(lines) == 1, out.stderr
+    assert lines[0].startswith(f"error: operator.key_file: {key}: is owned by uid 65534, not by this process's user "
+                               f"(uid 0)"), lines[0]
+    assert not (tmp_path / "j.sqlite").exists()
