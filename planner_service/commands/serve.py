@@ -9,11 +9,16 @@ import atexit
 import logging
 import os
 import sys
+import threading
 from typing import NoReturn
 
 from protocol.arguments import existing_file, zenoh_endpoint
 
 HELP = "the long-running flight-side service (zenoh intake, MCTS planning, MAVLink missions)"
+EXIT_DEADLINE_S = 3.0
+"""Once the service has stopped (its last line logged), the process ends within this many
+seconds whatever holds it: a library's exit hook, a thread in a native call, a flush to a
+pipe nobody reads. A supervisor or a pilot's Ctrl-C never needs SIGKILL (issue 34)."""
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
@@ -57,7 +62,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"error: {where}: {printable(err.message, 400)}", file=sys.stderr)
         return 2
     try:
-        status = run_service(config)
+        status = run_service(config, on_stopped=exit_by_deadline)
     except ServiceError as err:
         print(f"error: {err}", file=sys.stderr)
         status = 1
@@ -78,7 +83,16 @@ def end_now(status: int) -> NoReturn:
     libraries registered (logging's flush, MAVSDK's server, weakref finalizers) still run;
     numba writes its cache files whole (to a temporary name, then renamed), so a compile
     cut short leaves none half-written."""
+    exit_by_deadline(status)
     atexit._run_exitfuncs()  # not the threads' join: that one is threading's, at normal exit only
     sys.stdout.flush()
     sys.stderr.flush()
     os._exit(status)
+
+
+def exit_by_deadline(status: int, after_s: float = EXIT_DEADLINE_S) -> None:
+    """Arm the process's end: ``status`` in ``after_s`` seconds unless it has ended before.
+    Nothing is written then (a write could block where the exit did)."""
+    timer = threading.Timer(after_s, os._exit, (status,))
+    timer.daemon = True
+    timer.start()

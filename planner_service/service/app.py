@@ -45,6 +45,7 @@ from ..mcts import MctsConfig
 from .allocator import ARENAS, cap_arenas
 from .config import ServiceConfig
 from .errors import ConfigError, JournalError, LinkError, PlanningError
+from .event_loop import run_to_end
 from .fleet_presence import FleetPresence
 from . import events as ev
 from .intake import Accepted, Intake, fairness_rule
@@ -793,10 +794,21 @@ def fleet_presence(config: ServiceConfig) -> FleetPresence | None:
     return FleetPresence(FleetKeys(config.zenoh.prefix), own, f.min_horizontal_m, f.position_stale_s)
 
 
-def run_service(config: ServiceConfig) -> int:
-    """Run the service until SIGINT or SIGTERM; returns the exit status."""
+def run_service(config: ServiceConfig, on_stopped: Callable[[int], None] | None = None) -> int:
+    """Run the service until SIGINT or SIGTERM; returns the exit status. ``on_stopped`` is
+    told the status as soon as the service has stopped (its last line logged), before the
+    event loop is closed (``serve`` arms its exit deadline there)."""
     np.seterr(all="ignore")  # the kernels handle their own infinities
     if cap_arenas():
         log.debug("C allocator capped at %d arenas (MALLOC_ARENA_MAX overrides)", ARENAS)
     service = Service(config, build_parts(config))
-    return asyncio.run(service.run())
+
+    async def main() -> int:
+        status = 1
+        try:
+            status = await service.run()
+            return status
+        finally:
+            if on_stopped is not None:
+                on_stopped(status)
+    return run_to_end(main())
