@@ -8,7 +8,7 @@ import sys
 from protocol.arguments import OneLineParser
 from protocol.closed_stdout import quiet_on_closed_stdout
 
-COMMANDS = ("serve", "demo", "plan", "experiment", "bench", "submit", "keygen", "operator", "export", "warm")
+COMMANDS = ("serve", "demo", "plan", "experiment", "bench", "submit", "keygen", "fleet-key", "operator", "export", "warm")
 
 
 def build_parser() -> OneLineParser:
@@ -19,7 +19,7 @@ def build_parser() -> OneLineParser:
     )
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     for name in COMMANDS:
-        module = importlib.import_module(f"planner_service.commands.{name}")
+        module = importlib.import_module(f"planner_service.commands.{name.replace('-', '_')}")
         cmd = sub.add_parser(name, help=module.HELP, description=module.__doc__)
         module.configure(cmd)
         cmd.set_defaults(_run=module.run)

@@ -3,8 +3,8 @@ several UAVs without a coordinator (docs/OPERATIONS.md, "A fleet"):
 
 - **intentions** (``{prefix}/fleet/intentions/{vehicle}``): on every plan, the users of the
   points still to fly and when each service should begin (wall clock), and its claims: the
-  next point's user, and the user a hold serves from the moment it is bound (``bound_due``:
-  before any plan's), as the offline ``claims`` planner commits (the rest of a plan may still
+  next point's user, and the user a hold serves from the moment it is bound (``bound``, a
+  typed claim that beats any plan's), as the offline ``claims`` planner commits (the rest of a plan may still
   change, and claiming it would starve the others). A user several members claim belongs to
   the earliest (ties: the smaller vehicle id); every
   member computes the same from the same messages, and a member plans and binds only the
@@ -13,6 +13,14 @@ several UAVs without a coordinator (docs/OPERATIONS.md, "A fleet"):
 - **services** (``{prefix}/fleet/served/{vehicle}``): each service flown. The others count
   it as their own (``world.FleetWorld``): the user's backlog less what was served, its
   services one more, so the fairness rule spans the fleet.
+
+Every message is signed by its member's vehicle key and read only from the enrolled
+(``protocol.fleet_signing``), and what a member may claim is bounded by what it can do, so
+that even a member whose key was stolen cannot starve the fleet: at most ``MAX_CLAIMS``
+users and points (its next point, its hold's), each due within ``DUE_PAST_S`` before and
+``DUE_AHEAD_S`` after the message's signed time, a bound time within ``MAX_HOLD_S`` of it;
+its route capped at ``MAX_ROUTE`` points; a service it reports counts only for a user it
+claimed within ``CLAIM_KEPT_S``. A message beyond a bound is refused whole, and counted.
 
 Both are zenoh.ext advanced publishers with a cache, read by advanced subscribers with
 history, late-publisher detection and recovery (heartbeats): a member that joins late or
@@ -24,6 +32,7 @@ own threads).
 from __future__ import annotations
 
 import threading
+import time
 from collections import deque
 from typing import Any, Callable, Iterable, Mapping
 
@@ -31,6 +40,7 @@ import zenoh
 import zenoh.ext as zext
 
 from protocol import FleetKeys, ProtocolError
+from protocol.fleet_signing import FUTURE_S, FleetSigner, FleetVerifier, Unverified
 from protocol.messages import FleetIntentions, FleetServed, Intention, decode, encode
 
 SERVED_CACHE = 256
@@ -38,38 +48,81 @@ SERVED_CACHE = 256
 HEARTBEAT_S = 1.0
 MAX_SERVED_QUEUED = 4096
 MAX_INTENTIONS = 256
-MAX_CLAIMS = 8
+MAX_CLAIMS = 2
+"""Users, and points, a member may claim at once: its next point's and its hold's."""
+MAX_ROUTE = 32
+"""Points of a member's route kept (the first, in the order it flies them): the airspace a
+member gone armed keeps is what one sortie can fly, not the whole area."""
 MAX_MEMBERS = 1024
-"""Members whose intentions are kept: a peer announcing thousands of vehicle ids (a network
-without access control) cannot grow them without bound."""
+"""Members whose intentions are kept."""
+DUE_PAST_S = 120.0
+"""A claim's due may lie at most this long before its message's signed time (a plan late
+on its estimate); earlier (``due -1e15``) is refused: it would beat every honest claim."""
+DUE_AHEAD_S = 3600.0
+"""A claim's due may lie at most this long after its signed time (a sortie's flight)."""
+MAX_HOLD_S = 900.0
+"""A bound claim's time may lie at most this long before its signed time (a hold's length)."""
+CLAIM_KEPT_S = 3600.0
+"""A member's service counts for a user it claimed within this long; any other is refused."""
+INTENTIONS_MAX_AGE_S = 900.0
+"""Intentions signed longer ago than this are refused (the replay rule's window): a member
+publishes them on every plan and every binding."""
+SERVED_MAX_AGE_S = 3600.0
+"""Services signed longer ago than this are refused (a sortie's flight)."""
+
+Claim = tuple[int, float]
+"""How a member claims a user: (0, when its hold was bound) beats every (1, planned due);
+among equals the earlier, then the smaller vehicle id."""
+BOUND = 0
+PLANNED = 1
 
 
-BOUND_LEAD_S = 1.0e10
-"""A user bound by a hold is claimed as due this long before its binding: a hold under way
-beats every plan's estimate (an ETA is a prediction, and may be early), and of two holds the
-one bound first wins."""
-
-
-def bound_due(at_s: float) -> float:
-    """The due of a user bound by a hold at ``at_s`` (wall clock): before any plan's."""
-    return at_s - BOUND_LEAD_S
-
-
-def owner(user: str, intentions: Mapping[str, Mapping[str, float]]) -> str | None:
-    """The member that serves ``user`` (the earliest due, ties to the smaller vehicle id) of
-    ``intentions`` (vehicle -> user -> due); None when no member means to."""
-    dues = [(due[user], vehicle) for vehicle, due in intentions.items() if user in due]
+def owner(user: str, claims: Mapping[str, Mapping[str, Claim]]) -> str | None:
+    """The member that serves ``user`` (a bound claim before a planned one, then the earliest,
+    ties to the smaller vehicle id) of ``claims`` (vehicle -> user -> claim); None when no
+    member means to."""
+    dues = [(claim[user], vehicle) for vehicle, claim in claims.items() if user in claim]
     return min(dues)[1] if dues else None
 
 
-def owned_by_others(own: str, intentions: Mapping[str, Mapping[str, float]], alive: Iterable[str]) -> dict[str, str]:
+def owned_by_others(own: str, claims: Mapping[str, Mapping[str, Claim]], alive: Iterable[str]) -> dict[str, str]:
     """The users a live member other than ``own`` owns (``owner``), each with that member:
     this member neither plans, binds nor records them."""
     members = set(alive) | {own}
-    live = {v: d for v, d in intentions.items() if v in members}
+    live = {v: d for v, d in claims.items() if v in members}
     users = {u for v, d in live.items() if v != own for u in d}
     owners = {u: owner(u, live) for u in users}
     return {u: v for u, v in owners.items() if v is not None and v != own}
+
+
+def claims_refused(message: FleetIntentions, signed_at_s: float) -> str | None:
+    """Why ``message`` (signed at ``signed_at_s``) claims more than its member can do, or None."""
+    users = len(set(message.claims) | ({message.bound} if message.bound is not None else set()))
+    if users > MAX_CLAIMS or len(message.points) > MAX_CLAIMS:
+        return f"claims {users} users and {len(message.points)} points (at most {MAX_CLAIMS})"
+    due = {i.user_id: i.due_s for i in message.users}
+    for user in message.claims:
+        if user in due and not signed_at_s - DUE_PAST_S <= due[user] <= signed_at_s + DUE_AHEAD_S:
+            return f"claims {user} due {due[user] - signed_at_s:+.0f} s from its signed time (not a flight's)"
+    if (message.bound is None) != (message.bound_at_s is None):
+        return "bound without bound_at_s, or bound_at_s without bound"
+    if message.bound_at_s is not None and not signed_at_s - MAX_HOLD_S <= message.bound_at_s <= signed_at_s + FUTURE_S:
+        return f"bound {message.bound_at_s - signed_at_s:+.0f} s from its signed time (not a hold's)"
+    return None
+
+
+def claims_of(message: FleetIntentions) -> dict[str, Claim]:
+    """The claims of a message within its bounds: its hold's user bound, its next point's planned."""
+    due = {i.user_id: i.due_s for i in message.users}
+    out: dict[str, Claim] = {u: (PLANNED, due[u]) for u in message.claims if u in due}
+    if message.bound is not None and message.bound_at_s is not None:
+        out[message.bound] = (BOUND, message.bound_at_s)
+    return out
+
+
+def first_route(route: Iterable[int]) -> list[int]:
+    """The first ``MAX_ROUTE`` distinct points of ``route``, in its order."""
+    return list(dict.fromkeys(int(k) for k in route))[:MAX_ROUTE]
 
 
 class FleetLedger:
@@ -77,15 +130,23 @@ class FleetLedger:
     ``served`` on every service, ``take_served`` to read the others'."""
 
     def __init__(self, keys: FleetKeys, vehicle: str, alive: Callable[[], Iterable[str]],
-                 lost: Callable[[], Iterable[str]] = lambda: ()) -> None:
+                 lost: Callable[[], Iterable[str]], signer: FleetSigner | None, verifier: FleetVerifier,
+                 wall: Callable[[], float] = time.time) -> None:
         self.keys = keys
         self.vehicle = vehicle
         self._alive = alive
         self._lost = lost
         """The members gone while their vehicles were armed (``FleetRoster.lost``)."""
+        self._signer = signer
+        """This member's key (None: a watcher, who only reads)."""
+        self._verifier = verifier
+        self._wall = wall
         self._lock = threading.Lock()
         self._intentions: dict[str, dict[str, float]] = {}
-        self._claims: dict[str, dict[str, float]] = {}
+        self._claims: dict[str, dict[str, Claim]] = {}
+        self._claimed: dict[str, dict[str, float]] = {}
+        """vehicle -> user -> when (monotonic) it last claimed the user: its services count
+        for these only."""
         self._points: dict[str, set[int]] = {}
         self._routes: dict[str, set[int]] = {}
         self._served: deque[FleetServed] = deque(maxlen=MAX_SERVED_QUEUED)
@@ -125,26 +186,31 @@ class FleetLedger:
 
     # --- this member's side ------------------------------------------------------------------
     def intend(self, due: Mapping[str, float], now_s: float, claims: Iterable[str] = (),
-               points: Iterable[int] = (), route: Iterable[int] = ()) -> None:
+               points: Iterable[int] = (), route: Iterable[int] = (), bound: tuple[str, float] | None = None) -> None:
         """Say which users this member's plan means to serve and when (wall clock), which of
-        them it claims (``claims``: the next point's user and the one a hold serves) and the
-        hovering points it claims (``points``: its next point, its hold's)."""
+        them it claims (``claims``: the next point's user), the user its hold serves and when
+        it was bound (``bound``), and the hovering points it claims (``points``: its next
+        point, its hold's)."""
         users = sorted(due.items(), key=lambda kv: kv[1])[:MAX_INTENTIONS]
-        claimed = sorted(set(claims) & set(due))[:MAX_CLAIMS]
+        claimed = sorted(set(claims) & set(due))[:MAX_CLAIMS - (bound is not None)]
         held = sorted(set(int(k) for k in points))[:MAX_CLAIMS]
+        message = FleetIntentions(
+            vehicle=self.vehicle, time_s=now_s, users=[Intention(u, d) for u, d in users], claims=claimed,
+            points=held, route=first_route(route), bound=None if bound is None else bound[0],
+            bound_at_s=None if bound is None else bound[1])
         with self._lock:
             self._intentions[self.vehicle] = dict(users)
-            self._claims[self.vehicle] = {u: due[u] for u in claimed}
+            self._claims[self.vehicle] = claims_of(message)
             self._points[self.vehicle] = set(held)
-        if self._intent_pub is not None:
-            self._intent_pub.put(encode(FleetIntentions(
-                vehicle=self.vehicle, time_s=now_s, users=[Intention(u, d) for u, d in users], claims=claimed,
-                points=held, route=sorted(set(int(k) for k in route))[:512])))
+        if self._intent_pub is not None and self._signer is not None:
+            key = self.keys.intentions(self.vehicle)
+            self._intent_pub.put(self._signer.seal(key, encode(message), self._wall()))
 
     def served(self, user_id: str, tasks: int, at_s: float) -> None:
         """Tell the fleet of a service this member flew."""
-        if self._served_pub is not None and tasks > 0:
-            self._served_pub.put(encode(FleetServed(vehicle=self.vehicle, user_id=user_id, tasks=tasks, at_s=at_s)))
+        if self._served_pub is not None and self._signer is not None and tasks > 0:
+            body = encode(FleetServed(vehicle=self.vehicle, user_id=user_id, tasks=tasks, at_s=at_s))
+            self._served_pub.put(self._signer.seal(self.keys.served(self.vehicle), body, self._wall()))
 
     # --- what the others said ----------------------------------------------------------------
     def taken(self) -> set[str]:
@@ -164,8 +230,8 @@ class FleetLedger:
             claimed = {k for v, ks in self._points.items() if v != self.vehicle and v in alive for k in ks}
             return frozenset(claimed | {k for v in lost for k in self._routes.get(v, ())})
 
-    def claims(self) -> dict[str, dict[str, float]]:
-        """Every member's last claims (vehicle -> user -> due), live or not."""
+    def claims(self) -> dict[str, dict[str, Claim]]:
+        """Every member's last claims (vehicle -> user -> claim), live or not."""
         with self._lock:
             return {v: dict(d) for v, d in self._claims.items()}
 
@@ -181,36 +247,65 @@ class FleetLedger:
             self._served.clear()
         return out
 
-    def _read(self, sample: Any, kind: type) -> Any:
+    def _read(self, sample: Any, kind: type, max_age_s: float, latest_wins: bool) -> tuple[Any, float] | None:
+        """The signed message of an enrolled member in ``sample`` and its signed time, or None
+        (refused: counted by the verifier, said in ``refused``)."""
         key = str(sample.key_expr)
         vehicle = self.keys.vehicle_of(key)
         if vehicle is None or vehicle == self.vehicle or sample.kind != zenoh.SampleKind.PUT:
             return None
         try:
-            message = decode(sample.payload.to_bytes(), kind)
+            body, signed_at = self._verifier.open(key, vehicle, sample.payload.to_bytes(), self._wall(), max_age_s,
+                                                  latest_wins)
+            message = decode(body, kind)
+        except Unverified as err:
+            self.refused.append(f"{key}: {err.why}")
+            return None
         except ProtocolError as err:
-            self.refused.append(f"{key}: {err}")
+            self._refuse(f"{key}: {err}")
             return None
         if message.vehicle != vehicle:  # a member speaks for its own vehicle only
-            self.refused.append(f"{key}: names vehicle {message.vehicle!r}")
+            self._refuse(f"{key}: names vehicle {message.vehicle!r}")
             return None
-        return message
+        return message, signed_at
+
+    def _refuse(self, why: str) -> None:
+        self._verifier.count_ignored()
+        self.refused.append(why)
 
     def _on_intentions(self, sample: Any) -> None:
-        message = self._read(sample, FleetIntentions)
-        if message is not None:
-            due = {i.user_id: i.due_s for i in message.users}
-            with self._lock:
-                if message.vehicle not in self._intentions and len(self._intentions) >= MAX_MEMBERS:
-                    return
-                self._intentions[message.vehicle] = due
-                self._claims[message.vehicle] = {u: due[u] for u in message.claims if u in due}
-                self._points[message.vehicle] = set(message.points)
-                self._routes[message.vehicle] = set(message.route)
+        read = self._read(sample, FleetIntentions, INTENTIONS_MAX_AGE_S, latest_wins=True)
+        if read is None:
+            return
+        message, signed_at = read
+        why = claims_refused(message, signed_at)
+        if why is not None:
+            self._refuse(f"{sample.key_expr}: {why}")
+            return
+        claims, now = claims_of(message), time.monotonic()
+        with self._lock:
+            if message.vehicle not in self._intentions and len(self._intentions) >= MAX_MEMBERS:
+                return
+            self._intentions[message.vehicle] = {i.user_id: i.due_s for i in message.users}
+            self._claims[message.vehicle] = claims
+            self._points[message.vehicle] = set(message.points)
+            self._routes[message.vehicle] = set(first_route(message.route))
+            claimed = self._claimed.setdefault(message.vehicle, {})
+            for user in claims:
+                claimed[user] = now
+            if len(claimed) > 4 * MAX_INTENTIONS:  # the oldest go: a member claims two at a time
+                for user in sorted(claimed, key=claimed.__getitem__)[:len(claimed) - 4 * MAX_INTENTIONS]:
+                    del claimed[user]
 
     def _on_served(self, sample: Any) -> None:
-        message = self._read(sample, FleetServed)
-        if message is None:
+        read = self._read(sample, FleetServed, SERVED_MAX_AGE_S, latest_wins=False)
+        if read is None:
+            return
+        message = read[0]
+        with self._lock:
+            at = self._claimed.get(message.vehicle, {}).get(message.user_id)
+        if at is None or at < time.monotonic() - CLAIM_KEPT_S:  # it serves only whom it claimed
+            self._refuse(f"{sample.key_expr}: {message.vehicle} served {message.user_id}, a user it never claimed")
             return
         mark = (message.vehicle, message.user_id, message.at_s)
         with self._lock:

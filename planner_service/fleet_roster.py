@@ -9,9 +9,17 @@ protocol written here:
 - an advanced subscriber (``zenoh.ext``) with history, late-publisher detection and recovery:
   each member's announcement is kept in its advanced publisher's cache, so a member who joins
   later, or whose router restarted, still reads it;
-- a subscriber to every vehicle's ``status``: the members' own positions, on which the
-  fleet's separation is judged (``fleet_separation``). A member that leaves with its vehicle
-  last seen armed stays in that judgement, unknown, until its service is back.
+- a subscriber to every member's signed position (``{prefix}/fleet/positions/{vehicle}``: its
+  status, in a fleet envelope), on which the fleet's separation is judged
+  (``fleet_separation``). A member that leaves with its vehicle last seen armed stays in that
+  judgement, unknown, until its service is back or ``lost_s`` has passed (its battery's
+  flight: it has landed by then).
+
+Every announcement and position is read only from an enrolled vehicle, signed and fresh
+(``protocol.fleet_signing``); a token counts as a member only while a signed announcement of
+its vehicle came within ``ANNOUNCE_STALE_S`` (the members sign theirs again every
+``ANNOUNCE_EVERY_S``). Anything else is ignored and counted (``ignored``, ``refused``): a
+rogue token or a forged announcement never makes a member, nor an "unknown" layer.
 
 Read by the service (``service/fleet_presence.py``: its layer checked against the others')
 and by ``operator watch``. Pure bookkeeping apart from the declarations; thread-safe (zenoh
@@ -30,6 +38,7 @@ import zenoh
 import zenoh.ext as zext
 
 from protocol import FleetKeys, ProtocolError, Status
+from protocol.fleet_signing import FleetVerifier, Unverified
 from protocol.messages import FleetMember, decode
 
 from .fleet_separation import MIN_HORIZONTAL_M, STALE_S, Judgement, Seen, judge
@@ -37,6 +46,20 @@ from .fleet_separation import MIN_HORIZONTAL_M, STALE_S, Judgement, Seen, judge
 SETTLE_POLL_S = 0.02
 MAX_PUBLISHERS_KEPT = 8
 """Announcement publishers kept per vehicle: two already say it is claimed twice."""
+ANNOUNCE_EVERY_S = 2.0
+"""A member signs and puts its announcement again this often (``FleetPresence``)."""
+ANNOUNCE_STALE_S = 10.0
+"""A token counts as a member while its vehicle's last signed announcement arrived within
+this: a replayed old announcement is refused as stale, and a rogue token beside a member gone
+counts for this long at most."""
+ANNOUNCE_MAX_AGE_S = 30.0
+"""An announcement signed longer ago than this is refused (the replay rule's window)."""
+POSITION_MAX_AGE_S = 10.0
+"""A signed position older than this is refused (it is stale for separation long before)."""
+MAX_LAYER_GAP_M = 100.0
+"""Default bound of an announced ``min_gap_m`` (``fleet.max_layer_gap_m``): above it, refused."""
+LOST_S = 1800.0
+"""Default of ``fleet.lost_airspace_s``: how long a member gone armed stays unknown."""
 MAX_VEHICLES_KEPT = 1024
 """Vehicles whose announcements and publishers are kept: a peer that announces thousands of
 vehicle ids (a network without access control) cannot grow the roster without bound."""
@@ -58,12 +81,23 @@ class Change:
 class FleetRoster:
     """The members alive and their announcements (None until one arrives)."""
 
-    def __init__(self, keys: FleetKeys, on_change: Callable[[Change], None] | None = None) -> None:
+    def __init__(self, keys: FleetKeys, verifier: FleetVerifier, on_change: Callable[[Change], None] | None = None,
+                 max_gap_m: float = MAX_LAYER_GAP_M, lost_s: float = LOST_S,
+                 wall: Callable[[], float] = time.time) -> None:
         self.keys = keys
+        self.verifier = verifier
+        """The enrolled vehicles' keys and the replay rule (shared with the ledger)."""
+        self.max_gap_m = max_gap_m
+        self.lost_s = lost_s
+        self._wall = wall
         self._on_change = on_change
         self._lock = threading.Lock()
         self._alive: set[str] = set()
         self._said: dict[str, FleetMember] = {}
+        self._said_at: dict[str, float] = {}
+        """When (monotonic) each vehicle's last signed announcement arrived."""
+        self.ignored_tokens = 0
+        """Tokens of vehicles not enrolled (counted, never members)."""
         self._seen: dict[str, Seen] = {}
         """Each member's last status (its vehicle's own position)."""
         self._lost: dict[str, Seen] = {}
@@ -88,7 +122,7 @@ class FleetRoster:
             recovery=zext.RecoveryConfig(heartbeat=True))
         self._subs.append(announces)
         self._subs.append(announces.detect_publishers(self._on_publisher, history=True))
-        self._subs.append(session.declare_subscriber(self.keys.statuses, self._on_status))
+        self._subs.append(session.declare_subscriber(self.keys.positions, self._on_position))
         for reply in session.liveliness().get(self.keys.members, timeout=timeout_s):
             if reply.ok is not None:
                 self._on_token(reply.ok)
@@ -105,8 +139,9 @@ class FleetRoster:
 
     def _settled(self, positions: bool) -> bool:
         members = self.members()
-        with self._lock:
-            return None not in members.values() and (not positions or all(v in self._seen for v in members))
+        with self._lock:  # every enrolled token announced (a rogue one under an enrolled id: the wait's end)
+            announced = all(v in members for v in self._alive)
+            return announced and (not positions or all(v in self._seen for v in members))
 
     def close(self) -> None:
         for sub in self._subs:
@@ -117,29 +152,62 @@ class FleetRoster:
         self._subs.clear()
 
     def members(self) -> dict[str, FleetMember | None]:
-        """Every member whose token is alive, with its announcement (None: not read yet)."""
+        """Every member: its token alive and its signed announcement fresh (never None: a
+        token without one is not a member)."""
+        fresh = time.monotonic() - ANNOUNCE_STALE_S
         with self._lock:
-            return {v: self._said.get(v) for v in sorted(self._alive)}
+            return {v: self._said[v] for v in sorted(self._alive) if self._said_at.get(v, -1e18) >= fresh}
+
+    @property
+    def ignored(self) -> int:
+        """Fleet messages and tokens ignored so far: not enrolled, unsigned, stale, replayed,
+        or beyond the bounds."""
+        return self.verifier.ignored + self.ignored_tokens
+
+    def _refuse(self, why: str) -> None:
+        with self._lock:
+            self.refused.append(why)
 
     def separation(self, min_horizontal_m: float = MIN_HORIZONTAL_M, stale_s: float = STALE_S) -> Judgement:
         """The fleet's separation now, on the members' last statuses (``fleet_separation``)."""
         with self._lock:
-            seen, lost = dict(self._seen), dict(self._lost)
-        return judge(self.members(), seen, time.monotonic(), min_horizontal_m, stale_s, lost)
+            seen = dict(self._seen)
+        return judge(self.members(), seen, time.monotonic(), min_horizontal_m, stale_s, self._lost_now())
 
     def lost(self) -> list[str]:
-        """The members gone while their vehicles were armed (not back yet)."""
-        with self._lock:
-            return sorted(self._lost)
+        """The members gone while their vehicles were armed (not back yet, and last seen
+        within ``lost_s``: by then the vehicle has landed, whatever it flew)."""
+        return sorted(self._lost_now())
 
-    def _on_status(self, sample: Any) -> None:
-        vehicle = self.keys.status_vehicle(str(sample.key_expr)) or ""
+    def _lost_now(self) -> dict[str, Seen]:
+        since = time.monotonic() - self.lost_s
+        with self._lock:
+            return {v: s for v, s in self._lost.items() if s.at_s >= since}
+
+    def _open(self, sample: Any, vehicle: str, max_age_s: float) -> bytes | None:
+        """The signed message in ``sample`` from enrolled ``vehicle``, or None (refused, counted)."""
+        key = str(sample.key_expr)
+        try:
+            body, _ = self.verifier.open(key, vehicle, sample.payload.to_bytes(), self._wall(), max_age_s)
+        except Unverified as err:
+            self._refuse(f"{key}: {err.why}")
+            return None
+        return body
+
+    def _on_position(self, sample: Any) -> None:
+        vehicle = self.keys.vehicle_of(str(sample.key_expr))
+        if vehicle is None or sample.kind != zenoh.SampleKind.PUT:
+            return
         with self._lock:
             if vehicle not in self._alive:  # a member's only: what it holds stays bounded
                 return
+        body = self._open(sample, vehicle, POSITION_MAX_AGE_S)
+        if body is None:
+            return
         try:
-            status = decode(sample.payload.to_bytes(), Status)
-        except ProtocolError:
+            status = decode(body, Status)
+        except ProtocolError as err:
+            self._refuse(f"{sample.key_expr}: {err}")
             return
         with self._lock:
             self._seen[vehicle] = Seen(status, time.monotonic())
@@ -171,6 +239,11 @@ class FleetRoster:
         vehicle = self.keys.vehicle_of(str(sample.key_expr))
         if vehicle is None:
             return
+        if vehicle not in self.verifier.roster:  # anyone may declare a token: only the enrolled count
+            with self._lock:
+                self.ignored_tokens += 1
+                self.refused.append(f"{sample.key_expr}: {vehicle} is not enrolled in the fleet's roster")
+            return
         joined = sample.kind == zenoh.SampleKind.PUT
         armed = False
         with self._lock:
@@ -192,21 +265,24 @@ class FleetRoster:
         vehicle = self.keys.vehicle_of(key)
         if vehicle is None or sample.kind != zenoh.SampleKind.PUT:
             return
+        body = self._open(sample, vehicle, ANNOUNCE_MAX_AGE_S)
+        if body is None:
+            return
         try:
-            member = decode(sample.payload.to_bytes(), FleetMember)
+            member = decode(body, FleetMember)
         except ProtocolError as err:
-            with self._lock:
-                self.refused.append(f"{key}: {err}")
+            self._refuse(f"{key}: {err}")
             return
         if member.vehicle != vehicle:  # a member speaks for its own vehicle only
-            with self._lock:
-                self.refused.append(f"{key}: names vehicle {member.vehicle!r}")
+            self._refuse(f"{key}: names vehicle {member.vehicle!r}")
+            return
+        if member.min_gap_m > self.max_gap_m:  # obeyed, it would bar every other layer
+            self.verifier.count_ignored()
+            self._refuse(f"{key}: min_gap_m {member.min_gap_m:g} m above fleet.max_layer_gap_m {self.max_gap_m:g} m")
             return
         with self._lock:
+            self._said_at[vehicle] = time.monotonic()
             if self._said.get(vehicle) == member:
-                return
-            if vehicle not in self._said and len(self._said) >= MAX_VEHICLES_KEPT:
-                self.refused.append(f"{key}: more than {MAX_VEHICLES_KEPT} vehicles announced")
                 return
             self._said[vehicle] = member
         self._tell(Change(vehicle, "announced", member))

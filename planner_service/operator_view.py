@@ -45,6 +45,9 @@ class WatchView:
     """The fleet's separation on the members' own positions (None for a lone UAV)."""
     claims: dict[str, list[str]] = field(default_factory=dict)
     """The users each live member claims (its next point's and its hold's)."""
+    fleet_ignored: int = 0
+    """Fleet messages and tokens ignored (not enrolled, unsigned, stale, replayed, beyond the
+    bounds): a rogue peer at work, or a member missing from the watch's roster."""
 
 
 def _t(text: object, limit: int = 80) -> str:
@@ -96,8 +99,9 @@ def status_lines(s: Status) -> list[str]:
 
 def _fleet_lines(view: WatchView) -> list[str]:
     """One line for the fleet's members (none for a lone UAV): vehicle, layer, this one."""
+    ignored = [f"fleet      {view.fleet_ignored} messages ignored (not enrolled, unsigned, stale or replayed)"]
     if not view.fleet:
-        return []
+        return ignored if view.fleet_ignored else []
     this = view.vehicle.rsplit("/", 1)[-1]
 
     def one(vehicle: str, m: FleetMember | None) -> str:
@@ -109,6 +113,8 @@ def _fleet_lines(view: WatchView) -> list[str]:
                if v in view.fleet and users]
     if claimed:
         lines.append("claims     " + "; ".join(claimed))
+    if view.fleet_ignored:
+        lines += ignored
     j = view.separation
     if j is not None:
         lines += [f"SEPARATION LOST {_t(c, 120)}" for c in j.conflicts]

@@ -234,10 +234,20 @@ class FleetKeys:
     def all_served(self) -> str:
         return self._key("served/*")
 
+    def position(self, vehicle: str) -> str:
+        """Publication: ``vehicle``'s own position, signed (its ``status`` in a fleet envelope),
+        on which the fleet's separation is judged."""
+        return self._key(f"positions/{_check_chunk('vehicle', vehicle)}")
+
+    @property
+    def positions(self) -> str:
+        return self._key("positions/*")
+
     def vehicle_of(self, key_expr: str) -> str | None:
-        """The vehicle id that ends a member, announcement, intentions or served key; None
-        for any other key."""
-        for head in (self._key("members/"), self._key("uavs/"), self._key("intentions/"), self._key("served/")):
+        """The vehicle id that ends a member, announcement, intentions, served or position
+        key; None for any other key."""
+        for head in (self._key("members/"), self._key("uavs/"), self._key("intentions/"), self._key("served/"),
+                     self._key("positions/")):
             if key_expr.startswith(head) and _CHUNK.fullmatch(key_expr[len(head):]):
                 return key_expr[len(head):]
         return None

@@ -353,11 +353,15 @@ class Intention(msgspec.Struct, frozen=True, array_like=True, forbid_unknown_fie
     due_s: float
 
 
-class FleetIntentions(_Message, tag="fleet_intentions"):
+class FleetIntentions(_Message, tag="fleet_intentions", kw_only=True):
     """What a member's plan means to do (``FleetKeys.intentions``), published on every plan
     with a cache of one: each user of the points still to fly and when its service should
     begin, and the users it claims. A user several members claim belongs to the earliest
     (docs/OPERATIONS.md, "A fleet")."""
+
+    LAYOUT: ClassVar[int] = 2
+    """2: the typed ``bound`` claim (1 dated a bound user 1e10 s early)."""
+    schema: int = 2
 
     vehicle: VehicleId
     time_s: float
@@ -372,6 +376,10 @@ class FleetIntentions(_Message, tag="fleet_intentions"):
     """Every hovering point of the mission it flies, still to fly: if its service is lost with
     its vehicle armed, the vehicle flies them home, and the others plan without them until
     it is back."""
+    bound: UserId | None = None
+    """The user its hold serves, from the moment the hold is bound (a typed claim that beats
+    every plan's estimate; of two, the one bound first), with ``bound_at_s`` (wall clock)."""
+    bound_at_s: float | None = None
 
 
 class FleetServed(_Message, tag="fleet_served"):

@@ -56,6 +56,10 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--once", action="store_true",
                         help="watch: print one view (after waiting up to --timeout for a status) and exit: 0 if a "
                              "status came, 1 if not")
+    parser.add_argument("--fleet-roster", metavar="FILE", default=None,
+                        help="watch: the fleet's roster (fleet.roster_file): the members' signed announcements and "
+                             "positions are read against it; without it the fleet's messages cannot be verified and "
+                             "no member is shown")
     parser.add_argument("--plain", action="store_true",
                         help="watch: never clear the screen, print each changed view after the last (the default "
                              "when TERM is dumb or the output is not a terminal)")
@@ -70,6 +74,13 @@ def _key(path: str | None) -> bytes | None:
             return None
         path = DEFAULT_KEY
     return load_key(path)
+
+
+def _fleet_roster(path: str | None) -> dict[str, Any]:
+    """The enrolled vehicles' public keys ({} without a roster: nothing of the fleet verifies)."""
+    from protocol.fleet_signing import read_roster
+
+    return {} if path is None else read_roster(path)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -90,6 +101,11 @@ def run(args: argparse.Namespace) -> int:
         args.key = _key(args.operator_key)
     except SigningError as err:
         print(f"error: --operator-key: {printable(str(err), 400)}", file=sys.stderr)
+        return 1
+    try:
+        args.fleet_keys = _fleet_roster(args.fleet_roster)
+    except SigningError as err:
+        print(f"error: --fleet-roster: {printable(str(err), 400)}", file=sys.stderr)
         return 1
     keys = Keys(args.prefix, args.vehicle)
     stop = threading.Event()
@@ -143,6 +159,8 @@ def _watch(client: Any, args: argparse.Namespace, stop: threading.Event) -> int:
     from protocol import FleetKeys, ProtocolError
     from protocol.client import ClientError
 
+    from protocol.fleet_signing import FleetVerifier
+
     from ..fleet_ledger import FleetLedger
     from ..fleet_roster import FleetRoster
     from ..operator_view import WatchView, render
@@ -167,9 +185,11 @@ def _watch(client: Any, args: argparse.Namespace, stop: threading.Event) -> int:
     client.follow_plans(lambda p: update(plan=p))
     client.follow_events(on_event)
     alive_sub = client.session.liveliness().declare_subscriber(client.keys.alive, on_alive, history=True)
-    roster = FleetRoster(FleetKeys(client.keys.prefix))
+    verifier = FleetVerifier(args.fleet_keys)  # the watch only reads: it signs nothing
+    roster = FleetRoster(FleetKeys(client.keys.prefix), verifier)
     roster.follow(client.session)
-    ledger = FleetLedger(FleetKeys(client.keys.prefix), "", lambda: roster.members().keys())
+    ledger = FleetLedger(FleetKeys(client.keys.prefix), "", lambda: roster.members().keys(), roster.lost, None,
+                         verifier)
     ledger.follow(client.session)
     term = os.environ.get("TERM", "")
     plain = args.plain or not sys.stdout.isatty() or term in ("", "dumb", "unknown")
@@ -196,7 +216,7 @@ def _watch(client: Any, args: argparse.Namespace, stop: threading.Event) -> int:
                 update(alive=True)  # the token's history may reach the subscriber after the state's answer
             if args.once:  # one view: with the layers and positions of the members the roster knows of
                 roster.settle(min(args.timeout, 2.0), positions=True)
-            update(fleet=roster.members(), separation=roster.separation(),
+            update(fleet=roster.members(), separation=roster.separation(), fleet_ignored=roster.ignored,
                    claims={v: sorted(c) for v, c in ledger.claims().items()})
             with lock:
                 lines = render(view, time.monotonic())

@@ -7,6 +7,7 @@ seed, the coordination traffic each UAV sent, and one figure with every path."""
 from __future__ import annotations
 
 import json
+import shutil
 import socket
 import threading
 import time
@@ -17,6 +18,7 @@ from typing import Any, Callable
 import zenoh
 
 from protocol import Event, FleetKeys, GeoOrigin, Keys, Status, decode, local_to_global
+from protocol.fleet_signing import make_vehicle_key
 from protocol.zenoh_config import session_config
 
 from ..fleet.sortie import run_fleet_sortie
@@ -127,6 +129,17 @@ class Watch:
             sub.undeclare()
 
 
+def enrol_fleet(folder: Path, vehicles: list[str]) -> Path:
+    """Every vehicle's fleet key and the fleet's roster in ``folder`` (made afresh: the demo's
+    own, as ``python -m planner_service fleet-key`` makes them); returns the roster's path."""
+    shutil.rmtree(folder, ignore_errors=True)
+    folder.mkdir(mode=0o700, parents=True)
+    roster = folder / "roster"
+    for vehicle in vehicles:
+        make_vehicle_key(folder / f"{vehicle}.key", roster, vehicle)
+    return roster
+
+
 def run_fleet_demo(out: Path, *, uavs: int = 3, users: int = 12, speedup: float = 25.0, budget_ms: float = 150.0,
                    seed: int = 1, timeout_s: float = 300.0, offline: bool = True,
                    echo: Callable[[str], None] = print) -> dict[str, Any]:
@@ -156,6 +169,7 @@ def run_fleet_demo(out: Path, *, uavs: int = 3, users: int = 12, speedup: float 
             children.append(child)
             child.wait_ready("router listening")
         vehicles = [f"uav{j + 1}" for j in range(uavs)]
+        roster = enrol_fleet(out / "fleet-keys", vehicles)
         for j, (vehicle, sc) in enumerate(zip(vehicles, scenarios)):
             folder = out / vehicle
             folder.mkdir(exist_ok=True)
@@ -175,7 +189,8 @@ def run_fleet_demo(out: Path, *, uavs: int = 3, users: int = 12, speedup: float 
                 # a member's first plan waits for its share of the users (the others' claims
                 # are not its to count: waiting for all, a late member would never fly)
                 "planner.min_requests": str(max(1, users // uavs)), "journal.path": str(folder / "journal.sqlite"),
-                "fleet.enabled": "true", "fleet.discovery_s": "1.0", **scenario_settings(default, sc)})
+                "fleet.enabled": "true", "fleet.discovery_s": "1.0", "fleet.roster_file": str(roster),
+                "fleet.key_file": str(roster.parent / f"{vehicle}.key"), **scenario_settings(default, sc)})
             (folder / "planner.toml").write_text(to_toml(config))
             service = Child("planner_service", ["serve", "--config", str(folder / "planner.toml")], folder / "service.log")
             children.append(service)

@@ -36,11 +36,11 @@ import msgspec
 import numpy as np
 
 from protocol import ErrorReply, FleetKeys, PendingRequest, Plan, PlanPoint, SigningError, State, Status, encode
+from protocol.fleet_signing import FleetSigner, FleetVerifier, load_private_key, read_roster
 from protocol.messages import FleetMember
 from protocol.operator_proof import ProofCheck, load_or_create_key
 from protocol.text import printable
 
-from ..fleet_ledger import bound_due
 from ..mcts import MctsConfig
 from .allocator import ARENAS, cap_arenas
 from .config import ServiceConfig
@@ -501,9 +501,11 @@ class Service:
         period = 1.0 / self.cfg.zenoh.status_hz
         while True:
             self._check_journal()
-            self.zio.publish(self._status())
+            status = self._status()
+            self.zio.publish(status)
             self._log_busy()
             if self.zio.fleet is not None and self.zio.fleet.joined:
+                self.zio.fleet.publish_position(status)  # signed: the others judge separation on it
                 self.zio.fleet.check_separation()
             await asyncio.sleep(period)
 
@@ -649,11 +651,10 @@ class Service:
         due, now = dict(self._plan_dues), self.wall()
         claims = {self._next_user} if self._next_user is not None else set()
         points = {self._next_point} if self._next_point is not None else set()
-        if self._bound is not None:  # a hold under way beats any plan's estimate
-            due[self._bound[0]] = bound_due(self._bound[1])
-            claims.add(self._bound[0])
+        if self._bound is not None:  # a hold under way beats any plan's estimate (a typed claim)
+            claims.discard(self._bound[0])
             points.add(self.state.schedule.last_hover_index)
-        self.fleet.ledger.intend(due, now, claims, {k for k in points if k >= 0}, self._route)
+        self.fleet.ledger.intend(due, now, claims, {k for k in points if k >= 0}, self._route, self._bound)
         if log.isEnabledFor(logging.DEBUG):  # the others' owners are worked out for the line alone
             log.debug("fleet: intends %s; others own %s", {u: round(d - now, 2) for u, d in due.items()},
                       sorted(self.fleet.ledger.taken()))
@@ -791,7 +792,19 @@ def fleet_presence(config: ServiceConfig) -> FleetPresence | None:
                       min_gap_m=config.fleet.min_layer_gap_m, origin_lat_deg=o.lat_deg, origin_lon_deg=o.lon_deg,
                       origin_alt_m=o.alt_m, autopilot=config.mavlink.flavour)
     f = config.fleet
-    return FleetPresence(FleetKeys(config.zenoh.prefix), own, f.min_horizontal_m, f.position_stale_s)
+    if f.insecure and config.fleet_transport_open():
+        log.warning("fleet: INSECURE (fleet.insecure = true): %s; any peer can read the fleet's keys and flood "
+                    "them (the signatures still refuse what the enrolled members did not sign)",
+                    config.fleet_transport_open())
+    try:
+        signer = FleetSigner(config.zenoh.vehicle, load_private_key(f.key_file))
+        verifier = FleetVerifier(read_roster(f.roster_file))
+    except SigningError as err:
+        raise ConfigError("fleet.key_file", str(err)) from None
+    if config.zenoh.vehicle not in verifier.roster:
+        raise ConfigError("fleet.roster_file", f"{config.zenoh.vehicle} is not enrolled in {f.roster_file}")
+    return FleetPresence(FleetKeys(config.zenoh.prefix), own, signer, verifier, f.min_horizontal_m,
+                         f.position_stale_s, f.max_layer_gap_m, f.lost_airspace_s)
 
 
 def run_service(config: ServiceConfig, on_stopped: Callable[[int], None] | None = None) -> int:

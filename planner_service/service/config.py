@@ -22,6 +22,7 @@ from typing import Any, ClassVar, Literal, Mapping, get_args
 
 from protocol import Area, GeoOrigin, Keys, ProtocolError
 from protocol.errors import MissionError, SigningError
+from protocol.fleet_signing import load_private_key, public_hex, read_roster
 from protocol.mission import Flavour
 from protocol.signing import default_timestamp_path, load_key
 from protocol.zenoh_config import access_control_closed, endpoint_problem
@@ -349,6 +350,39 @@ class MembershipConfig(Section):
     """How long a joining service waits for the mesh to tell it of every member (then for
     their layers until each is read: 5 s at most, or this if longer) before it judges the
     separation and goes on."""
+    key_file: str = ""
+    """This vehicle's fleet signing key (Ed25519, mode 0600: ``python -m planner_service
+    fleet-key``); every fleet message it sends is signed with it. Required with ``enabled``."""
+    roster_file: str = ""
+    """The fleet's roster: ``VEHICLE PUBLIC-KEY`` per line, every enrolled member's; a
+    message from any other is ignored and counted. Required with ``enabled``."""
+    insecure: bool = False
+    """Fly a fleet over zenoh endpoints that are neither loopback nor TLS with access control
+    (``zenoh.config_file``): refused without this (any peer could then put what it likes on
+    the fleet's keys; the signatures stop it speaking for a member, not reading or flooding)."""
+    max_layer_gap_m: float = setting(100.0, gt=0, unit="m")
+    """A member announcing a ``min_layer_gap_m`` above this is refused and ignored (a gap of
+    1e9 m would bar every other member)."""
+    lost_airspace_s: float = setting(1800.0, gt=0, unit="s")
+    """How long a member gone with its vehicle armed keeps its airspace (its route, its
+    unknown separation): at most a sortie's flight on one battery."""
+
+    def check(self) -> None:
+        super().check()
+        if not self.enabled:
+            return
+        for name in ("key_file", "roster_file"):
+            if not getattr(self, name):
+                raise ConfigError(f"fleet.{name}", "a fleet needs its enrolment: this vehicle's signing key and the "
+                                  "fleet's roster (make them with: python -m planner_service fleet-key)")
+        try:
+            load_private_key(self.key_file)
+        except SigningError as err:
+            raise ConfigError("fleet.key_file", str(err)) from None
+        try:
+            read_roster(self.roster_file)
+        except SigningError as err:
+            raise ConfigError("fleet.roster_file", str(err)) from None
 
 
 SECTIONS: dict[str, type[Section]] = {
@@ -436,11 +470,49 @@ class ServiceConfig:
             raise ConfigError("operator.key_file", f"{path}: the folder {folder} is missing or not writable "
                                                    "(the service makes the operator key there)")
 
+    def fleet_transport_open(self) -> str:
+        """Why the fleet's zenoh is open to any peer ("" when it is not): an endpoint neither
+        loopback nor TLS under access control (``zenoh.config_file``)."""
+        z = self.zenoh
+        endpoints = [*z.listen, *z.connect]
+        if all(_loopback(e) for e in endpoints):
+            return ""
+        try:
+            closed = access_control_closed(z.config_file or None)
+        except ProtocolError as err:
+            raise ConfigError("zenoh.config_file", err.message) from None
+        if closed and all(e.startswith("tls/") for e in endpoints):
+            return ""
+        return f"zenoh endpoints {', '.join(endpoints)} are not all loopback, nor TLS with access control"
+
+    def _check_fleet_enrolment(self) -> None:
+        """This vehicle's key must be the one the roster enrols for it: the others would
+        refuse every message it signs, without a word to it."""
+        if not self.fleet.enabled:
+            return
+        roster = read_roster(self.fleet.roster_file)
+        enrolled = roster.get(self.zenoh.vehicle)
+        if enrolled is None:
+            raise ConfigError("fleet.roster_file", f"{self.zenoh.vehicle} is not enrolled in {self.fleet.roster_file} "
+                              "(python -m planner_service fleet-key)")
+        if public_hex(load_private_key(self.fleet.key_file)) != enrolled.public_bytes_raw().hex():
+            raise ConfigError("fleet.key_file", f"{self.fleet.key_file} is not the key {self.fleet.roster_file} "
+                              f"enrols for {self.zenoh.vehicle}")
+
+    def _check_fleet_transport(self) -> None:
+        if self.fleet.enabled and not self.fleet.insecure:
+            why = self.fleet_transport_open()
+            if why:
+                raise ConfigError("fleet.insecure", f"{why}: any peer could read and flood the fleet's keys; give "
+                                  "zenoh TLS and access control, or set fleet.insecure = true to fly so knowingly")
+
     def check(self) -> None:
         """Every section's rules, then those between sections; ``ConfigError`` names the key."""
         for name in SECTIONS:
             getattr(self, name).check()
         self._check_operator_key()
+        self._check_fleet_enrolment()
+        self._check_fleet_transport()
         p, s = self.planner, self.safety
         if p.min_requests > self.intake.max_pending_requests:
             raise ConfigError("planner.min_requests", f"{p.min_requests} can never be pending: "
@@ -515,6 +587,13 @@ def load_config(path: str | Path | None, overrides: Mapping[str, Any] | None = N
         except tomllib.TOMLDecodeError as err:
             raise ConfigError("config", f"{path} is not valid TOML: {err}") from None
     return build_config(raw, overrides)
+
+
+def _loopback(endpoint: str) -> bool:
+    """A zenoh endpoint on this computer only (127.0.0.0/8, ::1, localhost)."""
+    address = endpoint.split("/", 1)[-1].split("#", 1)[0]
+    host = address.rsplit(":", 1)[0].strip("[]")
+    return host == "localhost" or host == "::1" or host.startswith("127.")
 
 
 def mavlink_url_problem(url: str, backend: str) -> str | None:

@@ -18,6 +18,11 @@ may lie closer than the larger of their ``min_layer_gap_m``. A service joining t
    announcement: unknown is never "clear"). Two services started at once with one layer both
    see the other in step 3 and both refuse: neither flies into the other's layer.
 
+Every message it puts on the fleet's keys is signed with its vehicle's key, and it reads only
+the enrolled vehicles' (``protocol.fleet_signing``; ``fleet_roster``): its announcement again
+every ``ANNOUNCE_EVERY_S``, its position on each status (``publish_position``). What it
+ignores (not enrolled, unsigned, stale, replayed, beyond the bounds) is counted and logged.
+
 A member that joins later with a clashing layer is refused by its own check; this service
 logs it. The check keeps two services from being configured into one layer; what the vehicles
 really fly is for their own positions to show (docs/OPERATIONS.md, "A fleet").
@@ -26,18 +31,20 @@ really fly is for their own positions to show (docs/OPERATIONS.md, "A fleet").
 from __future__ import annotations
 
 import logging
+import threading
 import time
-from typing import Any, Mapping
+from typing import Any, Callable, Mapping
 
 import zenoh
 import zenoh.ext as zext
 
-from protocol import FleetKeys
+from protocol import FleetKeys, Status
+from protocol.fleet_signing import FleetSigner, FleetVerifier
 from protocol.messages import FleetMember, encode
 from protocol.text import printable
 
 from ..fleet_ledger import FleetLedger
-from ..fleet_roster import Change, FleetRoster
+from ..fleet_roster import ANNOUNCE_EVERY_S, LOST_S, MAX_LAYER_GAP_M, Change, FleetRoster
 from ..fleet_separation import MIN_HORIZONTAL_M, STALE_S, Judgement
 from .errors import ServiceError
 
@@ -48,6 +55,8 @@ that a subscriber that missed it (a router lost meanwhile) asks its cache again 
 subscribers' recovery)."""
 ANNOUNCE_WAIT_S = 5.0
 """Seconds a joining service waits at least for the announcements of the members it saw."""
+IGNORED_LOG_EVERY_S = 10.0
+"""The count of fleet messages ignored is logged at most this often (a flood is one line)."""
 
 
 class MembershipError(ServiceError):
@@ -74,21 +83,31 @@ def layer_clashes(own: FleetMember, others: Mapping[str, FleetMember | None]) ->
 class FleetPresence:
     """One service's membership: ``join`` on an open session, ``leave`` at the end."""
 
-    def __init__(self, keys: FleetKeys, own: FleetMember, min_horizontal_m: float = MIN_HORIZONTAL_M,
-                 stale_s: float = STALE_S) -> None:
+    def __init__(self, keys: FleetKeys, own: FleetMember, signer: FleetSigner, verifier: FleetVerifier,
+                 min_horizontal_m: float = MIN_HORIZONTAL_M, stale_s: float = STALE_S,
+                 max_gap_m: float = MAX_LAYER_GAP_M, lost_s: float = LOST_S,
+                 wall: Callable[[], float] = time.time) -> None:
         self.keys = keys
         self.own = own
+        self.signer = signer
+        """This vehicle's key: every fleet message it puts is signed."""
         self.min_horizontal_m = min_horizontal_m
         self.stale_s = stale_s
+        self._wall = wall
         self._conflicts: set[str] = set()
         self._unknown: set[str] = set()
-        self.roster = FleetRoster(keys, self._on_change)
-        self.ledger = FleetLedger(keys, own.vehicle, lambda: self.roster.members().keys(), self.roster.lost)
+        self._ignored_logged = (0.0, 0)
+        self.roster = FleetRoster(keys, verifier, self._on_change, max_gap_m, lost_s, wall)
+        self.ledger = FleetLedger(keys, own.vehicle, lambda: self.roster.members().keys(), self.roster.lost,
+                                  signer, verifier, wall)
         """Intentions and services exchanged with the other members (opened on joining)."""
         self.joined = False
         """A member now (``join`` went through, ``leave`` not called)."""
         self._publisher: Any = None
+        self._position_pub: Any = None
         self._token: Any = None
+        self._stop = threading.Event()
+        self._announcer: threading.Thread | None = None
 
     def join(self, session: Any, discovery_s: float) -> None:
         """Become a member (blocking: run it off the event loop), or ``MembershipError`` naming
@@ -102,7 +121,11 @@ class FleetPresence:
         self._publisher = zext.declare_advanced_publisher(
             session, self.keys.announce(v), cache=zext.CacheConfig(max_samples=1),
             sample_miss_detection=zext.MissDetectionConfig(heartbeat=HEARTBEAT_S), publisher_detection=True)
-        self._publisher.put(encode(self.own))
+        self._announce()
+        self._stop.clear()
+        self._announcer = threading.Thread(target=self._announce_again, name="fleet-announce", daemon=True)
+        self._announcer.start()
+        self._position_pub = session.declare_publisher(self.keys.position(v))
         self._token = session.liveliness().declare_token(self.keys.member(v))
         time.sleep(discovery_s)
         self.roster.settle(max(discovery_s, ANNOUNCE_WAIT_S))
@@ -117,6 +140,36 @@ class FleetPresence:
         others = self._others()
         log.info("fleet: joined as %s, layer %g m; %s", v, self.own.layer_m,
                  ", ".join(f"{k} at {m.layer_m:g} m" for k, m in others.items() if m) or "no other member yet")
+
+    def _announce(self) -> None:
+        publisher = self._publisher
+        if publisher is not None:
+            try:
+                publisher.put(self.signer.seal(self.keys.announce(self.own.vehicle), encode(self.own), self._wall()))
+            except zenoh.ZError:  # undeclared meanwhile (leaving)
+                pass
+
+    def _announce_again(self) -> None:
+        """Sign and put the announcement again every ``ANNOUNCE_EVERY_S``: a member counts
+        only while its announcement is fresh, so a replayed old one cannot keep it."""
+        while not self._stop.wait(ANNOUNCE_EVERY_S):
+            self._announce()
+
+    def publish_position(self, status: Status) -> None:
+        """This vehicle's position, signed, for the others' separation watch (with each status)."""
+        if self._position_pub is not None and self.joined:
+            key = self.keys.position(self.own.vehicle)
+            self._position_pub.put(self.signer.seal(key, encode(status), self._wall()))
+
+    def _log_ignored(self) -> None:
+        """Say how many fleet messages were ignored since the last line, with the latest reason."""
+        since, seen = self._ignored_logged
+        now, count = time.monotonic(), self.roster.ignored
+        if count > seen and now - since >= IGNORED_LOG_EVERY_S:
+            latest = self.roster.refused[-1] if self.roster.refused else ""
+            log.warning("fleet: %d fleet messages or tokens ignored (not enrolled, unsigned, stale, replayed or "
+                        "beyond the bounds); the latest: %s", count - seen, printable(latest, 200))
+            self._ignored_logged = (now, count)
 
     def _others(self) -> dict[str, FleetMember | None]:
         return {k: m for k, m in self.roster.members().items() if k != self.own.vehicle}
@@ -142,6 +195,7 @@ class FleetPresence:
     def check_separation(self) -> Judgement:
         """Judge the fleet's separation now and log what changed: a pair that lost it (an
         error), a pair that has it again, a member whose position became unknown or known."""
+        self._log_ignored()
         j = self.roster.separation(self.min_horizontal_m, self.stale_s)
         conflicts = {c.split(":", 1)[0]: c for c in j.conflicts}
         unknown = {u.split(":", 1)[0]: u for u in j.unknown}
@@ -160,12 +214,16 @@ class FleetPresence:
     def leave(self) -> None:
         """Withdraw the token and the announcement, stop following the others."""
         self.joined = False
+        self._stop.set()
+        if self._announcer is not None:
+            self._announcer.join(timeout=2 * ANNOUNCE_EVERY_S)
+            self._announcer = None
         self.ledger.close()
-        for thing in (self._token, self._publisher):
+        for thing in (self._token, self._publisher, self._position_pub):
             if thing is not None:
                 try:
                     thing.undeclare()
                 except zenoh.ZError:
                     pass
-        self._token = self._publisher = None
+        self._token = self._publisher = self._position_pub = None
         self.roster.close()

@@ -24,11 +24,11 @@ import pytest
 import zenoh
 
 from planner_service.harness.processes import REPO, Child, free_port
-from planner_service.service.fleet_presence import FleetPresence, MembershipError
+from planner_service.service.fleet_presence import FleetPresence
 from protocol import FleetKeys, Keys, Status, decode, encode
 from protocol.client import PlannerClient, client_config, request_for
 from protocol.messages import FleetIntentions, FleetServed, Intention, UserPlace
-from tests.support.fleet import member, wait_until
+from tests.support.fleet import ROSTER, fleet_settings, member, presence, wait_until
 from tests.support.stack import Stack
 from tests.support.zenoh_tls import VEHICLE_MARKS, add_entries, make_certs, shipped
 
@@ -71,7 +71,7 @@ def test_each_uav_certificate_speaks_for_its_own_vehicle_only(tmp_path: Path) ->
             routers.append(Child("sim_bridge", ["router", "--listen", listen, *connect, "--zenoh-config",
                                                 str(router_conf)], tmp_path / f"router-{n}.log"))
             routers[-1].wait_ready("router listening")
-        uav1 = FleetPresence(KEYS, member("uav1", 80.0))
+        uav1 = presence(KEYS, member("uav1", 80.0))
         uav1.join(session("uav1"), DISCOVERY_S)
         presences.append(uav1)
         uav2_session = session("uav2", second)
@@ -86,15 +86,15 @@ def test_each_uav_certificate_speaks_for_its_own_vehicle_only(tmp_path: Path) ->
             time.sleep(0.05)
         # a user's certificate tries to join as uav4: it sees the members' tokens (a user waits
         # for the fleet's) but not their layers, so it refuses itself; its token reached nobody
-        user = FleetPresence(KEYS, member("uav4", 120.0))
-        with pytest.raises(MembershipError, match="uav1 is a member but its layer is unknown"):
-            user.join(session("u-1"), DISCOVERY_S)
+        user = presence(KEYS, member("uav4", 120.0))
+        user.join(session("u-1"), DISCOVERY_S)  # it reads no signed announcement: no member, no clash
+        presences.append(user)
 
         # the real uav2 and uav3 join, each layer read as its own
-        uav2 = FleetPresence(KEYS, member("uav2", 90.0))
+        uav2 = presence(KEYS, member("uav2", 90.0))
         uav2.join(uav2_session, DISCOVERY_S)
         presences.append(uav2)
-        uav3 = FleetPresence(KEYS, member("uav3", 100.0))
+        uav3 = presence(KEYS, member("uav3", 100.0))
         uav3.join(session("uav3", second), DISCOVERY_S)
         presences.append(uav3)
         every = {v: member(v, layer) for v, layer in (("uav1", 80.0), ("uav2", 90.0), ("uav3", 100.0))}
@@ -104,7 +104,8 @@ def test_each_uav_certificate_speaks_for_its_own_vehicle_only(tmp_path: Path) ->
 
         # intentions and services in uav2's name: uav2's own reach uav1 (across the two
         # routers), the thief's none (it would take users from uav2, or close their requests)
-        uav2.ledger.intend({"u-real": 1.0e9}, 0.0)
+        now = time.time()
+        uav2.ledger.intend({"u-real": now + 60}, now, claims=["u-real"])
         uav2.ledger.served("u-real", 3, 1.0)
         for _ in range(20):
             thief.put(KEYS.intentions("uav2"), encode(FleetIntentions(vehicle="uav2", time_s=0.0,
@@ -114,7 +115,7 @@ def test_each_uav_certificate_speaks_for_its_own_vehicle_only(tmp_path: Path) ->
         wait_until(lambda: "u-real" in uav1.ledger.intentions().get("uav2", {}), 10.0,
                    lambda: f"uav2's intentions at uav1: {uav1.ledger.intentions()}")
         heard_served = [(d.vehicle, d.user_id) for d in uav1.ledger.take_served()]
-        assert uav1.ledger.intentions()["uav2"] == {"u-real": 1.0e9}
+        assert uav1.ledger.intentions()["uav2"] == {"u-real": now + 60}
         assert heard_served == [("uav2", "u-real")], heard_served
 
         # a status in uav2's name: uav2's own reaches uav1, the thief's none
@@ -166,7 +167,8 @@ def test_a_fleet_service_behind_the_routers_access_control(stack: Stack, tmp_pat
     stack.vehicle()
     stack.client = PlannerClient([endpoint], mode="client", config_file=user_conf, timeout_s=3.0)
     service = stack.service(zenoh__mode="client", zenoh__connect=endpoint, zenoh__listen="",
-                            zenoh__config_file=str(vehicle_conf), fleet__enabled="true", fleet__discovery_s="1.0")
+                            zenoh__config_file=str(vehicle_conf), fleet__enabled="true", fleet__discovery_s="1.0",
+                            **{k.replace(".", "__"): v for k, v in fleet_settings().items()})
     assert "fleet: joined as uav1, layer 100 m" in service.log()
     ack = stack.client.submit("u-1", 100.0, 120.0, 9)
     assert ack.request_id == 1
@@ -178,7 +180,7 @@ def test_a_fleet_service_behind_the_routers_access_control(stack: Stack, tmp_pat
                lambda: f"u-1's place from uav1, through the router: {places.members()}\n{service.log()[-2000:]}")
     watch = subprocess.run([sys.executable, "-m", "planner_service", "operator", "watch", "--once", "--plain",
                             "--connect", endpoint, "--zenoh-config", str(operator_conf),
-                            "--operator-key", str(stack.operator_key_path)],
+                            "--operator-key", str(stack.operator_key_path), "--fleet-roster", str(ROSTER)],
                            cwd=REPO, capture_output=True, text=True, timeout=60)
     assert watch.returncode == 0, watch.stderr
     assert "fleet      1 member: uav1 100 m (this)" in watch.stdout, watch.stdout

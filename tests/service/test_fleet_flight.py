@@ -53,7 +53,7 @@ def test_two_uavs_share_the_users_and_one_takes_over_a_lost_ones(fleet: FleetSta
     uav1 = fleet.uav("uav1", 100.0, SPEEDUP, **START)
     uav2 = fleet.uav("uav2", 120.0, SPEEDUP, home_east_m=60.0, **START)
     wait_until(lambda: "fleet: uav2 announced layer 120 m" in uav1.service.log(), 30.0, "uav1 hearing of uav2")
-    wire = Intentions(fleet.endpoints[1])
+    wire = Intentions(fleet.endpoints[1], fleet.roster)
     try:
         fly_and_lose_one(fleet, uav1, uav2, wire)
     finally:

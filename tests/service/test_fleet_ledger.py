@@ -9,9 +9,12 @@ from dataclasses import dataclass, field
 
 import zenoh
 
-from planner_service.fleet_ledger import FleetLedger, bound_due, owned_by_others, owner
+import time
+
+from planner_service.fleet_ledger import BOUND, PLANNED, FleetLedger, owned_by_others, owner
 from protocol import FleetKeys
 from protocol.messages import FleetIntentions, FleetServed, Intention, encode
+from tests.support.fleet import signer, verifier
 
 KEYS = FleetKeys("ledgertest")
 
@@ -31,30 +34,41 @@ class Sample:
     kind: zenoh.SampleKind = field(default_factory=lambda: zenoh.SampleKind.PUT)
 
 
+T = time.time()
+"""Wall clock at the tests' start: a claim's due is bounded by its signed time."""
+
+
 def said(ledger: FleetLedger, message: FleetIntentions | FleetServed, vehicle: str | None = None) -> None:
+    """``message`` signed by ``vehicle`` (its own by default) and handed over as zenoh would."""
     v = vehicle or message.vehicle
+    key = KEYS.intentions(v) if isinstance(message, FleetIntentions) else KEYS.served(v)
+    sample = Sample(key, Payload(signer(v).seal(key, encode(message), time.time())))
     if isinstance(message, FleetIntentions):
-        ledger._on_intentions(Sample(KEYS.intentions(v), Payload(encode(message))))
+        ledger._on_intentions(sample)
     else:
-        ledger._on_served(Sample(KEYS.served(v), Payload(encode(message))))
+        ledger._on_served(sample)
+
+
+def ledger_of(vehicle: str, alive: set[str], lost: set[str] | None = None) -> FleetLedger:
+    return FleetLedger(KEYS, vehicle, lambda: alive, lambda: lost or set(), None, verifier())
 
 
 def test_the_earliest_claim_owns_a_user_and_a_hold_beats_any_estimate() -> None:
-    claims = {"uav1": {"u": 100.0}, "uav2": {"u": 90.0}, "uav3": {"v": 5.0}}
+    claims = {"uav1": {"u": (PLANNED, 100.0)}, "uav2": {"u": (PLANNED, 90.0)}, "uav3": {"v": (PLANNED, 5.0)}}
     assert owner("u", claims) == "uav2" and owner("w", claims) is None
     assert owned_by_others("uav1", claims, ["uav1", "uav2", "uav3"]) == {"u": "uav2", "v": "uav3"}
     assert owned_by_others("uav1", claims, ["uav1", "uav3"]) == {"v": "uav3"}  # uav2 gone: its claim with it
-    claims["uav1"]["u"] = bound_due(120.0)  # uav1 bound u (its hold began), though uav2 predicted earlier
+    claims["uav1"]["u"] = (BOUND, 120.0)  # uav1 bound u (its hold began), though uav2 predicted earlier
     assert owner("u", claims) == "uav1"
-    assert owner("u", {"uav2": {"u": 1.0}, "uav1": {"u": 1.0}}) == "uav1"  # a tie: the smaller id
+    assert owner("u", {"uav2": {"u": (PLANNED, 1.0)}, "uav1": {"u": (PLANNED, 1.0)}}) == "uav1"  # a tie
 
 
 def test_points_claimed_by_live_members_and_a_lost_members_route_are_planned_without() -> None:
     alive, lost = {"uav1", "uav2"}, set()
-    ledger = FleetLedger(KEYS, "uav1", lambda: alive, lambda: lost)
-    said(ledger, FleetIntentions(vehicle="uav2", time_s=0.0, users=[Intention("u", 10.0), Intention("v", 20.0)],
+    ledger = ledger_of("uav1", alive, lost)
+    said(ledger, FleetIntentions(vehicle="uav2", time_s=T, users=[Intention("u", T + 10), Intention("v", T + 20)],
                                  claims=["u"], points=[3], route=[3, 5, 7]))
-    ledger.intend({"w": 5.0}, 0.0, ["w"], [4], [4, 6])  # its own are never blocked for it
+    ledger.intend({"w": T + 5}, T, ["w"], [4], [4, 6])  # its own are never blocked for it
     assert ledger.taken() == {"u"} and ledger.owners() == {"u": "uav2"}
     assert ledger.blocked_points() == {3}
     alive.discard("uav2")
@@ -65,11 +79,39 @@ def test_points_claimed_by_live_members_and_a_lost_members_route_are_planned_wit
 
 
 def test_a_member_speaks_for_itself_and_a_service_heard_twice_counts_once() -> None:
-    ledger = FleetLedger(KEYS, "uav1", lambda: {"uav1", "uav2"})
-    said(ledger, FleetIntentions(vehicle="uav3", time_s=0.0, users=[Intention("u", 1.0)], claims=["u"]), "uav2")
+    ledger = ledger_of("uav1", {"uav1", "uav2"})
+    said(ledger, FleetIntentions(vehicle="uav3", time_s=T, users=[Intention("u", T + 1)], claims=["u"]), "uav2")
     assert ledger.taken() == set() and ledger.refused[-1].endswith("names vehicle 'uav3'")
+    said(ledger, FleetIntentions(vehicle="uav2", time_s=T, users=[Intention("u", T + 1)], claims=["u"]))
     done = FleetServed(vehicle="uav2", user_id="u", tasks=4, at_s=10.0)
     said(ledger, done)
     said(ledger, done)  # history and live delivery
     said(ledger, FleetServed(vehicle="uav1", user_id="u", tasks=4, at_s=11.0))  # its own: not the others'
     assert ledger.take_served() == [done] and ledger.take_served() == []
+
+
+def test_a_member_claims_only_what_it_can_fly() -> None:
+    """Issue 34, finding 5 on its own: a claim due 1e15 s early, more users or points than a
+    next point and a hold, a bound time out of a hold's reach are refused whole (counted); a
+    route is kept to its first ``MAX_ROUTE`` points; a service counts only for a user the
+    member claimed."""
+    from planner_service.fleet_ledger import MAX_ROUTE
+
+    ledger = ledger_of("uav1", {"uav1", "uav2"})
+    refused_before = ledger._verifier.ignored
+    for bad in (FleetIntentions(vehicle="uav2", time_s=T, users=[Intention("u", -1e15)], claims=["u"]),
+                FleetIntentions(vehicle="uav2", time_s=T, users=[Intention(u, T + 1) for u in "abc"],
+                                claims=["a", "b", "c"]),
+                FleetIntentions(vehicle="uav2", time_s=T, points=[1, 2, 3]),
+                FleetIntentions(vehicle="uav2", time_s=T, bound="u", bound_at_s=T - 1e10)):
+        said(ledger, bad)
+    assert ledger.taken() == set() and ledger.claims() == {}
+    assert ledger._verifier.ignored == refused_before + 4
+    said(ledger, FleetServed(vehicle="uav2", user_id="u", tasks=9, at_s=T))  # never claimed: not counted
+    assert ledger.take_served() == [] and "never claimed" in ledger.refused[-1]
+    said(ledger, FleetIntentions(vehicle="uav2", time_s=T, users=[Intention("v", T + 30)], claims=["v"],
+                                 bound="u", bound_at_s=T - 10, route=list(range(100))))
+    assert ledger.claims()["uav2"] == {"v": (PLANNED, T + 30), "u": (BOUND, T - 10)}
+    assert ledger._routes["uav2"] == set(range(MAX_ROUTE))
+    said(ledger, FleetServed(vehicle="uav2", user_id="u", tasks=9, at_s=T))
+    assert [d.user_id for d in ledger.take_served()] == ["u"]

@@ -7,18 +7,18 @@ each user, by the one rule."""
 
 from __future__ import annotations
 
+import time
 from typing import Any, Iterator
 
 import pytest
 import zenoh
 
-from planner_service.fleet_ledger import owner
+from planner_service.fleet_ledger import PLANNED, owner
 from planner_service.harness.processes import free_port
-from planner_service.service.fleet_presence import FleetPresence
-from protocol import FleetKeys, Keys, Status, encode
+from protocol import FleetKeys, Status
 from protocol.messages import FleetServed
 from protocol.zenoh_config import session_config
-from tests.support.fleet import member, wait_until
+from tests.support.fleet import member, presence, put_position, wait_until
 from tests.support.link_cut import LinkCut
 
 KEYS = FleetKeys("partitiontest")
@@ -64,16 +64,15 @@ def sides() -> Iterator[tuple[Any, Any, LinkCut]]:
 
 
 def armed(session: Any, vehicle: str, x_m: float) -> None:
-    """The member's status, as its service publishes it: its vehicle armed, in flight."""
-    session.put(Keys(KEYS.prefix, vehicle).status,
-                encode(Status(vehicle=vehicle, armed=True, x_m=x_m, z_m=100.0)))
+    """The member's signed position, as its service publishes it: its vehicle armed, in flight."""
+    put_position(session, KEYS, Status(vehicle=vehicle, armed=True, x_m=x_m, z_m=100.0))
 
 
 def test_a_fleet_split_in_two_plans_on_what_each_side_knows_and_agrees_once_healed(sides: Any) -> None:
     a_session, b_session, link = sides
-    a = FleetPresence(KEYS, member("uav1", 100.0))
+    a = presence(KEYS, member("uav1", 100.0))
     a.join(a_session, DISCOVERY_S)
-    b = FleetPresence(KEYS, member("uav2", 110.0))
+    b = presence(KEYS, member("uav2", 110.0))
     b.join(b_session, DISCOVERY_S)
     a_heard: list[FleetServed] = []
     b_heard: list[FleetServed] = []
@@ -83,8 +82,9 @@ def test_a_fleet_split_in_two_plans_on_what_each_side_knows_and_agrees_once_heal
         armed(b_session, "uav2", 60.0)
         return a.check_separation().unknown == () and b.check_separation().unknown == ()
     wait_until(both_seen, APART_S, "each member sees the other's vehicle armed")
-    b.ledger.intend({"u": 100.0, "v": 200.0}, 0.0, claims=["u"], points=[3], route=[3, 5])
-    a.ledger.intend({"w": 50.0}, 0.0, claims=["w"], points=[4], route=[4, 6])
+    t = time.time()  # a claim's due lies within a flight of its signed time
+    b.ledger.intend({"u": t + 100, "v": t + 200}, t, claims=["u"], points=[3], route=[3, 5])
+    a.ledger.intend({"w": t + 50}, t, claims=["w"], points=[4], route=[4, 6])
     wait_until(lambda: a.ledger.owners() == {"u": "uav2"} and b.ledger.owners() == {"w": "uav1"}, APART_S,
                lambda: f"each reads the other's claims: {a.ledger.owners()}, {b.ledger.owners()}")
     assert a.ledger.blocked_points() == {3} and b.ledger.blocked_points() == {4}
@@ -97,10 +97,10 @@ def test_a_fleet_split_in_two_plans_on_what_each_side_knows_and_agrees_once_heal
     assert a.roster.lost() == ["uav2"] and b.roster.lost() == ["uav1"]
     assert a.ledger.taken() == set() and b.ledger.taken() == set()
     assert a.ledger.blocked_points() == {3, 5} and b.ledger.blocked_points() == {4, 6}
-    a.ledger.intend({"w": 50.0, "u": 150.0}, 1.0, claims=["w", "u"], points=[7], route=[7, 4, 6])
-    a.ledger.served("w", 4, 60.0)
-    b.ledger.served("v", 3, 61.0)
-    b.ledger.intend({"u": 100.0}, 1.0, claims=["u"], points=[3], route=[3])
+    a.ledger.intend({"w": t + 50, "u": t + 150}, t + 1, claims=["w", "u"], points=[7], route=[7, 4, 6])
+    a.ledger.served("w", 4, 60.0)  # each serves a user the other heard it claim (any other is not counted)
+    b.ledger.served("u", 3, 61.0)
+    b.ledger.intend({"u": t + 100}, t + 1, claims=["u"], points=[3], route=[3])
 
     link.heal()
     wait_until(lambda: list(a.members()) == list(b.members()) == ["uav1", "uav2"], APART_S,
@@ -112,14 +112,14 @@ def test_a_fleet_split_in_two_plans_on_what_each_side_knows_and_agrees_once_heal
         return bool(a_heard) and bool(b_heard)
     # what each flew while apart reaches the other: its backlog and fairness count it
     wait_until(heard, APART_S, lambda: f"the services flown apart: {a_heard}, {b_heard}")
-    assert a_heard == [FleetServed(vehicle="uav2", user_id="v", tasks=3, at_s=61.0)]
+    assert a_heard == [FleetServed(vehicle="uav2", user_id="u", tasks=3, at_s=61.0)]
     assert b_heard == [FleetServed(vehicle="uav1", user_id="w", tasks=4, at_s=60.0)]
     # ...and so does what each said: its last intentions (a cache of one), which claim u on both sides
-    wait_until(lambda: a.ledger.intentions().get("uav2") == {"u": 100.0}
-               and b.ledger.intentions().get("uav1") == {"w": 50.0, "u": 150.0}, APART_S,
+    wait_until(lambda: a.ledger.intentions().get("uav2") == {"u": t + 100}
+               and b.ledger.intentions().get("uav1") == {"w": t + 50, "u": t + 150}, APART_S,
                lambda: f"the intentions said apart: {a.ledger.intentions()}, {b.ledger.intentions()}")
     # both claimed u apart; healed, both sides give it to the same member: uav2's claim is earlier
-    assert b.ledger.claims()["uav1"] == {"w": 50.0, "u": 150.0}
+    assert b.ledger.claims()["uav1"] == {"w": (PLANNED, t + 50), "u": (PLANNED, t + 150)}
     assert owner("u", a.ledger.claims()) == owner("u", b.ledger.claims()) == "uav2"
     assert a.ledger.owners() == {"u": "uav2"} and b.ledger.owners() == {"w": "uav1"}
     # nobody is lost any more: only the points the other claims now are kept out

@@ -20,7 +20,7 @@ from planner_service.harness.processes import free_port
 from planner_service.service.fleet_presence import MembershipError, FleetPresence, layer_clashes
 from protocol import FleetKeys, Keys, ProtocolError, Status, encode
 from protocol.zenoh_config import session_config
-from tests.support.fleet import member, wait_until
+from tests.support.fleet import member, presence, put_position, verifier, wait_until
 
 KEYS = FleetKeys("fleettest")
 DISCOVERY_S = 0.5
@@ -81,14 +81,14 @@ def mesh() -> Iterator[Callable[[], Any]]:
 
 
 def test_members_find_each_other_and_a_clash_is_refused(mesh: Callable[[], Any]) -> None:
-    a = FleetPresence(KEYS, member("uav1", 100.0))
+    a = presence(KEYS, member("uav1", 100.0))
     a.join(mesh(), DISCOVERY_S)
-    b = FleetPresence(KEYS, member("uav2", 110.0))
+    b = presence(KEYS, member("uav2", 110.0))
     b.join(mesh(), DISCOVERY_S)  # a's layer read from its publisher's cache, b joined later
     assert b.members() == {"uav1": member("uav1", 100.0), "uav2": member("uav2", 110.0)}
     wait_until(lambda: a.members().get("uav2") == member("uav2", 110.0), 5.0, "uav1 reads uav2's layer")
 
-    c = FleetPresence(KEYS, member("uav3", 104.0))
+    c = presence(KEYS, member("uav3", 104.0))
     with pytest.raises(MembershipError) as err:
         c.join(mesh(), DISCOVERY_S)
     assert "uav1 flies at 100 m, within 10 m" in str(err.value)
@@ -96,50 +96,45 @@ def test_members_find_each_other_and_a_clash_is_refused(mesh: Callable[[], Any])
     time.sleep(DISCOVERY_S)  # the refused one's token must be gone, not just late
     assert set(a.members()) == {"uav1", "uav2"}
 
-    twin = FleetPresence(KEYS, member("uav2", 60.0))
+    twin = presence(KEYS, member("uav2", 60.0))
     with pytest.raises(MembershipError) as err:
         twin.join(mesh(), DISCOVERY_S)
     assert "already the member for vehicle uav2" in str(err.value)
 
 
 def test_a_member_that_goes_is_seen_gone(mesh: Callable[[], Any]) -> None:
-    a = FleetPresence(KEYS, member("uav1", 100.0))
+    a = presence(KEYS, member("uav1", 100.0))
     a.join(mesh(), DISCOVERY_S)
     b_session = mesh()
-    b = FleetPresence(KEYS, member("uav2", 110.0))
+    b = presence(KEYS, member("uav2", 110.0))
     b.join(b_session, DISCOVERY_S)
     wait_until(lambda: "uav2" in a.members(), 5.0, "uav1 sees uav2")
     b_session.close()  # as a killed service: its transport goes, zenoh withdraws its token
     wait_until(lambda: "uav2" not in a.members(), 10.0, "uav1 sees uav2 gone")
 
 
-def test_a_member_whose_layer_cannot_be_read_bars_a_join(mesh: Callable[[], Any]) -> None:
-    """A token with an announcement that does not decode (or names another vehicle): the
-    layer is unknown, and unknown is never clear."""
+def test_a_token_without_a_signed_announcement_is_no_member_and_bars_nothing(mesh: Callable[[], Any]) -> None:
+    """A token under an enrolled id whose announcement is unsigned (or names another vehicle)
+    is ignored and counted, never a member of unknown layer that bars a join (issue 34,
+    finding 4: it was)."""
     rogue = mesh()
     token = rogue.liveliness().declare_token(KEYS.member("uav9"))
-    roster = FleetRoster(KEYS)
+    roster = FleetRoster(KEYS, verifier())
     roster.follow(mesh())
-    wait_until(lambda: "uav9" in roster.members(), 5.0, "the rogue's token")
 
     def say(payload: bytes) -> Callable[[], bool]:
         def said() -> bool:  # until the roster's subscription has reached the rogue
             rogue.put(KEYS.announce("uav9"), payload)
             return len(roster.refused) > 0
         return said
-    wait_until(say(b'{"kind": "fleet_member", "vehicle": "uav1", "layer_m": 50, "min_gap_m": 1, '
+    wait_until(say(b'{"kind": "fleet_member", "vehicle": "uav9", "layer_m": 50, "min_gap_m": 1, '
                    b'"origin_lat_deg": 47.4, "origin_lon_deg": 8.5, "origin_alt_m": 488}'), 5.0,
-               "an announcement for another vehicle refused")
-    assert "names vehicle 'uav1'" in roster.refused[-1]
-    roster.refused.clear()
-    wait_until(say(b'{"kind": "fleet_member", "vehicle": "uav9", "layer_m": -5, "min_gap_m": 1, '
-                   b'"origin_lat_deg": 47.4, "origin_lon_deg": 8.5, "origin_alt_m": 488}'), 5.0,
-               "a negative layer refused")
-    assert roster.members() == {"uav9": None}
-    a = FleetPresence(KEYS, member("uav1", 100.0))
-    with pytest.raises(MembershipError) as err:
-        a.join(mesh(), DISCOVERY_S)
-    assert "uav9 is a member but its layer is unknown" in str(err.value)
+               "an unsigned announcement refused")
+    assert "not a signed fleet message" in roster.refused[-1]
+    assert roster.members() == {} and roster.ignored >= 1
+    a = presence(KEYS, member("uav1", 100.0))
+    a.join(mesh(), DISCOVERY_S)
+    assert set(a.members()) == {"uav1"}
     token.undeclare()
 
 
@@ -160,14 +155,14 @@ def test_a_member_moves_to_the_other_router_when_its_own_dies() -> None:
         return sessions[-1]
     try:
         a_session = client(e1, e2)
-        a = FleetPresence(KEYS, member("uav1", 100.0))
+        a = presence(KEYS, member("uav1", 100.0))
         a.join(a_session, DISCOVERY_S)
-        b = FleetPresence(KEYS, member("uav2", 110.0))
+        b = presence(KEYS, member("uav2", 110.0))
         b.join(client(e2), DISCOVERY_S)
         assert b.members()["uav1"] == member("uav1", 100.0)
         first_router = a_session.info.routers_zid()
         changes: list[str] = []  # the tokens' (the announcements' history may come at any time)
-        watcher = FleetRoster(KEYS, lambda c: changes.append(f"{c.vehicle} {c.what}") if c.member is None else None)
+        watcher = FleetRoster(KEYS, verifier(), lambda c: changes.append(f"{c.vehicle} {c.what}") if c.member is None else None)
         watcher.follow(client(e2))
         changes.clear()  # what the history told
         r1.close()
@@ -190,18 +185,17 @@ def test_separation_is_judged_on_the_members_published_positions(mesh: Callable[
     armed UAVs 10 m apart in one layer have lost separation (an error in the log), then
     30 m apart have it back; a vehicle that is no member is not judged."""
     a_session, b_session, stranger = mesh(), mesh(), mesh()
-    a = FleetPresence(KEYS, member("uav1", 100.0))
+    a = presence(KEYS, member("uav1", 100.0))
     a.join(a_session, DISCOVERY_S)
-    b = FleetPresence(KEYS, member("uav2", 110.0))
+    b = presence(KEYS, member("uav2", 110.0))
     b.join(b_session, DISCOVERY_S)
 
     def fly(a_xyz: tuple[float, float, float], b_xyz: tuple[float, float, float]) -> Callable[[], Any]:
         def put() -> Any:
             for session, vehicle, (x, y, z) in ((a_session, "uav1", a_xyz), (b_session, "uav2", b_xyz)):
-                session.put(Keys(KEYS.prefix, vehicle).status,
-                            encode(Status(vehicle=vehicle, armed=True, x_m=x, y_m=y, z_m=z)))
+                put_position(session, KEYS, Status(vehicle=vehicle, armed=True, x_m=x, y_m=y, z_m=z))
             # no member: right above uav1, it would have lost separation with it if judged
-            stranger.put(Keys(KEYS.prefix, "uav7").status, encode(Status(vehicle="uav7", armed=True, z_m=105.0)))
+            put_position(stranger, KEYS, Status(vehicle="uav7", armed=True, z_m=105.0))
             return a.check_separation()
         return put
     close = fly((0.0, 0.0, 100.0), (6.0, 8.0, 104.0))  # uav2 below its layer, 10 m from uav1
@@ -220,18 +214,18 @@ def test_a_member_gone_with_its_vehicle_armed_is_not_forgotten(mesh: Callable[[]
     unknown in the separation, never dropped as if it had landed; once uav2's service is back
     and says its vehicle is disarmed, all is known. uav3 leaves disarmed: simply gone."""
     a_session = mesh()
-    a = FleetPresence(KEYS, member("uav1", 100.0))
+    a = presence(KEYS, member("uav1", 100.0))
     a.join(a_session, DISCOVERY_S)
     flying: dict[str, tuple[Any, bool]] = {"uav1": (a_session, True)}
 
     def judged() -> tuple[str, ...]:
         """Every open member's status sent (as each service does, 2 Hz), then uav1's judgement."""
         for vehicle, (session, armed) in flying.items():
-            session.put(Keys(KEYS.prefix, vehicle).status, encode(Status(vehicle=vehicle, armed=armed, z_m=100.0)))
+            put_position(session, KEYS, Status(vehicle=vehicle, armed=armed, z_m=100.0))
         return a.check_separation().unknown
     for vehicle, layer, armed in (("uav2", 110.0, True), ("uav3", 120.0, False)):
         session = mesh()
-        FleetPresence(KEYS, member(vehicle, layer)).join(session, DISCOVERY_S)
+        presence(KEYS, member(vehicle, layer)).join(session, DISCOVERY_S)
         flying[vehicle] = (session, armed)
         wait_until(lambda: judged() == (), 10.0, f"{vehicle}'s status")
     gone = {v: flying.pop(v)[0] for v in ("uav2", "uav3")}
@@ -251,7 +245,7 @@ def test_a_member_gone_with_its_vehicle_armed_is_not_forgotten(mesh: Callable[[]
     assert a.roster.lost() == ["uav2"]
 
     back = mesh()
-    FleetPresence(KEYS, member("uav2", 110.0)).join(back, DISCOVERY_S)
+    presence(KEYS, member("uav2", 110.0)).join(back, DISCOVERY_S)
 
     flying["uav2"] = (back, False)
     wait_until(lambda: judged() == (), 10.0, "uav2 back, its vehicle disarmed")
@@ -262,7 +256,7 @@ def test_of_two_services_started_at_once_for_one_vehicle_one_at_most_goes_on(mes
     """Each refuses when it sees the other's token before declaring its own, or two
     publishers announcing the vehicle after: one may go on (the other saw it first, or
     judged after the other had already refused and left), never both."""
-    twins = [FleetPresence(KEYS, member("uav1", 100.0)) for _ in range(2)]
+    twins = [presence(KEYS, member("uav1", 100.0)) for _ in range(2)]
     sessions = [mesh(), mesh()]
     errors: list[str] = []
 
@@ -279,7 +273,7 @@ def test_of_two_services_started_at_once_for_one_vehicle_one_at_most_goes_on(mes
     assert len(errors) >= 1, "both services joined as uav1"
     assert all("uav1 too" in e or "already the member for vehicle uav1" in e for e in errors), errors
     members = [t for t in twins if t.joined]
-    roster = FleetRoster(KEYS)
+    roster = FleetRoster(KEYS, verifier())
     roster.follow(mesh())
     wait_until(lambda: roster.publishers("uav1") == len(members) and len(roster.members()) == len(members), 5.0,
                "only the member's token and announcement left")

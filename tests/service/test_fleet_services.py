@@ -14,16 +14,17 @@ from pathlib import Path
 
 from planner_service.harness.processes import Child, free_port
 from planner_service.service.config import build_config, to_toml
+from tests.support.fleet import ROSTER, fleet_settings
 from tests.support.stack import Stack
 
-FLEET = {"fleet.enabled": "true", "fleet.discovery_s": "1.0"}
+FLEET = {"fleet.enabled": "true", "fleet.discovery_s": "1.0", **fleet_settings()}
 
 
 def second_service(stack: Stack, folder: Path, altitude_m: float) -> Child:
     """uav2's service, its own journal and a vehicle port nobody answers (the fleet is joined
     before the vehicle matters), its zenoh session connected to uav1's."""
     folder.mkdir()
-    config = build_config({}, {**FLEET, "zenoh.vehicle": "uav2", "zenoh.connect": stack.endpoint,
+    config = build_config({}, {**FLEET, **fleet_settings(vehicle="uav2"), "zenoh.vehicle": "uav2", "zenoh.connect": stack.endpoint,
                                "mavlink.url": f"udpout:127.0.0.1:{free_port(socket.SOCK_DGRAM)}",
                                "journal.path": str(folder / "journal.sqlite"),
                                "scenario.altitude_m": str(altitude_m)})
@@ -57,7 +58,8 @@ def test_a_service_in_another_members_layer_refuses_to_start(stack: Stack, tmp_p
     assert "fleet: joined as uav2, layer 110 m; uav1 at 100 m" in other.log()
     stack.wait_log(first, "fleet: uav2 announced layer 110 m", 10.0)
     watch = subprocess.run([sys.executable, "-m", "planner_service", "operator", "watch", "--once", "--plain",
-                            "--connect", stack.endpoint, "--operator-key", str(stack.operator_key_path)],
+                            "--connect", stack.endpoint, "--operator-key", str(stack.operator_key_path),
+                            "--fleet-roster", str(ROSTER)],
                            capture_output=True, text=True, timeout=60)
     assert watch.returncode == 0, watch.stderr
     assert "fleet      2 members: uav1 100 m (this), uav2 110 m" in watch.stdout, watch.stdout

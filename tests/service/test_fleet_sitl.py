@@ -103,7 +103,7 @@ def test_three_copters_share_the_users_and_take_over_a_lost_ones(make_sitl: Call
                                                                   fleet: FleetStack) -> None:
     copters, uavs = fly_three(make_sitl, fleet)
     config = load_config(uavs[0].folder / "planner.toml")
-    wire = Intentions(fleet.endpoints[1])
+    wire = Intentions(fleet.endpoints[1], fleet.roster)
     try:
         fleet.users("--count", str(USERS), "--speedup", str(SPEEDUP), "--seed", "1", *config.scenario_arguments())
         wait_until(lambda: all(uav.services() for uav in uavs), 300.0,

@@ -16,7 +16,9 @@ import zenoh
 
 from planner_service.harness.processes import Child, free_port
 from planner_service.service.config import OriginConfig, build_config, to_toml
+from planner_service.fleet_ledger import Claim, claims_of
 from protocol import FleetKeys, GeoOrigin, local_to_global
+from protocol.fleet_signing import FleetVerifier, Unverified, make_vehicle_key, read_roster
 from protocol.messages import FleetIntentions, decode
 from protocol.zenoh_config import session_config
 
@@ -51,22 +53,29 @@ class Intentions:
     """Every member's intentions as published (``{prefix}/fleet/intentions/*``), with when
     each arrived: what each UAV meant to do, read from the wire as any client would."""
 
-    def __init__(self, endpoint: str) -> None:
+    def __init__(self, endpoint: str, roster: Path) -> None:
         self.session = zenoh.open(session_config("client", connect=[endpoint]))
         self.seen: list[tuple[float, FleetIntentions]] = []
         self._lock = threading.Lock()
+        self._verifier = FleetVerifier(read_roster(roster))
         self._sub = self.session.declare_subscriber(FleetKeys().all_intentions, self._on)
 
     def _on(self, sample: Any) -> None:
-        message = decode(sample.payload.to_bytes(), FleetIntentions)
+        key = str(sample.key_expr)
+        try:  # a member's, signed (as a member reads them)
+            body, _ = self._verifier.open(key, FleetKeys().vehicle_of(key) or "", sample.payload.to_bytes(),
+                                          time.time(), 900.0)
+        except Unverified:
+            return
+        message = decode(body, FleetIntentions)
         with self._lock:
             self.seen.append((time.monotonic(), message))
 
-    def claims(self) -> dict[str, dict[str, float]]:
-        """Each vehicle's latest claims (vehicle -> user -> due)."""
+    def claims(self) -> dict[str, dict[str, Claim]]:
+        """Each vehicle's latest claims (vehicle -> user -> claim)."""
         with self._lock:
             last = {m.vehicle: m for _, m in self.seen}
-        return {v: {i.user_id: i.due_s for i in m.users if i.user_id in m.claims} for v, m in last.items()}
+        return {v: claims_of(m) for v, m in last.items()}
 
     def since(self, vehicle: str, t: float) -> list[tuple[float, set[str]]]:
         with self._lock:
@@ -75,6 +84,10 @@ class Intentions:
     def close(self) -> None:
         self._sub.undeclare()
         self.session.close()
+
+
+ENROLLED = 6
+"""Vehicles uav1..uav6 are enrolled in every stack's fleet."""
 
 
 class FleetStack:
@@ -88,6 +101,17 @@ class FleetStack:
         self.routers: list[Any] = [first, second]
         self.children: list[Child] = []
         self.uavs: dict[str, Uav] = {}
+        self.keys = tmp / "fleet-keys"
+        """Each UAV's fleet key and the fleet's roster (``roster``), made as ``fleet-key`` does,
+        for every vehicle a test may start (a service reads the roster when it starts)."""
+        self.keys.mkdir(mode=0o700)
+        self.roster = self.keys / "roster"
+        for n in range(1, ENROLLED + 1):
+            make_vehicle_key(self.keys / f"uav{n}.key", self.roster, f"uav{n}")
+
+    def enrol(self, vehicle: str) -> dict[str, str]:
+        """``vehicle``'s service's ``[fleet]`` enrolment settings."""
+        return {"fleet.key_file": str(self.keys / f"{vehicle}.key"), "fleet.roster_file": str(self.roster)}
 
     def uav(self, vehicle: str, altitude_m: float, speedup: str, home_east_m: float = 0.0, autopilot: str = "",
             **overrides: str) -> Uav:
@@ -109,7 +133,7 @@ class FleetStack:
                     "zenoh.vehicle": vehicle, "mavlink.url": autopilot or f"udpout:127.0.0.1:{port}",
                     "journal.path": str(folder / "journal.sqlite"), "planner.budget_ms": "100",
                     "fleet.enabled": "true", "fleet.discovery_s": "1.0", "scenario.altitude_m": str(altitude_m),
-                    **overrides}
+                    **self.enrol(vehicle), **overrides}
         config = build_config({}, settings)
         path = folder / "planner.toml"
         path.write_text(to_toml(config))
