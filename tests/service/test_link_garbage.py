@@ -186,8 +186,13 @@ def test_garbage_from_the_autopilot_changes_nothing(stack: Stack, fake: FakeAuto
     assert status_now(stack) == before
     assert service.proc.poll() is None
     # The control: the same frames unspoiled do reach the service (MISSION_CURRENT is not
-    # in the fake's own telemetry, so its report stays).
-    fake.send_garbage([frame for frame in spoil if frame[7:10] == bytes([42, 0, 0])])
+    # in the fake's own telemetry, so its report stays). Sent twice, as an autopilot's
+    # stream repeats the item flown: one naming a new item alone is not believed
+    # (``link.progress.CurrentWatch``, issue 34 finding 8).
+    valid = [frame for frame in spoil if frame[7:10] == bytes([42, 0, 0])]
+    fake.send_garbage(valid)
+    time.sleep(0.5)  # the stream's next report comes later (CURRENT_CONFIRM_S 0.2)
+    fake.send_garbage(valid)
     wait_status(stack, lambda s: (s.mission_seq, s.mission_total) == (4, 9), 5.0, "a valid MISSION_CURRENT")
     # And it still plans and uploads, with garbage between the autopilot's answers.
     fake.send_garbage([data for _, data in chunks(seed=8, target=255, spoil=spoil)][:60])

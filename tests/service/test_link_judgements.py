@@ -18,6 +18,7 @@ from planner_service.service.link import (ArmedChanged, Connected, OnGround, Lin
 from planner_service.service.link.state import DERIVED, SILENCE_S, VehicleState
 from planner_service.service.link.streams import (MISSING_AFTER_S, REREQUEST_S, UNAVAILABLE_AFTER_S, Streams,
                                                   stream_plan)
+from planner_service.service.link.progress import CurrentWatch
 from planner_service.service.link.telemetry import (ClockRate, ClockWatch, PositionInputs, assess_position, battery_fraction,
                                                     derived_airborne, energy_used_j)
 
@@ -90,17 +91,17 @@ def test_the_vehicles_clock_rate_is_unknown_until_measured() -> None:
     assert rate.update(200.0, 11.25) == pytest.approx(80.0), "then kept, and measured again every few seconds"
 
 
-# --- restarts take two readings ------------------------------------------------------------------------
+# --- restarts take several readings of the new clock ----------------------------------------------------
 def test_one_reading_from_the_past_is_only_a_suspicion() -> None:
     watch = ClockWatch(slack_s=2.0, confirm_s=0.5)
-    assert [watch.observe(t, 1.0, t) for t in (100.0, 100.25, 0.0, 100.5, 100.75)] == ["ok", "ok", "suspect", "ok",
+    assert [watch.observe(t, 1.0, t) for t in (100.0, 100.25, 0.0, 100.5, 100.75)] == ["ok", "ok", "outlier", "ok",
                                                                                          "ok"]
     assert watch.boot_s == 100.75
-    assert [watch.observe(t, 1.0, 100.0 + t) for t in (1.0, 1.25, 1.5, 1.75)] == ["suspect", "suspect", "restart",
+    assert [watch.observe(t, 1.0, 100.0 + t) for t in (1.0, 1.25, 1.5, 1.75)] == ["outlier", "outlier", "restart",
                                                                                    "ok"]
     fast = ClockWatch(slack_s=2.0)
     assert [fast.observe(100.0, 1.0, 0.0), fast.observe(85.0, 10.0, 0.1)] == ["ok", "ok"]  # 10x: 20 vehicle s of slack
-    assert fast.observe(70.0, 1.0, 0.2) == "suspect"
+    assert fast.observe(70.0, 1.0, 0.2) == "outlier"
 
 
 def test_readings_in_one_moment_are_no_restart_however_many() -> None:
@@ -108,9 +109,82 @@ def test_readings_in_one_moment_are_no_restart_however_many() -> None:
     # was taken as a restart, which gave back an authority the pilot's LOITER had ended.
     watch = ClockWatch(slack_s=2.0, confirm_s=0.5)
     watch.observe(500.0, 1.0, 10.0)
-    assert [watch.observe(t, 1.0, 10.01) for t in (1.0, 1.1, 1.2, 1.3)] == ["suspect"] * 4
+    assert [watch.observe(t, 1.0, 10.01) for t in (1.0, 1.1, 1.2, 1.3)] == ["outlier"] * 4
     assert watch.observe(501.0, 1.0, 10.6) == "ok", "the old clock again: the suspicion is dropped"
-    assert watch.observe(1.4, 1.0, 10.7) == "suspect" and watch.observe(1.9, 1.0, 11.3) == "restart"
+    assert [watch.observe(1.4, 1.0, 10.7), watch.observe(1.9, 1.0, 11.3)] == ["outlier", "outlier"], "two readings"
+    assert watch.observe(2.0, 1.0, 11.4) == "restart"
+
+
+def test_one_reading_far_ahead_is_discarded_not_taken_as_the_clock() -> None:
+    # Issue 34, finding 8: one GLOBAL_POSITION_INT from 1/1 with time_boot_ms far ahead was
+    # taken as the clock, so the vehicle's own reports after it looked like a clock gone
+    # back, and 0.5 s later a restart was believed.
+    watch = ClockWatch()
+    assert watch.observe(600.0, 1.0, 50.0) == "ok"
+    assert watch.observe(4_000_000.0, 1.0, 50.05) == "outlier"
+    assert [watch.observe(600.0 + 0.1 * i, 1.0, 50.0 + 0.1 * i) for i in range(1, 40)] == ["ok"] * 39
+    assert watch.boot_s == pytest.approx(603.9)
+    # Rate unknown (the first second): a reading that no simulator's pace could reach is an outlier too.
+    young = ClockWatch()
+    assert [young.observe(10.0, None, 0.0), young.observe(18.0, None, 0.1)] == ["ok", "ok"]  # x80 is possible
+    assert young.observe(4_000_000.0, None, 0.2) == "outlier"
+
+
+def test_a_real_restart_is_believed_from_its_stream_within_half_a_second() -> None:
+    # As ArduPilot and PX4 (and the stub's --state-file restart) do: time_boot_ms starts near
+    # 0 again and grows at the vehicle's rate, GLOBAL_POSITION_INT at 10 Hz once asked for.
+    watch = ClockWatch()
+    for i in range(20):
+        assert watch.observe(600.0 + 0.8 * i, 8.0, 100.0 + 0.1 * i) == "ok"  # x8
+    verdicts = [watch.observe(3.0 + 0.8 * i, 8.0, 102.0 + 0.1 * i) for i in range(8)]
+    assert verdicts[:5] == ["outlier"] * 5 and verdicts[5] == "restart", verdicts
+    assert verdicts[6:] == ["ok", "ok"]
+
+
+def test_a_new_clock_needs_readings_that_agree_and_grow() -> None:
+    watch = ClockWatch()
+    watch.observe(600.0, 1.0, 0.0)
+    # forged readings scattered in time, each a different clock: never one new clock
+    assert [watch.observe(t, 1.0, 0.3 * i) for i, t in enumerate((5.0, 300.0, 60.0, 9.0, 200.0), 1)] == ["outlier"] * 5
+    # one reading repeated (a replayed datagram): not a clock that runs
+    assert [watch.observe(5.0, 1.0, 2.0 + 0.2 * i) for i in range(5)] == ["outlier"] * 5
+    # a clock ahead that goes on (a simulator sped up): taken, as no restart
+    ahead = ClockWatch()
+    ahead.observe(100.0, 1.0, 0.0)
+    assert [ahead.observe(500.0 + 0.1 * i, 1.0, 0.1 * i) for i in range(1, 7)] == ["outlier"] * 5 + ["jump"]
+    assert ahead.observe(500.7, 1.0, 0.7) == "ok"
+
+
+# --- MISSION_CURRENT believed when the stream agrees ----------------------------------------------------
+def test_one_mission_current_naming_another_item_is_not_believed() -> None:
+    # Issue 34, finding 8: one forged MISSION_CURRENT far ahead marked every planned point
+    # before it skipped and ended the hold flown.
+    watch = CurrentWatch(confirm_s=0.2)
+    assert [watch.observe(3, t) for t in (0.0, 0.5)] == [False, True], "the first report is confirmed by the next"
+    assert watch.observe(40, 1.0) is False
+    assert watch.observe(3, 1.5) is True and watch.believed == 3, "the stream goes on: the forged one is forgotten"
+    assert watch.observe(40, 1.6) is False, "and a second forged one begins again"
+    assert watch.observe(40, 1.61) is False, "two in one datagram confirm nothing"
+    assert [watch.observe(4, 2.0), watch.observe(4, 2.5), watch.believed] == [False, True, 4], "a real advance"
+    assert watch.observe(-1, 3.0) is True and watch.believed == 4, "naming no item: passed on, nothing changed"
+
+
+def test_the_item_the_service_asked_for_is_believed_at_once() -> None:
+    watch = CurrentWatch()
+    watch.observe(2, 0.0)
+    watch.observe(2, 1.0)
+    watch.expect(7)
+    assert watch.observe(7, 1.1) is True and watch.believed == 7
+    assert watch.observe(2, 1.2) is False, "the item before is news again: it needs the stream's word"
+    watch.observe(2, 1.3)
+    watch.observe(2, 1.6)
+    watch.reached(5)
+    assert watch.observe(6, 1.7) is False, "an item reached that is not the one flown says nothing"
+    watch.reached(2)
+    assert watch.observe(3, 1.8) is True, "the item after the one reached: at once"
+    watch.expect(9)
+    watch.reset()  # a restart: nothing before holds
+    assert watch.believed is None and watch.observe(9, 2.0) is False
 
 
 # --- the telemetry asked for ----------------------------------------------------------------------------
@@ -224,7 +298,9 @@ def test_a_restart_is_believed_only_on_reports_spread_over_time() -> None:
     assert not [e for e in events if isinstance(e, Restarted)]
     feed(state, position(500))
     assert not feed(state, position(600)), "a second report at once (one datagram) is no evidence"
-    clock.now += 0.5
+    clock.now += 0.25
+    assert not feed(state, position(800)), "two readings of the new clock, a quarter second apart: not yet"
+    clock.now += 0.25
     feed(state, position(1_000))  # the new clock goes on: a real restart
     assert [e for e in events if isinstance(e, Restarted)] and state.telemetry.position_boot_s == 1.0
     assert not state.telemetry.home_set and not state.telemetry.position_ok

@@ -400,6 +400,8 @@ class PymavlinkLink(VehicleLink):
         telemetry; the one before is passed on too, since the points it completed just
         before a new mission replaced it are services all the same."""
         if msg.get_type() == "MISSION_ITEM_REACHED":
+            if mission == self.generation:
+                self.state.current_watch.reached(int(msg.seq))
             if self.state.new_reach(mission, int(msg.seq)):
                 self.on_event(Reached(int(msg.seq), mission))
             return
@@ -407,6 +409,8 @@ class PymavlinkLink(VehicleLink):
         if mission != self.generation:
             self.on_event(Current(seq, total, mission))
             return
+        if not self.state.current_watch.observe(seq, time.monotonic()):
+            return  # another item, not yet confirmed by the vehicle's stream (``progress.CurrentWatch``)
         t = self.telemetry
         mission_id = extension_u32(msg, "mission_id", MISSION_CURRENT_ID_OFFSET)
         changed = (seq, total, mission_id) != (t.mission_seq, t.mission_total, t.mission_id)
@@ -495,6 +499,9 @@ class PymavlinkLink(VehicleLink):
                      restart_current: bool = False) -> None:
         if current_seq is not None and not 0 <= current_seq < len(items):
             raise LinkError("upload_mission()", f"current_seq {current_seq} is not an item of the {len(items)}")
+        for seq in [current_seq, *(i.seq for i in items if i.current)]:
+            if seq is not None:
+                self.state.current_watch.expect(seq)  # the vehicle's report of the item asked for is news
         async with self._mission_lock:
             self._check_link("upload_mission()")
             try:
@@ -546,6 +553,7 @@ class PymavlinkLink(VehicleLink):
         if seen == seq:
             return
         sent_at = time.monotonic()
+        self.state.current_watch.expect(seq)
         use_message = not self.profile.set_current_by_command
         for _ in range(max(self.settings.retries // 3, 2)):
             if not use_message:

@@ -219,6 +219,7 @@ class MavsdkLink(VehicleLink):
 
     def _report(self, name: str, msg: Any) -> None:
         if name == "MISSION_ITEM_REACHED":
+            self.state.current_watch.reached(int(msg.seq))
             if self.state.new_reach(self.generation, int(msg.seq)):
                 self.on_event(Reached(int(msg.seq), self.generation))
             return
@@ -231,6 +232,8 @@ class MavsdkLink(VehicleLink):
             if stale:
                 return  # about the mission before the last upload
             self._expect_total = None  # the first report of the mission moved: what follows is news
+        if not self.state.current_watch.observe(seq, time.monotonic()):
+            return  # another item, not yet confirmed by the vehicle's stream (``progress.CurrentWatch``)
         t = self.telemetry
         changed = (seq, total, mission_id) != (t.mission_seq, t.mission_total, t.mission_id)
         self.state.set_progress(seq, total, mission_id)
@@ -338,6 +341,9 @@ class MavsdkLink(VehicleLink):
                      restart_current: bool = False) -> None:
         if current_seq is not None and not 0 <= current_seq < len(items):
             raise LinkError("upload_mission()", f"current_seq {current_seq} is not an item of the {len(items)}")
+        for seq in [current_seq, *(i.seq for i in items if i.current)]:
+            if seq is not None:
+                self.state.current_watch.expect(seq)  # the vehicle's report of the item asked for is news
         raw = [raw_item(i) for i in items]
         async with self._upload_lock:
             self._check_link("upload_mission()")
@@ -400,6 +406,7 @@ class MavsdkLink(VehicleLink):
         if seen == seq:
             return
         sent_at = time.monotonic()
+        self.state.current_watch.expect(seq)
         for attempt in range(3):
             result = ("not tried" if not self.profile.set_current_by_command
                       else await self._command_result(M.MAV_CMD_DO_SET_MISSION_CURRENT, seq, 0))

@@ -6,8 +6,11 @@ for what needs I/O (asking for telemetry again, a new mission generation on a re
 Trust (issue: a forged datagram must change nothing): the autopilot is the (system,
 component) of the first heartbeat from a component 1 with a real autopilot type; from then
 on telemetry, STATUSTEXT and (in the backends) mission replies, reports and COMMAND_ACKs
-count only from that pair. A restart is believed only from position reports of a clock gone
-back that go on over half a second of wall time (``ClockWatch``); until then they are ignored.
+count only from that pair. A restart is believed only from several position reports of a
+clock gone back, consistent with each other, over half a second of wall time with none of the
+clock kept between (``clock.ClockWatch``); a report far ahead is discarded, never taken as the
+clock. A MISSION_CURRENT naming another item counts only once the vehicle's stream agrees
+(``progress.CurrentWatch``).
 """
 
 from __future__ import annotations
@@ -26,6 +29,7 @@ from .events import (MAX_TEXT, ArmedChanged, Connected, OnGround, LinkEvent, Los
 from protocol.autopilot import Autopilot, autopilot_for, autopilot_name
 
 from .modes import mode_name
+from .progress import CurrentWatch
 from .statustext import StatusTexts
 from .streams import Request, Streams, quiet_plan, stream_plan
 from .telemetry import (ClockRate, ClockWatch, PositionInputs, Telemetry, assess_position, battery_fraction,
@@ -74,6 +78,8 @@ class VehicleState:
         self.disarms = 0
         """Disarmings seen (a start stops if one comes between its steps)."""
         self._clock_watch = ClockWatch()
+        self.current_watch = CurrentWatch()
+        """Which MISSION_CURRENT the backends believe (``progress``)."""
         self._clock_rate = ClockRate()
         self._pos = PositionInputs(estimator_name=self.estimator,
                                    estimator_unaided_flags=self.profile.estimator_unaided_flags)
@@ -237,12 +243,16 @@ class VehicleState:
     def _position(self, msg: Any) -> bool:
         boot_s = msg.time_boot_ms / 1e3
         now = self.clock()
-        verdict = self._clock_watch.observe(boot_s, self.telemetry.time_rate or 1.0, now)
-        if verdict == "suspect":
-            return False  # ignored unless the reports that follow confirm a restart
+        verdict = self._clock_watch.observe(boot_s, self.telemetry.time_rate, now)
+        if verdict == "outlier":
+            return False  # ignored unless the reports that follow confirm a new clock
         if verdict == "restart":
-            self._restarted(f"its clock went back to {boot_s:.1f} s (reports over "
-                            f"{self._clock_watch.confirm_s:g} s)")
+            self._restarted(f"its clock went back to {boot_s:.1f} s ({self._clock_watch.confirm_readings} "
+                            f"reports over {self._clock_watch.confirm_s:g} s)")
+        elif verdict == "jump":
+            log.warning("the autopilot's clock jumped ahead to %.1f s (reports over %g s): its rate is measured again",
+                        boot_s, self._clock_watch.confirm_s)
+            self._clock_rate = ClockRate()
         rate = self._clock_rate.update(boot_s, now)
         self._pos = _replace(self._pos, lat_e7=int(msg.lat), lon_e7=int(msg.lon))
         self._set(lat_deg=msg.lat / 1e7, lon_deg=msg.lon / 1e7, rel_alt_m=msg.relative_alt / 1e3,
@@ -351,6 +361,7 @@ class VehicleState:
         self._pos = PositionInputs(estimator_name=self.estimator,
                                    estimator_unaided_flags=self.profile.estimator_unaided_flags)
         self._clock_rate = ClockRate()
+        self.current_watch.reset()
         self._set(home_set=False, gps_fix=-1, mission_seq=0, mission_total=-1, mission_id=0)
         log.warning("the autopilot restarted: %s", detail)
         self.on_restart()

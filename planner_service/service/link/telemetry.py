@@ -1,6 +1,6 @@
 """The vehicle as the link knows it (``Telemetry``) and the pure judgements made of what
-the autopilot reports: does it have a position, is it airborne, how full is its battery,
-has it restarted. No I/O; the backends feed them.
+the autopilot reports: does it have a position, is it airborne, how full is its battery
+(its clock and restarts: ``clock``). No I/O; the backends feed them.
 
 A position counts only when the autopilot has one (``assess_position``): a 3-D GPS fix,
 an estimator that reports an absolute horizontal position (ArduPilot's EKF_STATUS_REPORT,
@@ -16,6 +16,11 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from .clock import ClockRate, ClockWatch
+
+__all__ = ["ClockRate", "ClockWatch", "PositionInputs", "Telemetry", "assess_position", "battery_fraction",
+           "derived_airborne", "energy_used_j"]
+
 GPS_FIX_3D = 3
 """GPS_FIX_TYPE_3D_FIX: 3-D fix or better (DGPS 4, RTK 5-6)."""
 EST_POS_HORIZ_ABS = 16
@@ -28,15 +33,6 @@ AIRBORNE_CLIMB_MPS = 0.5
 LANDED_ALT_M = 0.5
 """...and airborne until below this height with the climb (either way) under ``LANDED_CLIMB_MPS``."""
 LANDED_CLIMB_MPS = 0.3
-RESTART_SLACK_S = 2.0
-"""Vehicle seconds (times the vehicle's clock rate) by which its clock must go back to count
-as a restart rather than a reordered datagram."""
-RESTART_CONFIRM_S = 0.5
-"""Wall seconds over which the readings of a new clock must go on before a restart is
-believed: a rebooted autopilot streams its position for as long as it runs (an unsigned
-datagram can carry two readings, or twenty)."""
-
-
 @dataclass(frozen=True)
 class Telemetry:
     """The vehicle as last reported by its autopilot (only its own system and component count)."""
@@ -159,64 +155,3 @@ def derived_airborne(armed: bool, rel_alt_m: float, climb_mps: float, was_airbor
     if was_airborne:
         return rel_alt_m > LANDED_ALT_M or abs(climb_mps) > LANDED_CLIMB_MPS
     return rel_alt_m > AIRBORNE_ALT_M or climb_mps > AIRBORNE_CLIMB_MPS
-
-
-class ClockRate:
-    """Vehicle seconds per wall second, measured from the vehicle's own timestamps over a
-    window of a few seconds (so the service never assumes the two clocks run alike). None
-    until the first window, a shorter one, has passed: a service restarted in the air beside
-    a simulator at x80 that took the rate as 1 meanwhile planned its first decisions as if a
-    battery reading a second old were a second of flight old, not 80 (a CI run: the
-    vehicle's battery failsafe fired on the way home)."""
-
-    FIRST_WINDOW_S = 1.0
-    WINDOW_S = 3.0
-
-    def __init__(self) -> None:
-        self._anchor: tuple[float, float] | None = None
-        self.rate: float | None = None
-
-    def update(self, vehicle_s: float, wall_s: float) -> float | None:
-        if self._anchor is None or vehicle_s < self._anchor[0]:
-            self._anchor = (vehicle_s, wall_s)
-            return self.rate
-        dv, dw = vehicle_s - self._anchor[0], wall_s - self._anchor[1]
-        if dw >= (self.FIRST_WINDOW_S if self.rate is None else self.WINDOW_S):
-            self.rate = max(dv / dw, 0.0)
-            self._anchor = (vehicle_s, wall_s)
-        return self.rate
-
-
-class ClockWatch:
-    """The vehicle's clock (time_boot_ms) and the restarts it shows. One reading that goes
-    back is only a suspicion (a reordered or forged datagram): a restart takes readings of
-    the new clock spread over ``confirm_s`` of wall time, with none of the old clock between
-    them (two messages in one datagram are no evidence of anything). ``observe`` says "ok"
-    (the reading counts), "suspect" (ignore the message that carried it) or "restart".
-    Unsigned, the link cannot tell a forged series from a restart: a restart only ever ends
-    the service's authority, and signing is the fix (docs/OPERATIONS.md)."""
-
-    def __init__(self, slack_s: float = RESTART_SLACK_S, confirm_s: float = RESTART_CONFIRM_S) -> None:
-        self.slack_s = slack_s
-        self.confirm_s = confirm_s
-        self.boot_s: float | None = None
-        self._suspect: tuple[float, float] | None = None
-        """(vehicle clock, wall clock) of the first reading of the suspected new clock."""
-
-    def observe(self, boot_s: float, rate: float, wall_s: float) -> str:
-        slack = self.slack_s * max(rate, 1.0)
-        last = self.boot_s
-        if last is None or boot_s >= last - slack:
-            self.boot_s = boot_s if last is None else max(last, boot_s)
-            self._suspect = None
-            return "ok"
-        if self._suspect is None or boot_s < self._suspect[0] - slack:
-            self._suspect = (boot_s, wall_s)
-            return "suspect"
-        if wall_s - self._suspect[1] < self.confirm_s:
-            return "suspect"
-        self.boot_s, self._suspect = boot_s, None
-        return "restart"
-
-    def reset(self) -> None:
-        self.boot_s, self._suspect = None, None
