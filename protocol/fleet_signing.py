@@ -153,6 +153,16 @@ class FleetSigner:
 
 
 # --- reading -----------------------------------------------------------------------------------
+def unverified_body(payload: bytes) -> bytes:
+    """The message in an envelope, its signature NOT checked (``Unverified`` if it is none):
+    for a reader without the roster that trusts its transport (a simulated user counting its
+    backlog down); a member always goes through ``FleetVerifier``."""
+    try:
+        return msgspec.json.decode(payload, type=FleetEnvelope).body.encode("utf-8")
+    except (msgspec.DecodeError, msgspec.ValidationError, UnicodeDecodeError, RecursionError) as err:
+        raise Unverified(f"not a fleet envelope: {str(err)[:120]}") from None
+
+
 class Unverified(Exception):
     """A fleet message refused: not enrolled, a bad signature, stale or replayed (``why``)."""
 

@@ -114,6 +114,7 @@ class FleetPresence:
         every clash; nothing is left declared after a refusal."""
         v = self.own.vehicle
         self.roster.follow(session, discovery_s)
+        self.roster.settle(max(discovery_s, ANNOUNCE_WAIT_S))  # a token counts with its announcement only
         if v in self.roster.members():  # before this service's own token is declared
             self.leave()
             raise MembershipError(f"fleet: another service is already the member for vehicle {v} "

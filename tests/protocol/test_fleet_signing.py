@@ -87,3 +87,15 @@ def test_key_files_and_the_roster(tmp_path: Path) -> None:
         read_roster(twice)
     with pytest.raises(SigningError, match="no such fleet roster"):
         read_roster(tmp_path / "none")
+
+
+def test_a_reader_without_the_roster_may_peek_but_nothing_else_passes(
+        fleet: tuple[FleetSigner, FleetVerifier, Path]) -> None:
+    """``unverified_body`` (a simulated user counting its backlog down) unwraps an envelope;
+    a plain message is no envelope."""
+    from protocol.fleet_signing import unverified_body
+
+    signer, _, _ = fleet
+    assert unverified_body(signer.seal(KEY, b'{"x": 1}', 1.0)) == b'{"x": 1}'
+    with pytest.raises(Unverified):
+        unverified_body(b'{"kind": "fleet_served"}')
