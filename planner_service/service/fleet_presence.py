@@ -14,8 +14,8 @@ may lie closer than the larger of their ``min_layer_gap_m``. A service joining t
    announcements of the members it saw (at most ``discovery_s`` or ``ANNOUNCE_WAIT_S``, the
    longer: each normally comes within milliseconds of its token, so the wait costs nothing
    unless one is missing, and a loaded computer is not taken for a missing layer);
-4. refuses to go on when a member's layer is too close to its own, or unknown (a token with no
-   announcement: unknown is never "clear"). Two services started at once with one layer both
+4. refuses to go on when a member's layer is too close to its own (a token with no signed,
+   fresh announcement is no member: anyone may declare a token). Two services started at once with one layer both
    see the other in step 3 and both refuse: neither flies into the other's layer.
 
 Every message it puts on the fleet's keys is signed with its vehicle's key, and it reads only
