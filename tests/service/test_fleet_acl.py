@@ -106,15 +106,21 @@ def test_each_uav_certificate_speaks_for_its_own_vehicle_only(tmp_path: Path) ->
         # routers), the thief's none (it would take users from uav2, or close their requests)
         now = time.time()
         uav2.ledger.intend({"u-real": now + 60}, now, claims=["u-real"])
-        uav2.ledger.served("u-real", 3, 1.0)
+        # a service counts only for a user its member claimed: the claim first (on another key, so
+        # it may arrive after a service sent at once; in flight a hold comes seconds after its claim)
+        wait_until(lambda: "u-real" in uav1.ledger.intentions().get("uav2", {}), 10.0,
+                   lambda: f"uav2's intentions at uav1: {uav1.ledger.intentions()}")
+        uav2.ledger.served("u-real", 3, now + 1.0)
         for _ in range(20):
             thief.put(KEYS.intentions("uav2"), encode(FleetIntentions(vehicle="uav2", time_s=0.0,
                                                                       users=[Intention("u-forged", 0.0)])))
             thief.put(KEYS.served("uav2"), encode(FleetServed(vehicle="uav2", user_id="u-forged", tasks=9, at_s=2.0)))
             time.sleep(0.05)
-        wait_until(lambda: "u-real" in uav1.ledger.intentions().get("uav2", {}), 10.0,
-                   lambda: f"uav2's intentions at uav1: {uav1.ledger.intentions()}")
-        heard_served = [(d.vehicle, d.user_id) for d in uav1.ledger.take_served()]
+        heard_served: list[tuple[str, str]] = []
+        wait_until(lambda: bool(heard_served.extend((d.vehicle, d.user_id) for d in uav1.ledger.take_served())
+                                or heard_served), 10.0, "uav2's service heard at uav1")
+        time.sleep(0.5)  # the thief's last puts have had time to arrive: none may count
+        heard_served += [(d.vehicle, d.user_id) for d in uav1.ledger.take_served()]
         assert uav1.ledger.intentions()["uav2"] == {"u-real": now + 60}
         assert heard_served == [("uav2", "u-real")], heard_served
 

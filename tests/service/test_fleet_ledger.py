@@ -11,6 +11,8 @@ import zenoh
 
 import time
 
+import pytest
+
 from planner_service.fleet_ledger import BOUND, PLANNED, FleetLedger, owned_by_others, owner
 from protocol import FleetKeys
 from protocol.messages import FleetIntentions, FleetServed, Intention, encode
@@ -35,6 +37,15 @@ class Sample:
 
 
 T = time.time()
+
+
+@pytest.fixture(autouse=True)
+def now_for_each_test() -> None:
+    """``T`` is the wall clock when each test starts, not when the module was imported: the
+    claims' bounds and the signatures' freshness are judged against the reader's clock, and
+    under ``make test`` a module runs minutes after it was collected."""
+    global T
+    T = time.time()
 """Wall clock at the tests' start: a claim's due is bounded by its signed time."""
 
 

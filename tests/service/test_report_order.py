@@ -109,6 +109,7 @@ def test_the_link_applies_the_decisions_to_generations_and_telemetry() -> None:
     link.state.autopilot = (1, 1)
     old = link.generation
     link.reports.upload_may_commit()
+    link.state.current_watch.expect(1)  # as upload_mission does: the upload marks item 1 current
     link._on_message(from_vehicle(M.MAVLink_mission_item_reached_message(3), 199))
     link._on_message(from_vehicle(M.MAVLink_mission_current_message(1, 2), 202))
     assert events == []
