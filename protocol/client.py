@@ -34,9 +34,15 @@ from .fleet_places import FleetPlaces
 from .keys import FleetKeys, Keys
 from .messages import (ErrorReply, Event, OperatorCommand, OperatorReply, Plan, State, Status, TaskAck, TaskRequest,
                        UserPlace, decode, decode_operator_reply, decode_reply, encode)
-from .operator_proof import sign
+from .operator_proof import reply_proved, sign
 from .text import printable
 from .zenoh_config import error_text, session_config
+
+
+MATCH_POLL_S = 0.005
+"""How often a client looks whether a queryable became reachable (zenoh's matching status)."""
+MIN_ASK_S = 0.05
+"""The least time a query is given once a queryable is reachable (the wait may take it all)."""
 
 
 class ClientError(ProtocolError):
@@ -81,6 +87,8 @@ class PlannerClient:
                                   f"{error_text(err)}") from None
         self.session = session
         self._subs: list[Any] = []
+        self._nonce: str | None = None
+        """The service's nonce for this run (its proved ``hello``), once asked."""
 
     def close(self) -> None:
         for sub in self._subs:
@@ -125,11 +133,35 @@ class PlannerClient:
         return replies[0] if replies else None
 
     def _replies(self, key: str, payload: bytes | None, timeout_s: float | None) -> list[bytes]:
+        wait_s = timeout_s or self.timeout_s
+        return [s.payload.to_bytes() for s in self._samples(key, payload, time.monotonic() + wait_s, wait_s)]
+
+    def _samples(self, key: str, payload: bytes | None, deadline: float, wait_s: float) -> list[Any]:
         """Every reply of every queryable on ``key`` (not only the first nor the nearest: an
-        answer from the service is not hidden behind another queryable's)."""
-        replies = self.session.get(key, payload=payload, timeout=timeout_s or self.timeout_s,
+        answer from the service is not hidden behind another queryable's), asked once one is
+        reachable (``_reachable``), all by ``deadline`` (``wait_s`` after the caller began).
+        ``ClientError("service", "no reply on KEY within N s: ...")`` if none became reachable."""
+        if not self._reachable(key, deadline):
+            raise ClientError("service", f"no reply on {key} within {wait_s:g} s: no queryable on it became "
+                                         f"reachable (waited for zenoh's matching status: is the service running, "
+                                         f"and reachable through the endpoints given?)")
+        replies = self.session.get(key, payload=payload, timeout=max(deadline - time.monotonic(), MIN_ASK_S),
                                    target=zenoh.QueryTarget.ALL, consolidation=zenoh.ConsolidationMode.NONE)
-        return [reply.ok.payload.to_bytes() for reply in replies if reply.ok is not None]
+        return [reply.ok for reply in replies if reply.ok is not None]
+
+    def _reachable(self, key: str, deadline: float) -> bool:
+        """Whether a queryable on ``key`` became reachable (zenoh's matching status of a
+        querier on it) before ``deadline``. A session just opened knows no route yet: a query
+        sent at once reaches nobody through a router (issue 34: 27 commands in 30 lost)."""
+        querier = self.session.declare_querier(key, target=zenoh.QueryTarget.ALL)
+        try:
+            while not querier.matching_status.matching:
+                if time.monotonic() >= deadline:
+                    return False
+                time.sleep(MATCH_POLL_S)
+            return True
+        finally:
+            querier.undeclare()
 
     def submit_raw(self, payload: bytes, timeout_s: float | None = None, key: str | None = None) -> TaskAck | ErrorReply:
         """Send any payload on a request key (default: the plain one); the first reply."""
@@ -165,7 +197,8 @@ class PlannerClient:
         key = self.keys.user_request(request.user_id)
         replies = self._replies(key, encode(request), timeout_s)
         if not replies:
-            raise ClientError("service", f"no reply on {key} within {timeout_s or self.timeout_s:g} s")
+            raise ClientError("service", f"no reply on {key} within {timeout_s or self.timeout_s:g} s: the "
+                                         f"service was reachable, and did not reply")
         reply = answer(replies, request.user_id, ref)
         if isinstance(reply, ErrorReply):
             raise ClientError(reply.field, reply.message)
@@ -183,8 +216,8 @@ class PlannerClient:
         key = FleetKeys(self.keys.prefix).user_request(request.user_id)
         replies = self._replies(key, encode(request), timeout_s)
         if not replies:
-            raise ClientError("service", f"no member of the fleet replied on {key} within "
-                                         f"{timeout_s or self.timeout_s:g} s")
+            raise ClientError("service", f"no reply on {key} within {timeout_s or self.timeout_s:g} s: a member "
+                                         f"was reachable, none replied")
         return fleet_answer(replies, request.user_id, ref)
 
     def state(self, timeout_s: float | None = None) -> State:
@@ -223,42 +256,80 @@ class PlannerClient:
                  key: bytes | None = None) -> OperatorReply:
         """Send an operator's command (``start``, ``hold``, ``status``) and return the
         service's reply, accepted or refused (``reply.accepted``); for ``status`` with the
-        fleet-wide ``reply.state`` (every pending request).
+        fleet-wide ``reply.state`` (every pending request). Everything within ``timeout_s``.
 
         ``key``: the operator key (``protocol.operator_proof``; the service's ``operator.key``
-        file). The command then carries its proof (an HMAC of the command and the time, not
-        the key), which a service without zenoh access control requires: without it the
-        answer is ``ClientError("proof", ...)``.
+        file), which a service without zenoh access control requires. The client first asks
+        the service's nonce for this run (``hello``, once per client; again once if the
+        service restarted meanwhile), then sends the command with its proof (an HMAC of the
+        command, the time and the nonce, never the key). Only a reply proved with the key
+        (the HMAC of its bytes and of the command's proof, the zenoh reply's attachment) is
+        believed: a rogue queryable that reads the command can neither answer it nor use it
+        (made for this run, and once). Without ``key`` (under access control, where the
+        routers decide who may command and who may answer) the replier is judged as
+        ``submit`` judges an ack's: only a reply that echoes the command's fresh random
+        ``client_ref`` answers it.
 
-        The command carries a fresh random ``client_ref``, and the replier is judged as
-        ``submit`` judges an ack's: every queryable on the key is asked and every reply
-        collected (a rogue one cannot hide the service's answer), only a reply that echoes
-        the ``client_ref``, for this command, answers it, and two answers that disagree are
-        refused (``ClientError("reply", ...)``: a rogue queryable that reads the command and
-        echoes it, or two services for one vehicle). ``ClientError`` with the error's field
-        if the service answered an error, ``("service", ...)`` if no reply answers (under
-        access control a user's certificate gets none: only operator certificates may send
-        commands, and no one but the service may declare the queryable)."""
+        Every queryable on the key is asked (a nearer rogue one cannot hide the service's
+        answer) and every reply collected; two answers that disagree are refused
+        (``ClientError("reply", ...)``). ``ClientError`` with the error's field if the service
+        answered an error, ``("service", "no reply on KEY within N s...")`` if no reply
+        answers (under access control a user's certificate gets none)."""
         if command not in ("start", "hold", "status"):
             raise ClientError("command", f"{command!r} is not start, hold or status")
         if len(reason) > 256:
             raise ClientError("reason", f"{len(reason)} characters; at most 256")
-        ref = secrets.token_hex(8)
-        proved: dict[str, Any] = {}
-        if key is not None:
-            sent_at_ms = int(time.time() * 1000)
-            proved = {"sent_at_ms": sent_at_ms, "proof": sign(key, self.keys, command, reason, ref, sent_at_ms)}
-        payload = encode(OperatorCommand(command=command, reason=reason, client_ref=ref, **proved))  # type: ignore[arg-type]
         wait_s = timeout_s or self.timeout_s
-        replies = self._replies(self.keys.operator, payload, wait_s)
-        answers = operator_answers(replies, command, ref)
+        deadline = time.monotonic() + wait_s
+        if key is None:
+            return self._ask_operator(OperatorCommand(command=command, reason=reason, client_ref=new_client_ref()),
+                                      None, deadline, wait_s)  # type: ignore[arg-type]
+        for attempt in (1, 2):
+            nonce = self._nonce or self._hello(key, deadline, wait_s)
+            ref, sent_at_ms = new_client_ref(), int(time.time() * 1000)
+            proof = sign(key, self.keys, command, reason, ref, sent_at_ms, nonce)
+            try:
+                return self._ask_operator(OperatorCommand(
+                    command=command, reason=reason, client_ref=ref, sent_at_ms=sent_at_ms, proof=proof,  # type: ignore[arg-type]
+                    nonce=nonce), key, deadline, wait_s)
+            except ClientError as err:
+                if err.field != "nonce" or attempt == 2:
+                    raise
+                self._nonce = None  # the service restarted since its hello: ask its new nonce, once
+        raise AssertionError("unreachable")
+
+    def _hello(self, key: bytes, deadline: float, wait_s: float) -> str:
+        """The service's nonce for this run, from its proved answer to ``hello``."""
+        reply = self._ask_operator(OperatorCommand(command="hello", client_ref=new_client_ref()), key, deadline,
+                                   wait_s)
+        if reply.nonce is None:
+            raise ClientError("operator_key", "the service takes no operator key (zenoh access control decides who may "
+                                       "command it): send the command without the key")
+        self._nonce = reply.nonce
+        return reply.nonce
+
+    def _ask_operator(self, command: OperatorCommand, key: bytes | None, deadline: float,
+                      wait_s: float) -> OperatorReply:
+        """``command`` sent, and its one answer (proved with ``key`` when given)."""
+        samples = self._samples(self.keys.operator, encode(command), deadline, wait_s)
+        unproved = 0
+        if key is not None:
+            proved = [s for s in samples if reply_proved(key, self.keys, command.proof, s.payload.to_bytes(),
+                                                         None if s.attachment is None else s.attachment.to_bytes())]
+            unproved, samples = len(samples) - len(proved), proved
+        replies = [s.payload.to_bytes() for s in samples]
+        answers = operator_answers(replies, command.command, command.client_ref or "")
         if len(answers) > 1:
             raise ClientError("reply", printable(
-                f"{len(answers)} different replies answer the operator's {command} (client_ref '{ref}'): two "
-                f"queryables answer on {self.keys.operator} (a rogue one, or two services for one vehicle)"))
+                f"{len(answers)} different replies answer the operator's {command.command} (client_ref "
+                f"'{command.client_ref}'): two queryables answer on {self.keys.operator} (a rogue one, or two "
+                f"services for one vehicle)"))
+        if not answers and unproved:
+            raise ClientError("proof", f"no reply on {self.keys.operator} within {wait_s:g} s carries the proof of "
+                                       f"this operator key ({unproved} without it: not the service's key, a rogue "
+                                       f"replier, or a service that takes no key)")
         if not answers:
-            foreign = len(replies)
-            ignored = f" ({foreign} replies that did not answer this command ignored)" if foreign else ""
+            ignored = f" ({len(replies)} replies that did not answer this command ignored)" if replies else ""
             raise ClientError("service", f"no reply on {self.keys.operator} within {wait_s:g} s{ignored}")
         if isinstance(answers[0], ErrorReply):
             raise ClientError(answers[0].field, answers[0].message)

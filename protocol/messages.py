@@ -40,9 +40,10 @@ for ``status`` and ``state``, ``OPERATOR_SCHEMA_VERSION`` for the operator's mes
 STATUS_SCHEMA_VERSION = 2
 """``status`` (and ``state``, which holds one) at version 2: authority, battery source and
 unknown battery, position check, what the service waits for, the degraded state."""
-OPERATOR_SCHEMA_VERSION = 2
+OPERATOR_SCHEMA_VERSION = 3
 """``operator_command`` and ``operator_reply``: 2 added the command's proof (``sent_at_ms``,
-``proof``) and the fleet-wide ``state`` in the reply to ``status``."""
+``proof``) and the fleet-wide ``state`` in the reply to ``status``; 3 the ``hello`` command
+and the service's ``nonce`` that a proof covers."""
 EVENT_SCHEMA_VERSION = 2
 """``event``'s layout: 2 added the kinds of the sortie logic (waypoint_skipped,
 upload_abandoned, command_failed, authority_*, degraded)."""
@@ -84,7 +85,9 @@ Authority = Literal["none", "operator", "revoked"]
 """May the service command modes and arming? ``none``: not given (or handed back by the
 operator's ``hold``); ``operator``: given by the operator (``start``); ``revoked``: taken
 away by a change the service did not command (a pilot's mode, a failsafe, a landing)."""
-OperatorCommandName = Literal["start", "hold", "status"]
+OperatorCommandName = Literal["start", "hold", "status", "hello"]
+Nonce = Annotated[str, msgspec.Meta(pattern=r"\A[0-9a-f]{32}\Z")]
+"""A service's nonce for one run (``protocol.operator_proof``): 32 lowercase hex digits."""
 
 
 class _Message(
@@ -287,9 +290,11 @@ class State(_Message, tag="state"):
 class OperatorCommand(_Message, tag="operator_command", kw_only=True):
     """The operator's command on the operator queryable: ``start`` gives the service
     authority over modes and arming for the sortie, ``hold`` takes it back (the service
-    commands nothing more; the vehicle keeps the mission it holds), ``status`` asks.
-    Without zenoh access control every command carries the operator's proof
-    (``protocol.operator_proof``: ``sent_at_ms``, ``proof``, and ``client_ref``)."""
+    commands nothing more; the vehicle keeps the mission it holds), ``status`` asks,
+    ``hello`` asks the service's ``nonce`` (anyone may: it needs no proof, changes nothing and
+    tells nothing personal). Without zenoh access control every other command carries the
+    operator's proof (``protocol.operator_proof``: ``sent_at_ms``, ``proof``, ``nonce`` and
+    ``client_ref``)."""
 
     LAYOUT: ClassVar[int] = OPERATOR_SCHEMA_VERSION
     schema: int = OPERATOR_SCHEMA_VERSION
@@ -302,6 +307,9 @@ class OperatorCommand(_Message, tag="operator_command", kw_only=True):
     """When the operator sent it: milliseconds since 1970 (UTC) on the operator's clock."""
     proof: Annotated[str, msgspec.Meta(pattern=r"\A[0-9a-fA-F]{64}\Z")] | None = None
     """HMAC-SHA256 of the command under the operator key, 64 hex digits."""
+    nonce: Nonce | None = None
+    """The service's nonce (its reply to ``hello``) that the proof covers: no proof made for
+    another run of the service passes."""
 
 
 class OperatorReply(_Message, tag="operator_reply", kw_only=True):
@@ -322,6 +330,8 @@ class OperatorReply(_Message, tag="operator_reply", kw_only=True):
     status: Status | None = None
     state: State | None = None
     """``status`` only: the state with every pending request and the plan's users."""
+    nonce: Nonce | None = None
+    """``hello`` only: the service's nonce for this run, which a command's proof covers."""
 
 
 class FleetMember(_Message, tag="fleet_member"):

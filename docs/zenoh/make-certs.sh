@@ -77,7 +77,7 @@ if [ "${1:-}" = "--user" ]; then
     echo "add to the access_control of service-tls-acl.json5 (prefix uavmec, vehicle uav1: change them with yours):"
     echo "rules: { id: \"$user-in\", permission: \"allow\", flows: [\"ingress\"], messages: [\"query\", \"declare_subscriber\"], key_exprs: [\"$k/request/$user\", \"$k/users/$user\", \"uavmec/fleet/request/$user\"] }, { id: \"$user-out\", permission: \"allow\", flows: [\"egress\"], messages: [\"reply\", \"put\"], key_exprs: [\"$k/request/$user\", \"$k/users/$user\", \"uavmec/fleet/request/$user\"] },"
     echo "subjects: { id: \"$user\", cert_common_names: [\"$user\"] },"
-    echo "policies: { id: \"$user\", rules: [\"user-asks\", \"user-follows\", \"user-checks-alive\", \"to-users\", \"$user-in\", \"$user-out\"], subjects: [\"$user\"] },"
+    echo "policies: { id: \"$user\", rules: [\"user-asks\", \"user-follows\", \"user-checks-alive\", \"to-users\", \"queryables-known\", \"$user-in\", \"$user-out\"], subjects: [\"$user\"] },"
     echo "in fleet-router-tls-acl.json5 the same subject and policy, with these rules (its place on every member's key):"
     echo "fleet rules: { id: \"$user-in\", permission: \"allow\", flows: [\"ingress\"], messages: [\"query\", \"declare_subscriber\"], key_exprs: [\"$k/request/$user\", \"uavmec/*/users/$user\", \"uavmec/fleet/request/$user\"] }, { id: \"$user-out\", permission: \"allow\", flows: [\"egress\"], messages: [\"reply\", \"put\"], key_exprs: [\"$k/request/$user\", \"uavmec/*/users/$user\", \"uavmec/fleet/request/$user\"] },"
     exit 0

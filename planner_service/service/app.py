@@ -35,7 +35,7 @@ from typing import Any, Awaitable, Callable, assert_never
 import msgspec
 import numpy as np
 
-from protocol import ErrorReply, FleetKeys, PendingRequest, Plan, PlanPoint, SigningError, State, Status, encode
+from protocol import ErrorReply, FleetKeys, OperatorReply, PendingRequest, Plan, PlanPoint, SigningError, State, Status, encode
 from protocol.fleet_signing import FleetSigner, FleetVerifier, load_private_key, read_roster
 from protocol.messages import FleetMember
 from protocol.operator_proof import ProofCheck, load_or_create_key
@@ -52,7 +52,7 @@ from .intake import Accepted, Intake, fairness_rule
 from .journal import Journal
 from .link import LinkEvent, LinkSettings, VehicleLink, open_link
 from .link.base import RETURNING_MODES
-from .operator import OperatorGate, read_command, reply_for
+from .operator import OperatorGate, hello_reply, read_command, reply_for
 from .places import Place, plan_places, user_places
 from .rows import UserRow
 from .planning import Planner, VehicleFix, after_hold, assemble, not_served_reason, planning_battery_j
@@ -541,10 +541,18 @@ class Service:
         """An operator's command: read at the edge (an error naming the field changes
         nothing), decided by the sortie logic, answered with what the service did."""
         payload = query.payload.to_bytes() if query.payload is not None else None
-        cmd = read_command(payload, self.parts.operator_gate, self.wall())
+        gate = self.parts.operator_gate
+
+        def answer(reply: OperatorReply | ErrorReply) -> None:
+            data = encode(reply)  # proved as sent: the client checks these very bytes
+            reply_and_drop(query, self.keys.operator, data, gate.prove(data, payload))
+        cmd = read_command(payload, gate, self.wall())
         if isinstance(cmd, ErrorReply):
             log.warning("operator command refused: %s: %s", printable(cmd.field, 64), printable(cmd.message, 300))
-            reply_and_drop(query, self.keys.operator, encode(cmd))
+            answer(cmd)
+            return
+        if cmd.command == "hello":
+            answer(hello_reply(cmd, gate, self._status()))
             return
         before = self.state
         self.state, effects, accepted, message = self.logic.operator(
@@ -554,7 +562,7 @@ class Service:
             log.info("operator: authority %s -> %s (%s)", before.authority.state, self.state.authority.state,
                      self.state.authority.detail)
         fleet = self._fleet_state() if cmd.command == "status" else None
-        reply_and_drop(query, self.keys.operator, encode(reply_for(cmd, accepted, message, self._status(), fleet)))
+        answer(reply_for(cmd, accepted, message, self._status(), fleet))
 
     def _fleet_state(self) -> State:
         """Everything: the status, the plan with its users, every pending request (each

@@ -54,9 +54,10 @@ def session_config(mode: str, listen: Sequence[str] = (), connect: Sequence[str]
         raise ZenohError(f"zenoh.config_file: {err.message}") from None
 
 
-def reply_and_drop(query: Any, key: str, payload: bytes) -> None:
+def reply_and_drop(query: Any, key: str, payload: bytes, attachment: bytes | None = None) -> None:
+    """Answer ``query`` (with ``attachment``: the operator's reply's proof) and let it go."""
     try:
-        query.reply(key, payload)
+        query.reply(key, payload, attachment=attachment)
     finally:
         query.drop()
 

@@ -135,7 +135,7 @@ class RecordingQuery:
         self.replies: list[tuple[str, bytes]] = []
         self.dropped = False
 
-    def reply(self, key: str, payload: bytes) -> None:
+    def reply(self, key: str, payload: bytes, attachment: bytes | None = None) -> None:
         self.replies.append((key, bytes(payload)))
 
     def drop(self) -> None:

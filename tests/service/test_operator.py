@@ -10,13 +10,13 @@ from dataclasses import replace
 import pytest
 
 from planner_service.model import preset
-from planner_service.service.operator import OperatorGate, read_command, reply_for
+from planner_service.service.operator import OperatorGate, hello_reply, read_command, reply_for
 from planner_service.service.sortie import Authority, Rules, SortieLogic, VehicleSnapshot, new_sortie
 from planner_service.service.sortie import effects as fx
 from planner_service.service.sortie import inputs as ins
 from protocol import (Area, ErrorReply, GeoOrigin, Keys, OperatorCommand, OperatorReply, PendingRequest, State, Status,
                       decode_operator_reply, encode)
-from protocol.operator_proof import ProofCheck, sign
+from protocol.operator_proof import ProofCheck, reply_proved, sign
 
 
 class NoRequests:
@@ -135,16 +135,18 @@ def test_hostile_text_in_a_reason_is_escaped_and_bounded() -> None:
 
 KEY = bytes(range(32))
 GATED_KEYS = Keys()
+NONCE = "0123456789abcdef" * 2
+"""The gated service's nonce for this run."""
 
 
-def gated() -> OperatorGate:
-    return OperatorGate(ProofCheck(KEY, GATED_KEYS, window_s=30.0), "the key's proof")
+def gated(nonce: str = NONCE) -> OperatorGate:
+    return OperatorGate(ProofCheck(KEY, GATED_KEYS, window_s=30.0, nonce=nonce), "the key's proof")
 
 
 def command(name: str = "start", reason: str = "range clear", ref: str = "r-1", at_ms: int = 1_000_000,
-            key: bytes = KEY, **fields: object) -> bytes:
+            key: bytes = KEY, nonce: str = NONCE, **fields: object) -> bytes:
     body = {"kind": "operator_command", "command": name, "reason": reason, "client_ref": ref, "sent_at_ms": at_ms,
-            "proof": sign(key, GATED_KEYS, name, reason, ref, at_ms), **fields}
+            "nonce": nonce, "proof": sign(key, GATED_KEYS, name, reason, ref, at_ms, nonce), **fields}
     return json.dumps({k: v for k, v in body.items() if v is not None}).encode()
 
 
@@ -158,7 +160,8 @@ def test_without_the_keys_proof_no_command_passes_the_gate(name: str) -> None:
                            (command(name, key=b"\x01" * 32), "proof"),  # another key
                            (command(name, proof=None), "proof"),
                            (command(name, ref=None), "client_ref"),
-                           (command(name, at_ms=None), "sent_at_ms")):
+                           (command(name, at_ms=None), "sent_at_ms"),
+                           (command(name, nonce=None), "nonce")):
         reply = read_command(payload, gate, 1000.0)
         assert isinstance(reply, ErrorReply) and reply.field == field, (payload, reply)
         assert sent(reply) == reply
@@ -169,10 +172,11 @@ def test_without_the_keys_proof_no_command_passes_the_gate(name: str) -> None:
 
 def test_an_altered_command_fails_its_proof() -> None:
     good = json.loads(command("hold", reason="pilot takes over"))
-    for field, value in (("command", "start"), ("reason", "anything"), ("client_ref", "r-2"), ("sent_at_ms", 1_000_001)):
+    for field, value in (("command", "start"), ("reason", "anything"), ("client_ref", "r-2"), ("sent_at_ms", 1_000_001),
+                         ("nonce", "f" * 32)):
         reply = read_command(json.dumps({**good, field: value}).encode(), gated(), 1000.0)
         assert isinstance(reply, ErrorReply) and reply.field == "proof", field
-    other_vehicle = sign(KEY, Keys(vehicle="uav2"), "hold", "pilot takes over", "r-1", 1_000_000)
+    other_vehicle = sign(KEY, Keys(vehicle="uav2"), "hold", "pilot takes over", "r-1", 1_000_000, NONCE)
     reply = read_command(json.dumps({**good, "proof": other_vehicle}).encode(), gated(), 1000.0)
     assert isinstance(reply, ErrorReply) and reply.field == "proof"
 
@@ -195,6 +199,44 @@ def test_a_replayed_or_stale_command_is_refused() -> None:
     assert gate.check is not None and "r-1" in gate.check.seen
     read_command(command(ref="r-6", at_ms=1_100_000), gate, 1100.0)
     assert "r-1" not in gate.check.seen and "r-6" in gate.check.seen
+
+
+def test_a_command_made_for_another_run_of_the_service_is_refused_whatever_its_time() -> None:
+    """Issue 34, finding 3: a start captured before a restart was accepted after it (the
+    client_refs seen were in memory only). A proof covers the run's nonce: after the restart
+    (a new nonce) the same bytes, fresh in time and with a ref never seen, are refused."""
+    captured = command("start", ref="r-9", at_ms=1_000_000)
+    before = gated(NONCE)
+    assert isinstance(read_command(captured, before, 1000.0), OperatorCommand)
+    after = gated("fedcba9876543210" * 2)  # the service restarted: nothing of `before` kept
+    replayed = read_command(captured, after, 1001.0)
+    assert isinstance(replayed, ErrorReply) and replayed.field == "nonce", replayed
+    assert "another run of the service" in replayed.message and after.check is not None and after.check.seen == {}
+
+
+def test_hello_needs_no_proof_and_gives_the_runs_nonce_nothing_else() -> None:
+    gate = gated()
+    cmd = read_command(json.dumps({"kind": "operator_command", "command": "hello", "client_ref": "h-1"}).encode(),
+                       gate, 1000.0)
+    assert isinstance(cmd, OperatorCommand) and cmd.command == "hello"
+    reply = sent(hello_reply(cmd, gate, Status()))
+    assert isinstance(reply, OperatorReply) and reply.nonce == NONCE and reply.client_ref == "h-1"
+    assert reply.status is None and reply.state is None and gate.check is not None and gate.check.seen == {}
+    assert sent(hello_reply(cmd, OPEN, Status())).nonce is None  # access control decides: no proof to bind
+
+
+def test_every_reply_is_proved_over_its_bytes_and_the_command_it_answers() -> None:
+    gate, payload = gated(), command("hold")
+    reply = encode(ErrorReply(field="x", message="y", client_ref="r-1"))
+    proof = gate.prove(reply, payload)
+    proved = json.loads(payload)["proof"]
+    assert proof is not None and reply_proved(KEY, GATED_KEYS, proved, reply, proof)
+    assert not reply_proved(KEY, GATED_KEYS, proved, reply + b" ", proof)  # other bytes
+    assert not reply_proved(KEY, GATED_KEYS, None, reply, proof)  # an answer to another command
+    assert not reply_proved(b"\x02" * 32, GATED_KEYS, proved, reply, proof)  # another key
+    assert not reply_proved(KEY, Keys(vehicle="uav2"), proved, reply, proof)  # another vehicle's
+    assert not reply_proved(KEY, GATED_KEYS, proved, reply, None)
+    assert OPEN.prove(reply, payload) is None
 
 
 def test_the_proof_is_checked_on_the_reason_as_sent_then_the_reason_is_escaped() -> None:

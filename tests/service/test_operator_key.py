@@ -12,12 +12,15 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 import pytest
+import zenoh
 
 from planner_service.harness.processes import REPO
-from protocol import ErrorReply, Keys, OperatorCommand, OperatorReply, decode_operator_reply, encode
-from protocol.client import ClientError, PlannerClient
+from protocol import (ErrorReply, Keys, OperatorCommand, OperatorReply, decode_operator_command,
+                      decode_operator_reply, encode)
+from protocol.client import ClientError, PlannerClient, client_config
 from protocol.operator_proof import sign
 from tests.support.stack import Stack
 
@@ -51,7 +54,9 @@ def test_only_the_key_holder_commands_and_a_replay_is_refused(stack: Stack) -> N
             assert refused.value.field == "proof", refused.value
         with pytest.raises(ClientError) as wrong:
             peer.operator("start", timeout_s=10.0, key=b"\x07" * 32)
-        assert (wrong.value.field, wrong.value.message[:14]) == ("proof", "does not match")
+        # another key proves no reply of the service's (its hello first): nothing is sent
+        assert (wrong.value.field, wrong.value.message[:11]) == ("proof", "no reply on"), wrong.value
+        assert "1 without it" in wrong.value.message
     time.sleep(1.0)  # time enough for the arming a start would have commanded
     status = client.state().status
     assert (status.authority, status.armed) == ("none", False), status
@@ -59,9 +64,12 @@ def test_only_the_key_holder_commands_and_a_replay_is_refused(stack: Stack) -> N
 
     # the key holder: a start, captured as an eavesdropper would, then sent again after a hold
     key, keys = stack.operator_key(), Keys()
+    hello = send(client, encode(OperatorCommand(command="hello", client_ref="h-1")))
+    assert isinstance(hello, OperatorReply) and hello.nonce is not None, hello
     ref, at_ms = "captured-1", int(time.time() * 1000)
     captured = encode(OperatorCommand(command="start", reason="range clear", client_ref=ref, sent_at_ms=at_ms,
-                                      proof=sign(key, keys, "start", "range clear", ref, at_ms)))
+                                      proof=sign(key, keys, "start", "range clear", ref, at_ms, hello.nonce),
+                                      nonce=hello.nonce))
     started = send(client, captured)
     assert isinstance(started, OperatorReply) and started.accepted, started
     assert stack.operator("hold", "pilot takes over").accepted
@@ -79,6 +87,84 @@ def test_only_the_key_holder_commands_and_a_replay_is_refused(stack: Stack) -> N
                                                                            ("u-2", 300.0, 320.0, 4)]
     assert fleet.plan is not None and {p.user_id for p in fleet.plan.points} <= {"u-1", "u-2"}
     assert "Traceback" not in service.log()
+
+
+class Rogue:
+    """A queryable on the operator key beside the service's (any peer may declare one without
+    access control): it keeps every command it is asked and answers each as accepted."""
+
+    def __init__(self, endpoint: str, keys: Keys) -> None:
+        self.session = zenoh.open(client_config([endpoint], mode="client"))
+        self.captured: list[bytes] = []
+        self.keys = keys
+        self._queryable = self.session.declare_queryable(keys.operator, self._on)
+        self._token = self.session.liveliness().declare_token("rogue/here")  # after its queryable
+
+    def seen_by(self, session: Any, timeout_s: float = 10.0) -> bool:
+        """Whether ``session`` knows the rogue (its token, declared after its queryable)."""
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            if any(r.ok is not None for r in session.liveliness().get("rogue/here", timeout=0.5)):
+                return True
+        return False
+
+    def _on(self, query: Any) -> None:
+        payload = query.payload.to_bytes()
+        self.captured.append(payload)
+        cmd = decode_operator_command(payload)
+        forged = OperatorReply(command=cmd.command, accepted=True, authority="operator", phase="flying",
+                               message="forged", client_ref=cmd.client_ref, nonce="0" * 32)
+        query.reply(self.keys.operator, encode(forged), attachment=b"f" * 64)
+
+    def replay(self, payload: bytes) -> list[bytes]:
+        """``payload`` sent to the operator key as it was captured: every reply but its own."""
+        replies = self.session.get(self.keys.operator, payload=payload, timeout=10.0, target=zenoh.QueryTarget.ALL)
+        return [r.ok.payload.to_bytes() for r in replies
+                if r.ok is not None and b"forged" not in r.ok.payload.to_bytes()]
+
+    def close(self) -> None:
+        self._token.undeclare()
+        self._queryable.undeclare()
+        self.session.close()
+
+
+@pytest.mark.timeout(180)
+def test_a_captured_start_is_refused_after_a_restart_and_no_rogue_reply_is_believed(stack: Stack) -> None:
+    """Issue 34, finding 3: a rogue queryable on the operator key got the operator's proved
+    start (the client asks every queryable); after a restart of the service, within the
+    30 s window, the captured start was accepted (authority none -> operator) though the
+    operator's last command was hold. Now the proof covers the run's nonce: refused. And
+    the rogue's own answers ("accepted", to hello and to every command) are not believed."""
+    stack.vehicle()
+    stack.service(zenoh__mode="router")  # it routes between its peers (the operator, the rogue)
+    assert stack.client is not None
+    deadline = time.monotonic() + 30
+    while not stack.client.state().status.position_ok and time.monotonic() < deadline:
+        time.sleep(0.2)
+    rogue = Rogue(stack.endpoint, Keys())
+    try:
+        with PlannerClient([stack.endpoint]) as operator:
+            assert rogue.seen_by(operator.session), "the operator's session never learnt of the rogue peer"
+            key = stack.operator_key()
+            started = operator.operator("start", "range clear", 10.0, key=key)
+            assert started.accepted and started.message != "forged" and started.authority == "operator", started
+            held = operator.operator("hold", "pilot takes over", 10.0, key=key)
+            assert held.accepted and held.message != "forged" and held.authority == "none", held
+        starts = [p for p in rogue.captured if decode_operator_command(p).command == "start"]
+        assert len(starts) == 1, rogue.captured
+
+        stack.children[-1].stop()
+        stack.service(zenoh__mode="router")  # within the 30 s window of the captured start's time
+        replies = rogue.replay(starts[0])
+        assert len(replies) == 1, replies
+        refused = decode_operator_reply(replies[0])
+        assert isinstance(refused, ErrorReply) and refused.field == "nonce", refused
+        assert "another run of the service" in refused.message
+        time.sleep(1.0)  # time enough for the arming a start would have commanded
+        status = stack.client.state().status
+        assert (status.authority, status.armed) == ("none", False), status
+    finally:
+        rogue.close()
 
 
 def test_a_key_file_others_may_read_stops_the_service_at_start(tmp_path: Path) -> None:

@@ -34,8 +34,8 @@ KINDS = ("task_request", "task_ack", "error", "status", "plan", "event", "state"
 PHASES = get_args(Phase)
 AUTHORITIES = ("none", "operator", "revoked")
 BATTERY_SOURCES = ("autopilot", "model", "unknown")
-OPERATOR_COMMANDS = ("start", "hold", "status")
-LAYOUTS = {"status": 2, "state": 2, "operator_command": 2, "operator_reply": 2, "event": 2}
+OPERATOR_COMMANDS = ("start", "hold", "status", "hello")
+LAYOUTS = {"status": 2, "state": 2, "operator_command": 3, "operator_reply": 3, "event": 2}
 """Each message type's layout version (docs/PROTOCOL.md); 1 for the others."""
 EVENTS = get_args(EventKind)
 """Every event kind the wire knows (derived from the type: this list cannot drift)."""
@@ -204,13 +204,15 @@ def valid_message(kind: str, rng: random.Random, side_m: float = 500.0, max_alt_
         return _optional(rng, f, {"reason": lambda: _text(rng),
                                   "client_ref": lambda: rng.choice(["null", _text(rng, 64), _id(rng)]),
                                   "sent_at_ms": lambda: rng.choice(["null", str(rng.randrange(0, 2 ** 53))]),
-                                  "proof": lambda: rng.choice(["null", dump(rng.randbytes(32).hex())])})
+                                  "proof": lambda: rng.choice(["null", dump(rng.randbytes(32).hex())]),
+                                  "nonce": lambda: rng.choice(["null", dump(rng.randbytes(16).hex())])})
     if kind == "operator_reply":
         f.update(command=dump(rng.choice(OPERATOR_COMMANDS)), accepted=rng.choice(["true", "false"]),
                  authority=dump(rng.choice(AUTHORITIES)), phase=dump(rng.choice(PHASES)))
         return _optional(rng, f, {"message": lambda: _text(rng),
                                   "client_ref": lambda: rng.choice(["null", _text(rng, 64)]),
-                                  "status": lambda: rng.choice(["null", _struct(valid_message("status", rng))])})
+                                  "status": lambda: rng.choice(["null", _struct(valid_message("status", rng))]),
+                                  "nonce": lambda: rng.choice(["null", dump(rng.randbytes(16).hex())])})
     if kind == "plan":
         return _optional(rng, f, {"plan_id": lambda: _count(rng), "time_s": lambda: _float(rng),
                                   "predicted_energy_j": lambda: _float(rng, 0.0, 1e9),
