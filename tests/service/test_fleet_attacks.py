@@ -11,7 +11,7 @@ from __future__ import annotations
 import logging
 import time
 from pathlib import Path
-from typing import Any, Callable, Iterator
+from typing import Any, Callable
 
 import pytest
 import zenoh
@@ -22,7 +22,6 @@ from planner_service.harness.processes import Child, free_port
 from protocol import FleetKeys, Keys, Status, encode
 from protocol.client import client_config
 from protocol.messages import FleetIntentions, FleetServed, Intention
-from protocol.zenoh_config import session_config
 from tests.support.fleet import member, presence, put_position, signer, wait_until
 from tests.support.zenoh_tls import VEHICLE_MARKS, add_entries, make_certs, shipped
 
@@ -30,27 +29,6 @@ KEYS = FleetKeys("attacktest")
 DISCOVERY_S = 0.5
 EVERY_POINT = list(range(64))
 """A route through every hovering point of the area (more than any sortie flies)."""
-
-
-@pytest.fixture
-def mesh() -> Iterator[Callable[[], Any]]:
-    """A router on loopback and a maker of client sessions to it (timestamping on, as a
-    fleet member's own session)."""
-    endpoint = f"tcp/127.0.0.1:{free_port()}"
-    router = zenoh.open(session_config("router", listen=[endpoint]))
-    sessions: list[Any] = []
-
-    def client() -> Any:
-        conf = session_config("client", connect=[endpoint])
-        conf.insert_json5("timestamping/enabled", "true")
-        sessions.append(zenoh.open(conf))
-        return sessions[-1]
-    try:
-        yield client
-    finally:
-        for s in sessions:
-            s.close()
-        router.close()
 
 
 class Witness:

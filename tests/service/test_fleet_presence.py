@@ -9,7 +9,7 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from typing import Any, Callable, Iterator
+from typing import Any, Callable
 
 import pytest
 import zenoh
@@ -58,28 +58,6 @@ def test_fleet_keys_and_no_vehicle_named_fleet() -> None:
 
 
 # --- through a router -------------------------------------------------------------------------
-@pytest.fixture
-def mesh() -> Iterator[Callable[[], Any]]:
-    """A router on loopback and a maker of client sessions to it (timestamping on, as the
-    service's own session is when it joins a fleet)."""
-    endpoint = f"tcp/127.0.0.1:{free_port()}"
-    router = zenoh.open(session_config("router", listen=[endpoint]))
-    sessions: list[Any] = []
-
-    def client() -> Any:
-        conf = session_config("client", connect=[endpoint])
-        conf.insert_json5("timestamping/enabled", "true")
-        s = zenoh.open(conf)
-        sessions.append(s)
-        return s
-    try:
-        yield client
-    finally:
-        for s in sessions:
-            s.close()
-        router.close()
-
-
 def test_members_find_each_other_and_a_clash_is_refused(mesh: Callable[[], Any]) -> None:
     a = presence(KEYS, member("uav1", 100.0))
     a.join(mesh(), DISCOVERY_S)
