@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 from protocol import Event, PendingRequest, Plan, Status
 from protocol.messages import FleetMember
 
-from .fleet_separation import Judgement
+from .service.fleet.separation import Judgement
 from protocol.text import printable
 
 MAX_POINTS_SHOWN = 8

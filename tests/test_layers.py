@@ -11,6 +11,9 @@ PACKAGES = ("protocol", "planner_service", "sim_bridge")
 MODEL, SETTINGS, POLICY = "planner_service.model", "planner_service.settings", "planner_service.policy"
 REGISTRY, MCTS, BASELINES = "planner_service.registry", "planner_service.mcts", "planner_service.baselines"
 SORTIE, SERVICE, HARNESS = "planner_service.sortie", "planner_service.service", "planner_service.harness"
+FLEET_LIVE, ERRORS = "planner_service.service.fleet", "planner_service.service.errors"
+"""The live fleet's package, a layer of its own inside the service's (the service uses it; it
+uses none of the service but its errors), and the service's errors (pure exceptions)."""
 EVERYTHING = None
 ALLOWED: dict[str, set[str] | None] = {
     "protocol": set(),
@@ -23,16 +26,14 @@ ALLOWED: dict[str, set[str] | None] = {
     SORTIE: {SETTINGS, MODEL, POLICY, REGISTRY},
     "planner_service.fleet": {SETTINGS, MODEL, POLICY, REGISTRY, SORTIE},
     "planner_service.experiments": {SETTINGS, MODEL, POLICY, MCTS, SORTIE, "planner_service.fleet"},
-    SERVICE: {"protocol", SETTINGS, MODEL, POLICY, MCTS, "planner_service.fleet_roster",
-              "planner_service.fleet_separation", "planner_service.fleet_ledger"},
-    HARNESS: {"protocol", SETTINGS, MODEL, POLICY, SORTIE, SERVICE, "planner_service.fleet"},
+    SERVICE: {"protocol", SETTINGS, MODEL, POLICY, MCTS, FLEET_LIVE, ERRORS},
+    FLEET_LIVE: {"protocol", MODEL, ERRORS},  # the members' exchange; the claim rule is the model's
+    ERRORS: set(),
+    HARNESS: {"protocol", SETTINGS, MODEL, POLICY, SORTIE, SERVICE, FLEET_LIVE, ERRORS, "planner_service.fleet"},
     "planner_service.bench": EVERYTHING,
     "planner_service.commands": EVERYTHING,
     "planner_service.cli": EVERYTHING,
-    "planner_service.operator_view": {"protocol", "planner_service.fleet_separation"},
-    "planner_service.fleet_separation": {"protocol"},  # pure: the service's and the operator's judge
-    "planner_service.fleet_roster": {"protocol", "planner_service.fleet_separation"},  # zenoh I/O: both views
-    "planner_service.fleet_ledger": {"protocol"},  # zenoh I/O: the members' intentions and services
+    "planner_service.operator_view": {"protocol", FLEET_LIVE},  # the separation's judge, the roster
     "planner_service.__main__": EVERYTHING,
     "planner_service": EVERYTHING,
     "sim_bridge": {"protocol", SETTINGS, MODEL},
@@ -48,6 +49,9 @@ def layer(module: str) -> str | None:
         return None
     if len(parts) == 1:
         return "planner_service"
+    for inner in (FLEET_LIVE, ERRORS):
+        if module == inner or module.startswith(inner + "."):
+            return inner
     return f"planner_service.{parts[1]}"
 
 

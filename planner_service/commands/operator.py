@@ -161,8 +161,8 @@ def _watch(client: Any, args: argparse.Namespace, stop: threading.Event) -> int:
 
     from protocol.fleet_signing import FleetVerifier
 
-    from ..fleet_ledger import FleetLedger
-    from ..fleet_roster import FleetRoster
+    from ..service.fleet.ledger import FleetLedger
+    from ..service.fleet.roster import FleetRoster
     from ..operator_view import WatchView, render
 
     view = WatchView(vehicle=f"{client.keys.prefix}/{client.keys.vehicle}")

@@ -46,7 +46,7 @@ from .allocator import ARENAS, cap_arenas
 from .config import ServiceConfig
 from .errors import ConfigError, JournalError, LinkError, PlanningError
 from .event_loop import run_to_end
-from .fleet_presence import FleetPresence
+from .fleet.presence import FleetPresence
 from . import events as ev
 from .intake import Accepted, Intake, fairness_rule
 from .journal import Journal

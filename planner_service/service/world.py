@@ -93,7 +93,7 @@ class JournalWorld:
 
 class FleetWorld(JournalWorld):
     """A fleet member's view (docs/OPERATIONS.md, "A fleet"): the journal's, less the users
-    another live member owns (``fleet_ledger.owned_by_others``: this member neither plans nor binds
+    another live member owns (``fleet.claims.owned_by_others``: this member neither plans nor binds
     them), with the other members' services counted as its own (``remote``): each takes
     its tasks off the user's request in force here, as a service recorded here would."""
 

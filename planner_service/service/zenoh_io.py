@@ -27,7 +27,7 @@ from protocol.zenoh_config import session_config as _session_config
 
 from .config import ZenohConfig
 from .errors import ServiceError
-from .fleet_presence import FleetPresence
+from .fleet.presence import FleetPresence
 from .intake import BUSY, client_ref
 
 log = logging.getLogger("planner_service.zenoh")

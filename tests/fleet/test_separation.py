@@ -1,4 +1,4 @@
-"""The fleet's separation on the vehicles' own positions (``planner_service.fleet_separation``):
+"""The fleet's separation on the vehicles' own positions (``planner_service.service.fleet.separation``):
 two armed UAVs too close horizontally within their layer gap have lost it; what is not known
 is reported, never taken as separated; each member's position is put in one frame from its
 own origin."""
@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from protocol import GeoOrigin, Status, global_to_local, local_to_global
 from protocol.messages import FleetMember
-from planner_service.fleet_separation import Seen, judge
+from planner_service.service.fleet.separation import Seen, judge
 
 HOME = GeoOrigin()
 

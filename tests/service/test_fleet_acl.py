@@ -24,7 +24,7 @@ import pytest
 import zenoh
 
 from planner_service.harness.processes import REPO, Child, free_port
-from planner_service.service.fleet_presence import FleetPresence
+from planner_service.service.fleet.presence import FleetPresence
 from protocol import FleetKeys, Keys, Status, decode, encode
 from protocol.client import PlannerClient, client_config, request_for
 from protocol.messages import FleetIntentions, FleetServed, Intention, UserPlace

@@ -17,7 +17,7 @@ import pytest
 import zenoh
 import zenoh.ext as zext
 
-from planner_service.fleet_ledger import MAX_ROUTE
+from planner_service.service.fleet.ledger import MAX_ROUTE
 from planner_service.harness.processes import Child, free_port
 from protocol import FleetKeys, Keys, Status, encode
 from protocol.client import client_config

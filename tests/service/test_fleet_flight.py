@@ -1,7 +1,7 @@
 """A fleet in flight on loopback: two vehicle stubs, two services (one per UAV, each its own
 journal and layer), two meshed zenoh routers and simulated users who submit once to the fleet
 (``sim_bridge users --fleet``). Nothing central: the services share the user space through
-their intentions and services (``planner_service.fleet_ledger``).
+their intentions and services (``planner_service.service.fleet.ledger``).
 
 Proves: every request is held by every live member; both UAVs serve; no user is served more
 often than the fairness rule allows across the fleet; a service killed mid-sortie leaves its
@@ -18,7 +18,7 @@ from collections import Counter
 
 import pytest
 
-from planner_service.fleet_ledger import owner
+from planner_service.model.fleet.claims import owner
 from planner_service.model import field
 from planner_service.service.config import build_config
 from protocol import Keys
@@ -120,7 +120,7 @@ def fly_lose_and_follow(fleet: FleetStack, uav1: Uav, uav2: Uav, wire: Intention
     for uav, layer in ((uav1, 100.0), (uav2, 120.0)):  # each cruised its own layer, by its own positions
         heights = Counter(round(z) for z, mode in track(uav) if mode == "AUTO" and z > 50.0)
         assert heights.most_common(1)[0][0] == layer and max(heights) <= layer + 1, (uav.vehicle, heights)
-    # judged live on both statuses by each member (fleet_separation): never lost
+    # judged live on both statuses by each member (fleet.separation): never lost
     for uav in (uav1, uav2):
         assert "SEPARATION LOST" not in uav.service.log()
     assert users.stop() == 0

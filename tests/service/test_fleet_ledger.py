@@ -1,4 +1,4 @@
-"""The members' exchange in flight (``planner_service.fleet_ledger``), its rules on their own:
+"""The members' exchange in flight (``planner_service.service.fleet.ledger``), its rules on their own:
 who owns a user several members claim, the points a member plans without, and what it keeps
 of a member gone with its vehicle armed. Samples are made here as zenoh hands them over; the
 exchange through real routers is tests/service/test_fleet_flight.py's and test_fleet_acl.py's."""
@@ -13,7 +13,8 @@ import time
 
 import pytest
 
-from planner_service.fleet_ledger import BOUND, PLANNED, FleetLedger, owned_by_others, owner
+from planner_service.model.fleet.claims import BOUND, PLANNED, owned_by_others, owner
+from planner_service.service.fleet.ledger import FleetLedger
 from protocol import FleetKeys
 from protocol.messages import FleetIntentions, FleetServed, Intention, encode
 from tests.support.fleet import signer, verifier
@@ -106,7 +107,7 @@ def test_a_member_claims_only_what_it_can_fly() -> None:
     next point and a hold, a bound time out of a hold's reach are refused whole (counted); a
     route is kept to its first ``MAX_ROUTE`` points; a service counts only for a user the
     member claimed."""
-    from planner_service.fleet_ledger import MAX_ROUTE
+    from planner_service.service.fleet.ledger import MAX_ROUTE
 
     ledger = ledger_of("uav1", {"uav1", "uav2"})
     refused_before = ledger._verifier.ignored

@@ -13,7 +13,7 @@ from typing import Any, Iterator
 import pytest
 import zenoh
 
-from planner_service.fleet_ledger import PLANNED, owner
+from planner_service.model.fleet.claims import PLANNED, owner
 from planner_service.harness.processes import free_port
 from protocol import FleetKeys, Status
 from protocol.messages import FleetServed

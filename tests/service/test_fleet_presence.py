@@ -14,10 +14,10 @@ from typing import Any, Callable
 import pytest
 import zenoh
 
-from planner_service.fleet_roster import FleetRoster
+from planner_service.service.fleet.roster import FleetRoster
 from planner_service.operator_view import WatchView, render
 from planner_service.harness.processes import free_port
-from planner_service.service.fleet_presence import MembershipError, FleetPresence, layer_clashes
+from planner_service.service.fleet.presence import MembershipError, FleetPresence, layer_clashes
 from protocol import FleetKeys, Keys, ProtocolError, Status, encode
 from protocol.zenoh_config import session_config
 from tests.support.fleet import member, presence, put_position, verifier, wait_until

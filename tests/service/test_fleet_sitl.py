@@ -19,7 +19,7 @@ from typing import Callable
 
 import pytest
 
-from planner_service.fleet_ledger import owner
+from planner_service.model.fleet.claims import owner
 from planner_service.harness.fleet_demo import OFFLINE_ALGO, fleet_of, offline_fleet, scenario_settings
 from planner_service.harness.report import sortie_summary
 from planner_service.model.fleet import uav_scenarios

@@ -12,7 +12,7 @@ import time
 from pathlib import Path
 from typing import Any, Callable, Iterable
 
-from planner_service.service.fleet_presence import FleetPresence
+from planner_service.service.fleet.presence import FleetPresence
 from protocol import FleetKeys, Status, encode
 from protocol.fleet_signing import FleetSigner, FleetVerifier, load_private_key, make_vehicle_key, read_roster
 from protocol.messages import FleetMember

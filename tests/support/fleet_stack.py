@@ -16,7 +16,8 @@ import zenoh
 
 from planner_service.harness.processes import Child, free_port
 from planner_service.service.config import OriginConfig, build_config, to_toml
-from planner_service.fleet_ledger import Claim, claims_of
+from planner_service.model.fleet.claims import Claim
+from planner_service.service.fleet.ledger import claims_of
 from protocol import FleetKeys, GeoOrigin, local_to_global
 from protocol.fleet_signing import FleetVerifier, Unverified, make_vehicle_key, read_roster
 from protocol.messages import FleetIntentions, decode

@@ -6,6 +6,7 @@ import numpy as np
 
 from ..errors import ScenarioError
 from ..interval import AT_BASE, NO_USER
+from .claims import others_points
 from .state import FleetState
 
 
@@ -40,10 +41,11 @@ def busy_users(state: FleetState, j: int) -> list[int]:
 
 def claimed_points(state: FleetState, j: int) -> list[int]:
     """The hovering points the other active UAVs have committed to: the one each holds now
-    and the one each says it flies to next (its intent), sorted, each once."""
-    points = set(state.held_points(j))
-    points.update(int(state.intent[i]) for i in state.others(j) if state.intent[i] != AT_BASE)
-    return sorted(points)
+    and the one each says it flies to next (its intent), sorted, each once: the fleet's claim
+    rule (``claims.others_points``), the one the live fleet flies."""
+    points = {int(i): [int(k) for k in (state.hover[i], state.intent[i]) if k != AT_BASE]
+              for i in np.flatnonzero(state.active)}
+    return sorted(others_points(int(j), points, points))
 
 
 def visible_tasks(state: FleetState, j: int) -> np.ndarray:

@@ -11,7 +11,7 @@ protocol written here:
   later, or whose router restarted, still reads it;
 - a subscriber to every member's signed position (``{prefix}/fleet/positions/{vehicle}``: its
   status, in a fleet envelope), on which the fleet's separation is judged
-  (``fleet_separation``). A member that leaves with its vehicle last seen armed stays in that
+  (``fleet.separation``). A member that leaves with its vehicle last seen armed stays in that
   judgement, unknown, until its service is back or ``lost_s`` has passed (its battery's
   flight: it has landed by then).
 
@@ -21,7 +21,7 @@ its vehicle came within ``ANNOUNCE_STALE_S`` (the members sign theirs again ever
 ``ANNOUNCE_EVERY_S``). Anything else is ignored and counted (``ignored``, ``refused``): a
 rogue token or a forged announcement never makes a member, nor an "unknown" layer.
 
-Read by the service (``service/fleet_presence.py``: its layer checked against the others')
+Read by the service (``service/fleet/presence.py``: its layer checked against the others')
 and by ``operator watch``. Pure bookkeeping apart from the declarations; thread-safe (zenoh
 calls back on its own threads).
 """
@@ -41,7 +41,7 @@ from protocol import FleetKeys, ProtocolError, Status
 from protocol.fleet_signing import FleetVerifier, Unverified
 from protocol.messages import FleetMember, decode
 
-from .fleet_separation import MIN_HORIZONTAL_M, STALE_S, Judgement, Seen, judge
+from .separation import MIN_HORIZONTAL_M, STALE_S, Judgement, Seen, judge
 
 SETTLE_POLL_S = 0.02
 MAX_PUBLISHERS_KEPT = 8
@@ -169,7 +169,7 @@ class FleetRoster:
             self.refused.append(why)
 
     def separation(self, min_horizontal_m: float = MIN_HORIZONTAL_M, stale_s: float = STALE_S) -> Judgement:
-        """The fleet's separation now, on the members' last statuses (``fleet_separation``)."""
+        """The fleet's separation now, on the members' last statuses (``fleet.separation``)."""
         with self._lock:
             seen = dict(self._seen)
         return judge(self.members(), seen, time.monotonic(), min_horizontal_m, stale_s, self._lost_now())

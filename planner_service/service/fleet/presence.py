@@ -9,7 +9,7 @@ may lie closer than the larger of their ``min_layer_gap_m``. A service joining t
    another announce itself under that id at the same moment (step 3: zenoh.ext's publisher
    detection counts the announcement publishers of each vehicle; of two, one at most goes on);
 2. declares its announcement (an advanced publisher with a cache of one) and its token, and
-   follows the others' (``planner_service.fleet_roster``);
+   follows the others' (``planner_service.service.fleet.roster``);
 3. waits ``fleet.discovery_s`` for the mesh to tell it of every member, then for the
    announcements of the members it saw (at most ``discovery_s`` or ``ANNOUNCE_WAIT_S``, the
    longer: each normally comes within milliseconds of its token, so the wait costs nothing
@@ -19,7 +19,7 @@ may lie closer than the larger of their ``min_layer_gap_m``. A service joining t
    see the other in step 3 and both refuse: neither flies into the other's layer.
 
 Every message it puts on the fleet's keys is signed with its vehicle's key, and it reads only
-the enrolled vehicles' (``protocol.fleet_signing``; ``fleet_roster``): its announcement again
+the enrolled vehicles' (``protocol.fleet_signing``; ``fleet.roster``): its announcement again
 every ``ANNOUNCE_EVERY_S``, its position on each status (``publish_position``). What it
 ignores (not enrolled, unsigned, stale, replayed, beyond the bounds) is counted and logged.
 
@@ -43,10 +43,10 @@ from protocol.fleet_signing import FleetSigner, FleetVerifier
 from protocol.messages import FleetMember, encode
 from protocol.text import printable
 
-from ..fleet_ledger import FleetLedger
-from ..fleet_roster import ANNOUNCE_EVERY_S, LOST_S, MAX_LAYER_GAP_M, Change, FleetRoster
-from ..fleet_separation import MIN_HORIZONTAL_M, STALE_S, Judgement
-from .errors import ServiceError
+from .ledger import FleetLedger
+from .roster import ANNOUNCE_EVERY_S, LOST_S, MAX_LAYER_GAP_M, Change, FleetRoster
+from .separation import MIN_HORIZONTAL_M, STALE_S, Judgement
+from ..errors import ServiceError
 
 log = logging.getLogger("planner_service.fleet")
 HEARTBEAT_S = 1.0

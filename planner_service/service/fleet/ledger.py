@@ -4,11 +4,11 @@ several UAVs without a coordinator (docs/OPERATIONS.md, "A fleet"):
 - **intentions** (``{prefix}/fleet/intentions/{vehicle}``): on every plan, the users of the
   points still to fly and when each service should begin (wall clock), and its claims: the
   next point's user, and the user a hold serves from the moment it is bound (``bound``, a
-  typed claim that beats any plan's), as the offline ``claims`` planner commits (the rest of a plan may still
-  change, and claiming it would starve the others). A user several members claim belongs to
-  the earliest (ties: the smaller vehicle id); every
-  member computes the same from the same messages, and a member plans and binds only the
-  users no other live member owns. A member whose token goes loses its intentions at once:
+  typed claim that beats any plan's), and the points it holds and flies to next, as the
+  offline ``claims`` planner commits (the rest of a plan may still change, and claiming it
+  would starve the others). Who owns what several members claim is the one rule of
+  ``model.fleet.claims``, shared with the offline planner; a member plans and binds only the
+  users no other live member owns, and plans without the points the others claim. A member whose token goes loses its intentions at once:
   its users are planned by the others at their next decision (one interval).
 - **services** (``{prefix}/fleet/served/{vehicle}``): each service flown. The others count
   it as their own (``world.FleetWorld``): the user's backlog less what was served, its
@@ -43,6 +43,8 @@ from protocol import FleetKeys, ProtocolError
 from protocol.fleet_signing import FUTURE_S, FleetSigner, FleetVerifier, Unverified
 from protocol.messages import FleetIntentions, FleetServed, Intention, decode, encode
 
+from ...model.fleet.claims import BOUND, PLANNED, Claim, others_points, owned_by_others
+
 SERVED_CACHE = 256
 """Services each member keeps in its publisher's cache for members that join late."""
 HEARTBEAT_S = 1.0
@@ -69,31 +71,6 @@ INTENTIONS_MAX_AGE_S = 900.0
 publishes them on every plan and every binding."""
 SERVED_MAX_AGE_S = 3600.0
 """Services signed longer ago than this are refused (a sortie's flight)."""
-
-Claim = tuple[int, float]
-"""How a member claims a user: (0, when its hold was bound) beats every (1, planned due);
-among equals the earlier, then the smaller vehicle id."""
-BOUND = 0
-PLANNED = 1
-
-
-def owner(user: str, claims: Mapping[str, Mapping[str, Claim]]) -> str | None:
-    """The member that serves ``user`` (a bound claim before a planned one, then the earliest,
-    ties to the smaller vehicle id) of ``claims`` (vehicle -> user -> claim); None when no
-    member means to."""
-    dues = [(claim[user], vehicle) for vehicle, claim in claims.items() if user in claim]
-    return min(dues)[1] if dues else None
-
-
-def owned_by_others(own: str, claims: Mapping[str, Mapping[str, Claim]], alive: Iterable[str]) -> dict[str, str]:
-    """The users a live member other than ``own`` owns (``owner``), each with that member:
-    this member neither plans, binds nor records them."""
-    members = set(alive) | {own}
-    live = {v: d for v, d in claims.items() if v in members}
-    users = {u for v, d in live.items() if v != own for u in d}
-    owners = {u: owner(u, live) for u in users}
-    return {u: v for u, v in owners.items() if v is not None and v != own}
-
 
 def claims_refused(message: FleetIntentions, signed_at_s: float) -> str | None:
     """Why ``message`` (signed at ``signed_at_s``) claims more than its member can do, or None."""
@@ -225,10 +202,10 @@ class FleetLedger:
         """The hovering points this member plans without: those the other live members claim,
         and every point still to fly of a member gone with its vehicle armed (its vehicle
         flies its mission home: it keeps that airspace until its service is back)."""
-        alive, lost = set(self._alive()), set(self._lost()) - {self.vehicle}
+        lost = set(self._lost()) - {self.vehicle}
         with self._lock:
-            claimed = {k for v, ks in self._points.items() if v != self.vehicle and v in alive for k in ks}
-            return frozenset(claimed | {k for v in lost for k in self._routes.get(v, ())})
+            claimed = others_points(self.vehicle, self._points, self._alive())
+            return claimed | {k for v in lost for k in self._routes.get(v, ())}
 
     def claims(self) -> dict[str, dict[str, Claim]]:
         """Every member's last claims (vehicle -> user -> claim), live or not."""

@@ -1,0 +1,11 @@
+"""The live fleet: one service per UAV, one user space over a zenoh router mesh, nothing
+central (docs/OPERATIONS.md, "A fleet").
+
+- ``presence``: this service's membership (its token, its signed announcement, the layer rule
+  at join), and the separation watch on the members' signed positions;
+- ``roster``: who the members are (tokens with a fresh signed announcement), their layers
+  and last positions; ``separation``: the pure judge of a pair's separation;
+- ``ledger``: the members' intentions and services (signed, bounded), read and written;
+- the claim rule itself is ``planner_service.model.fleet.claims``, shared with the offline
+  ``claims`` planner.
+"""
