@@ -49,6 +49,9 @@ CONTEXT = "uavmec-fleet-1"
 """The first element of the signed text: a signature made for anything else never matches."""
 FUTURE_S = 5.0
 """How far a message's signed time may lie ahead of the reader's clock (clocks differ a little)."""
+CLOCK_WINDOW_S = 10.0
+"""A member's clock offset is judged on its messages heard within this long (several
+announcements and positions: the freshest of them tells)."""
 MAX_ENVELOPE_BYTES = 96 * 1024
 """The largest envelope read (an intentions message of 256 users fits many times)."""
 MAX_STREAMS = 4096
@@ -214,6 +217,25 @@ class FleetVerifier:
     ignored: int = 0
     _lock: threading.Lock = field(default_factory=threading.Lock, repr=False)
     """zenoh calls back on its own threads: the guard's memory is one."""
+    _ahead: dict[str, tuple[float, float]] = field(default_factory=dict, repr=False)
+    """vehicle -> (when, by how much) its clock read furthest ahead of this reader's within
+    ``CLOCK_WINDOW_S``: signed time less the reader's clock at arrival, over every message
+    its key signed (taken or refused for its time)."""
+
+    def clock_offset(self, vehicle: str, now_s: float) -> float | None:
+        """How far ``vehicle``'s clock reads ahead of this reader's (negative: behind), from
+        the freshest of its signed messages heard within ``CLOCK_WINDOW_S`` (a message's age
+        on the way only lowers the estimate, and a replayed one cannot raise it); None when
+        none was heard."""
+        with self._lock:
+            mark = self._ahead.get(vehicle)
+        return None if mark is None or mark[0] < now_s - CLOCK_WINDOW_S else mark[1]
+
+    def _clock(self, vehicle: str, t: float, now_s: float) -> None:
+        ahead = t - now_s
+        mark = self._ahead.get(vehicle)
+        if mark is None or mark[0] < now_s - CLOCK_WINDOW_S or ahead >= mark[1]:
+            self._ahead[vehicle] = (now_s, ahead)
 
     def count_ignored(self) -> None:
         """Count a message the caller refused after opening it (beyond its bounds)."""
@@ -248,5 +270,6 @@ class FleetVerifier:
             public.verify(bytes.fromhex(env.sig), signed_text(key_expr, env.vehicle, env.boot, env.seq, env.t, env.body))
         except InvalidSignature:
             raise Unverified(f"bad signature (not {vehicle}'s enrolled key)") from None
+        self._clock(vehicle, env.t, now_s)
         self.guard.check(key_expr, env.boot, env.seq, env.t, now_s, max_age_s, latest_wins)
         return env.body.encode("utf-8"), env.t

@@ -34,7 +34,8 @@ from .processes import Child, free_port
 from .report import sortie_summary
 
 LAYER_M = 20.0
-"""The layers' spacing: twice the services' default ``fleet.min_layer_gap_m``."""
+"""The layers' spacing: at least the services' default layer gap (``fleet.vertical_separation_m``
+10 m + ``fleet.altitude_margin_m`` 5 m), in round metres, as docs/OPERATIONS.md's examples."""
 BASE_STEP_M = 40.0
 """UAV j's home lies j times this east of the origin: twice ``fleet.min_horizontal_m``,
 since the UAVs climb through each other's layers above their homes."""

@@ -46,6 +46,7 @@ from .allocator import ARENAS, cap_arenas
 from .config import ServiceConfig
 from .errors import ConfigError, JournalError, LinkError, PlanningError
 from .event_loop import run_to_end
+from .fleet.airspace import layer_gap_m
 from .fleet.presence import FleetPresence
 from . import events as ev
 from .intake import Accepted, Intake, fairness_rule
@@ -59,6 +60,7 @@ from .planning import Planner, VehicleFix, after_hold, assemble, not_served_reas
 from .sortie import HeldMission, Rules, Sortie, SortieLogic, VehicleSnapshot, item_dict, new_sortie
 from .sortie import effects as fx
 from .sortie import inputs as ins
+from .sortie.fleet import Claims, FleetView
 from .supervisor import Supervisor
 from .throttle import RateLimit
 from .vehicle_view import VehicleView
@@ -138,8 +140,7 @@ class Service:
         self.view = VehicleView(self.scenario, self.origin, self.area)
         self._waiting_for = ""
         s = config.safety
-        self.world = JournalWorld(self.journal) if self.fleet is None else FleetWorld(self.journal,
-                                                                                      self.fleet.ledger.owners)
+        self.world = JournalWorld(self.journal) if self.fleet is None else FleetWorld(self.journal)
         self.logic = SortieLogic(Rules(
             scenario=self.scenario, origin=self.origin, area=self.area, flavour=self.flavour,
             start_mission=config.mavlink.start_mission, min_requests=config.planner.min_requests,
@@ -153,17 +154,11 @@ class Service:
         self.state = self._restore()
         self._plan_dues: dict[str, float] = {}
         """When this UAV's last plan means to serve each of its users (wall clock)."""
-        self._bound: tuple[str, float] | None = None
-        """The user a hold of this UAV serves now, and since when (wall clock)."""
-        self._next_user: str | None = None
-        """The user of this UAV's next point (its claim, with the bound one)."""
-        self._next_point: int | None = None
-        """This UAV's next hovering point (claimed, with its hold's)."""
+        self._bound_at: tuple[str, float] | None = None
+        """The user a hold of this UAV is bound to, and since when (wall clock)."""
         self._route: tuple[int, ...] = ()
         """The hovering points of the mission on board still to fly (its airspace if this
         service is lost while the vehicle flies)."""
-        self._taken: set[str] = set()
-        """The users another member owned at the last tick."""
         self.plan_msg: Plan | None = None
         if self.state.life.over:
             self.intake.closed_reason = self._closed_reason()
@@ -281,7 +276,6 @@ class Service:
     def _feed(self, event: ins.Input) -> None:
         before = self.state
         self.state, effects = self.logic.step(before, event, self._vehicle(), self.mono())
-        self._claim_binding(before)
         self._carry_out(before, effects)
 
     def _carry_out(self, before: Sortie, effects: list[fx.Effect]) -> None:
@@ -317,6 +311,8 @@ class Service:
                 self._event(event)
             case fx.PublishPlan(mission=mission, predicted_energy_j=energy):
                 self._publish_plan(mission, energy)
+            case fx.Intend(claims=claims):
+                self._tell_claims(claims)
             case fx.Log(level=level, text=text):
                 getattr(log, level)("%s", text)
             case fx.EndSortie(why=why):
@@ -351,7 +347,7 @@ class Service:
     async def _plan(self, basis: fx.PlanBasis) -> ins.Input:
         fix = self._planning_fix(basis)
         try:
-            pending = self.world.pending()
+            pending = [r for r in self.world.pending() if self.state.fleet.owner(r.user_id) is None]
             assembled = assemble(self.scenario, self._users(), pending, self.journal.services(), fix,
                                  self.state.schedule.last_hover_index)
         except JournalError as err:
@@ -361,7 +357,7 @@ class Service:
         newest = max((r.request_id for r in pending), default=0)
         t0 = time.perf_counter()
         try:
-            blocked = self.fleet.ledger.blocked_points() if self.fleet is not None else frozenset()
+            blocked = self.state.fleet.blocked
             _, path = await asyncio.get_running_loop().run_in_executor(self.executor, self.planner.decide, assembled,
                                                                        blocked)
         except Exception as err:  # noqa: BLE001 - a planner bug must not stop the sortie
@@ -445,16 +441,13 @@ class Service:
             self.fleet.ledger.served(e.user_id, e.tasks, self.wall())
 
     def _hear_fleet(self) -> None:
-        """Count the services the other members flew (docs/OPERATIONS.md, "A fleet")."""
+        """What the other members own and claim, fed to the sortie logic when it changed, and
+        the services they flew, counted (docs/OPERATIONS.md, "A fleet")."""
         if self.fleet is None or not isinstance(self.world, FleetWorld):
             return
-        taken = self.fleet.ledger.taken()
-        freed = self._taken - taken  # a member gone, or its plan changed: plan these users again
-        self._taken = taken
-        for user in sorted(freed):
-            row = self.world.request_for(user)
-            if row is not None:
-                self._feed(ins.RequestIn(user, row.backlog))
+        heard = FleetView(self.fleet.ledger.owners(), self.fleet.ledger.blocked_points())
+        if heard != self.state.fleet:
+            self._feed(ins.FleetHeard(heard))
         for done in self.fleet.ledger.take_served():
             held = self.world.count_remote(done.user_id, done.tasks)
             log.info("fleet: %s served %s %d tasks%s", done.vehicle, done.user_id, done.tasks,
@@ -634,47 +627,32 @@ class Service:
             log.error("plan %d: users' places not published: %s", held.plan_id, err)
             return
         self.intake.set_places(places)
-        self._intend(places, v.time_rate, ahead[0].hover_index if ahead else None,
-                     tuple(p.hover_index for p in ahead))
+        self._plan_dues = self._dues(places, v.time_rate)
+        self._route = tuple(p.hover_index for p in ahead)
+        self._tell_claims(self.state.claims)  # the dues and route are the plan's
         for message in messages:
             self.zio.publish(message)
 
-    def _intend(self, places: dict[str, Place], time_rate: float | None, next_point: int | None = None,
-                route: tuple[int, ...] = ()) -> None:
-        """Tell the fleet which users this plan means to serve and when (wall clock), and the
-        point it flies to next."""
-        self._next_point = next_point
-        self._route = route
+    def _dues(self, places: dict[str, Place], time_rate: float | None) -> dict[str, float]:
+        """When this plan means to serve each of its users (wall clock)."""
         now, rate = self.wall(), time_rate if time_rate and time_rate > 0 else 1.0
-        self._plan_dues = {u: now + p.eta_s / rate for u, p in places.items()}
-        self._next_user = next((u for u, p in places.items() if p.place == 1), None)
-        self._tell_intentions()
+        return {u: now + p.eta_s / rate for u, p in places.items()}
 
-    def _tell_intentions(self) -> None:
-        """The plan's users and, claimed from the moment it is bound, the user a hold serves
-        (the binding serves the nearest eligible user, which may not be the planned one): the
-        other members neither plan nor bind it from then on (docs/OPERATIONS.md, "A fleet")."""
+    def _tell_claims(self, claims: Claims) -> None:
+        """Put what the sortie logic claims (``fx.Intend``) in this member's signed intentions,
+        with the plan's dues and route; the moment a hold was bound is this computer's clock
+        when it was first told (docs/OPERATIONS.md, "A fleet")."""
         if self.fleet is None or not self.fleet.joined:
             return
-        due, now = dict(self._plan_dues), self.wall()
-        claims = {self._next_user} if self._next_user is not None else set()
-        points = {self._next_point} if self._next_point is not None else set()
-        if self._bound is not None:  # a hold under way beats any plan's estimate (a typed claim)
-            claims.discard(self._bound[0])
-            points.add(self.state.schedule.last_hover_index)
-        self.fleet.ledger.intend(due, now, claims, {k for k in points if k >= 0}, self._route, self._bound)
+        if claims.bound is None:
+            self._bound_at = None
+        elif self._bound_at is None or self._bound_at[0] != claims.bound:
+            self._bound_at = (claims.bound, self.wall())
+        users = {claims.next_user} - {None, claims.bound}
+        self.fleet.ledger.intend(dict(self._plan_dues), self.wall(), users, claims.points, self._route,
+                                 self._bound_at)
         if log.isEnabledFor(logging.DEBUG):  # the others' owners are worked out for the line alone
-            log.debug("fleet: intends %s; others own %s", {u: round(d - now, 2) for u, d in due.items()},
-                      sorted(self.fleet.ledger.taken()))
-
-    def _claim_binding(self, before: Sortie) -> None:
-        b = self.state.holds.binding
-        if b == before.holds.binding:
-            return
-        bound = b.user_id if b is not None and b.request_id is not None else None
-        if bound != (self._bound[0] if self._bound else None):
-            self._bound = None if bound is None else (bound, self.wall())
-            self._tell_intentions()
+            log.debug("fleet: claims %s; others own %s", claims, sorted(self.fleet.ledger.taken()))
 
     # --- failing loud -------------------------------------------------------------------------------
     def _on_failure(self, name: str, error: BaseException) -> None:
@@ -710,8 +688,8 @@ class Service:
         for rid, reason in reasons.items():
             self._event(ev.RequestRejected(f"not served: {reason}", request_id=rid))
         self.intake.closed_reason = self._closed_reason()
-        self._bound = None
-        self._intend({}, None)  # nothing more this sortie: the users are the others' to serve
+        self._plan_dues, self._route = {}, ()  # nothing more this sortie: the users are the others' to serve
+        self._tell_claims(self.state.claims)
         self._event(ev.Landed(f"sortie {self.state.life.number}: {why}"))
         log.info("sortie %d over: %s; %d services, %d requests not served", self.state.life.number, why,
                  len(self.journal.services()), len(reasons))
@@ -797,7 +775,8 @@ def fleet_presence(config: ServiceConfig) -> FleetPresence | None:
         return None
     o = config.origin_point()
     own = FleetMember(vehicle=config.zenoh.vehicle, layer_m=config.scenario().altitude_m,
-                      min_gap_m=config.fleet.min_layer_gap_m, origin_lat_deg=o.lat_deg, origin_lon_deg=o.lon_deg,
+                      min_gap_m=layer_gap_m(config.fleet.vertical_separation_m, config.fleet.altitude_margin_m),
+                      origin_lat_deg=o.lat_deg, origin_lon_deg=o.lon_deg,
                       origin_alt_m=o.alt_m, autopilot=config.mavlink.flavour)
     f = config.fleet
     if f.insecure and config.fleet_transport_open():
@@ -812,7 +791,8 @@ def fleet_presence(config: ServiceConfig) -> FleetPresence | None:
     if config.zenoh.vehicle not in verifier.roster:
         raise ConfigError("fleet.roster_file", f"{config.zenoh.vehicle} is not enrolled in {f.roster_file}")
     return FleetPresence(FleetKeys(config.zenoh.prefix), own, signer, verifier, f.min_horizontal_m,
-                         f.position_stale_s, f.max_layer_gap_m, f.lost_airspace_s)
+                         f.position_stale_s, f.max_layer_gap_m, f.lost_airspace_s,
+                         vertical_separation_m=f.vertical_separation_m, max_clock_offset_s=f.max_clock_offset_s)
 
 
 def run_service(config: ServiceConfig, on_stopped: Callable[[int], None] | None = None) -> int:

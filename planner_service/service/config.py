@@ -337,13 +337,22 @@ class MembershipConfig(Section):
 
     enabled: bool = False
     """Join the fleet: announce this UAV's layer and hold a member's token; refuse to start
-    when another member is this vehicle, or flies a layer within ``min_layer_gap_m``."""
-    min_layer_gap_m: float = setting(10.0, gt=0, unit="m")
-    """The least vertical distance between this UAV's layer and any other member's (the
-    larger of the two members' settings applies)."""
+    when another member is this vehicle, flies a layer within ``vertical_separation_m`` +
+    ``altitude_margin_m``, or has a clock more than ``max_clock_offset_s`` off."""
+    vertical_separation_m: float = setting(10.0, gt=0, unit="m")
+    """Two armed UAVs closer than this vertically, and closer than ``min_horizontal_m``
+    horizontally, have lost separation (judged on their own positions; logged as an error)."""
+    altitude_margin_m: float = setting(5.0, ge=0, unit="m")
+    """What two UAVs' altitude errors may add up to: layers are kept ``vertical_separation_m``
+    plus this apart (the larger of the two members' sums applies; docs/OPERATIONS.md)."""
     min_horizontal_m: float = setting(20.0, gt=0, unit="m")
-    """Two armed UAVs closer than this horizontally, and vertically closer than their layer
-    gap, have lost separation (judged on their own positions; logged as an error)."""
+    """Two armed UAVs closer than this horizontally, and vertically closer than
+    ``vertical_separation_m``, have lost separation."""
+    max_clock_offset_s: float = setting(2.0, gt=0, le=4.0, unit="s")
+    """How far another member's clock may read from this computer's: a service refuses to join
+    beside one further off, and logs an error when a member drifts beyond it (the members
+    compare signed times with their own clocks; 4 s at most: a message signed more than 5 s
+    ahead of a reader is refused)."""
     position_stale_s: float = setting(3.0, gt=0, unit="s")
     """A member's position older than this is unknown (logged): never taken as separated."""
     discovery_s: float = setting(3.0, gt=0, le=60.0, unit="s")
@@ -361,8 +370,8 @@ class MembershipConfig(Section):
     (``zenoh.config_file``): refused without this (any peer could then put what it likes on
     the fleet's keys; the signatures stop it speaking for a member, not reading or flooding)."""
     max_layer_gap_m: float = setting(100.0, gt=0, unit="m")
-    """A member announcing a ``min_layer_gap_m`` above this is refused and ignored (a gap of
-    1e9 m would bar every other member)."""
+    """A member announcing a layer gap above this is refused and ignored (a gap of 1e9 m would
+    bar every other member)."""
     lost_airspace_s: float = setting(1800.0, gt=0, unit="s")
     """How long a member gone with its vehicle armed keeps its airspace (its route, its
     unknown separation): at most a sortie's flight on one battery."""

@@ -16,7 +16,6 @@ also on record there.)
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
-from typing import Callable
 
 from .errors import JournalError
 from .journal import Journal
@@ -92,27 +91,18 @@ class JournalWorld:
 
 
 class FleetWorld(JournalWorld):
-    """A fleet member's view (docs/OPERATIONS.md, "A fleet"): the journal's, less the users
-    another live member owns (``fleet.claims.owned_by_others``: this member neither plans nor binds
-    them), with the other members' services counted as its own (``remote``): each takes
-    its tasks off the user's request in force here, as a service recorded here would."""
+    """A fleet member's view (docs/OPERATIONS.md, "A fleet"): the journal's, with the other
+    members' services counted as its own (``remote``): each takes its tasks off the user's
+    request in force here, as a service recorded here would. Who owns which user is not the
+    world's: the sortie logic hears it (``inputs.FleetHeard``) and judges by it."""
 
-    def __init__(self, journal: Journal, owners: Callable[[], dict[str, str]]) -> None:
+    def __init__(self, journal: Journal) -> None:
         super().__init__(journal)
-        self.owners = owners
-        """The users another live member owns, each with that member (``FleetLedger.owners``)."""
         self.remote: list[Unrecorded] = []
 
-    def taken(self) -> set[str]:
-        return set(self.owners())
-
     def served_elsewhere(self, user_id: str) -> str | None:
-        """Why a hold of this UAV that served ``user_id`` records nothing: another member
-        owns the user (it bound the user first: the user uploads to one UAV), or the other
-        members' services took the whole request in force while this hold lasted."""
-        other = self.owners().get(user_id)
-        if other is not None:
-            return f"{other} serves {user_id} (claimed it first)"
+        """Why a hold of this UAV that served ``user_id`` records nothing: the other members'
+        services took the whole request in force while this hold lasted."""
         row = self.journal.request_in_force(user_id)
         sortie = self.journal.sortie
         if row is not None and self._counted(row) is None and any(u.user_id == user_id and u.sortie == sortie
@@ -129,13 +119,3 @@ class FleetWorld(JournalWorld):
 
     def _now(self) -> list[Unrecorded]:
         return [u for u in (*self.unrecorded, *self.remote) if u.sortie == self.journal.sortie]
-
-    def request_for(self, user_id: str) -> RequestRow | None:
-        return None if user_id in self.taken() else super().request_for(user_id)
-
-    def pending_count(self) -> int:
-        return len(self.pending())
-
-    def pending(self) -> list[RequestRow]:
-        taken = self.taken()
-        return [r for r in super().pending() if r.user_id not in taken]

@@ -29,9 +29,12 @@ def test_too_close_within_the_layer_gap_is_a_loss_of_separation() -> None:
     assert judge(members, {"uav1": seen("uav1", 0, 0, 100), "uav2": seen("uav2", 12, 9, 112)}, 100.5).conflicts == ()
     ok = judge(members, {"uav1": seen("uav1", 0, 0, 100), "uav2": seen("uav2", 25, 0, 100)}, 100.5)
     assert ok.conflicts == () and ok.closest.startswith("uav1-uav2: 25 m apart")
-    # the larger gap of the two applies
+    # the vertical separation is the watcher's rule (fleet.vertical_separation_m), not the
+    # layer gap a member announces (the separation plus a margin for altitude errors)
     wide = {"uav1": member("uav1"), "uav2": member("uav2", gap_m=15.0)}
-    assert judge(wide, {"uav1": seen("uav1", 0, 0, 100), "uav2": seen("uav2", 5, 0, 112)}, 100.5).conflicts != ()
+    assert judge(wide, {"uav1": seen("uav1", 0, 0, 100), "uav2": seen("uav2", 5, 0, 112)}, 100.5).conflicts == ()
+    assert judge(wide, {"uav1": seen("uav1", 0, 0, 100), "uav2": seen("uav2", 5, 0, 112)}, 100.5,
+                 vertical_separation_m=15.0).conflicts != ()
     # a bound of one's own: 30 m
     assert judge(members, {"uav1": seen("uav1", 0, 0, 100), "uav2": seen("uav2", 25, 0, 100)}, 100.5,
                  min_horizontal_m=30.0).conflicts != ()

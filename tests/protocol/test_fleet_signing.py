@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 from protocol.errors import SigningError
-from protocol.fleet_signing import (FUTURE_S, FleetSigner, FleetVerifier, Unverified, load_private_key,
+from protocol.fleet_signing import (CLOCK_WINDOW_S, FUTURE_S, FleetSigner, FleetVerifier, Unverified, load_private_key,
                                     make_vehicle_key, read_roster)
 
 KEY = "pfx/fleet/served/uav1"
@@ -99,3 +99,24 @@ def test_a_reader_without_the_roster_may_peek_but_nothing_else_passes(
     assert unverified_body(signer.seal(KEY, b'{"x": 1}', 1.0)) == b'{"x": 1}'
     with pytest.raises(Unverified):
         unverified_body(b'{"kind": "fleet_served"}')
+
+
+def test_a_members_clock_offset_is_read_from_what_its_key_signed(fleet: tuple[FleetSigner, FleetVerifier, Path]) -> None:
+    """The freshest message signed within the window tells how far ahead a member's clock
+    reads, refused or not for its time; an old one replayed cannot raise it, a forged one
+    (not its key) says nothing."""
+    signer, verifier, folder = fleet
+    assert verifier.clock_offset("uav1", 1000.0) is None
+    with pytest.raises(Unverified, match="future"):  # 7 s ahead: refused, and measured
+        verifier.open(KEY, "uav1", signer.seal(KEY, b"{}", 1007.0), 1000.0, 60.0)
+    assert verifier.clock_offset("uav1", 1000.0) == pytest.approx(7.0)
+    with pytest.raises(Unverified, match="stale"):
+        verifier.open(KEY, "uav1", signer.seal(KEY, b"{}", 900.0), 1001.0, 60.0)
+    assert verifier.clock_offset("uav1", 1001.0) == pytest.approx(7.0)  # the freshest tells
+    thief = FleetSigner("uav1", load_private_key(folder / "uav2.key"))
+    with pytest.raises(Unverified, match="bad signature"):
+        verifier.open(KEY, "uav1", thief.seal(KEY, b"{}", 1100.0), 1001.0, 60.0)
+    assert verifier.clock_offset("uav1", 1001.0) == pytest.approx(7.0)
+    assert verifier.clock_offset("uav1", 1000.0 + CLOCK_WINDOW_S + 1) is None  # heard too long ago
+    verifier.open(KEY, "uav1", signer.seal(KEY, b"{}", 1019.0), 1020.0, 60.0)
+    assert verifier.clock_offset("uav1", 1020.0) == pytest.approx(-1.0)

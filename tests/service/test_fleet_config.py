@@ -8,9 +8,11 @@ import subprocess
 import sys
 from pathlib import Path
 
+import msgspec
 import pytest
 
 from planner_service.service.app import fleet_presence
+from planner_service.service.fleet.presence import layer_clashes
 from planner_service.service.config import build_config
 from planner_service.service.errors import ConfigError
 from protocol.fleet_signing import read_roster
@@ -54,3 +56,20 @@ def test_fleet_key_enrols_a_vehicle(tmp_path: Path) -> None:
     assert list(read_roster(tmp_path / "roster")) == ["uav1"]
     again = subprocess.run(run, capture_output=True, text=True, timeout=60)
     assert again.returncode == 2 and "already" in again.stderr
+
+
+def test_the_default_layers_keep_a_margin_over_the_vertical_separation(tmp_path: Path) -> None:
+    """Issue 35, finding 2: section 11's layers 10 m apart sat on the 10 m separation rule
+    itself (stacked SITL copters 9.98-10.04 m apart: losses of separation the layers were to
+    rule out). With the defaults a layer 10 m from a member's is refused; 15 m is the least."""
+    settings = {"fleet.enabled": "true", **fleet_settings(enrol(tmp_path, ["uav1"])), "scenario.altitude_m": "90"}
+    presence = fleet_presence(build_config({}, settings))
+    assert presence is not None and presence.own.min_gap_m == 15.0
+    assert presence.vertical_separation_m == 10.0
+    at = {"uav2": msgspec.structs.replace(presence.own, vehicle="uav2", layer_m=80.0)}
+    assert layer_clashes(presence.own, at) == [
+        "uav2 flies at 80 m, within 15 m of this UAV's layer 90 m (fleet.vertical_separation_m + "
+        "fleet.altitude_margin_m)"]
+    assert layer_clashes(presence.own, {"uav2": msgspec.structs.replace(at["uav2"], layer_m=75.0)}) == []
+    wide = fleet_presence(build_config({}, {**settings, "fleet.altitude_margin_m": "10"}))
+    assert wide is not None and wide.own.min_gap_m == 20.0

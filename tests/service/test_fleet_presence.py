@@ -17,7 +17,7 @@ import zenoh
 from planner_service.service.fleet.roster import FleetRoster
 from planner_service.operator_view import WatchView, render
 from planner_service.harness.processes import free_port
-from planner_service.service.fleet.presence import MembershipError, FleetPresence, layer_clashes
+from planner_service.service.fleet.presence import MembershipError, FleetPresence, clock_clashes, layer_clashes
 from protocol import FleetKeys, Keys, ProtocolError, Status, encode
 from protocol.zenoh_config import session_config
 from tests.support.fleet import member, presence, put_position, verifier, wait_until
@@ -267,3 +267,39 @@ def test_the_operators_view_shows_each_live_members_claims() -> None:
     (claims,) = [line for line in lines if line.startswith("claims")]
     assert claims.startswith("claims     uav1 u-3; uav2 u-7, u")
     assert "uav9" not in claims and "\x1b" not in claims
+
+
+def test_a_member_whose_clock_is_far_off_bars_a_join_and_one_close_does_not(mesh: Callable[[], Any]) -> None:
+    """Issue 35, finding 3: the members compare signed times with their own clocks (the claims'
+    bounds, the positions' age, a message from more than 5 s ahead refused), and nothing said
+    the clocks must agree: a member 7 s ahead had every message refused, so a service joining
+    beside it saw a token with no announcement (no member) and flew beside an unknown one. Now
+    it refuses, naming the clock; 1.5 s off (within fleet.max_clock_offset_s, 2 s) joins."""
+    ahead = presence(KEYS, member("uav1", 100.0), wall=lambda: time.time() + 7.0)
+    ahead.join(mesh(), DISCOVERY_S)
+    joiner = presence(KEYS, member("uav2", 150.0))
+    try:
+        with pytest.raises(MembershipError) as refused:
+            joiner.join(mesh(), DISCOVERY_S)
+        assert "uav1's clock reads 7.0 s ahead of this computer's (at most 2 s, fleet.max_clock_offset_s)" in str(
+            refused.value), refused.value
+        assert not joiner.joined
+    finally:
+        ahead.leave()
+    close = presence(KEYS, member("uav3", 100.0), wall=lambda: time.time() - 1.5)
+    close.join(mesh(), DISCOVERY_S)
+    fine = presence(KEYS, member("uav4", 150.0))
+    try:
+        fine.join(mesh(), DISCOVERY_S)
+        assert fine.joined and set(fine.members()) == {"uav3", "uav4"}
+    finally:
+        fine.leave()
+        close.leave()
+
+
+def test_a_clock_is_judged_surely_off_only() -> None:
+    """Ahead, a member's clock reads at least what its freshest message shows; behind, up to a
+    message's age (its announcement signed every 2 s) less: only a sure excess is refused."""
+    said = clock_clashes({"uav1": 2.5, "uav2": -4.0, "uav3": -5.5, "uav4": None, "uav5": 1.9}, 2.0)
+    assert [s.split("'", 1)[0] for s in said] == ["uav1", "uav3"], said
+    assert "uav3's clock reads 3.0 s behind" in said[1]

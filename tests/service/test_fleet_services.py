@@ -48,21 +48,23 @@ def test_a_service_in_another_members_layer_refuses_to_start(stack: Stack, tmp_p
     first = stack.service(**FLEET)  # uav1 at the preset's 100 m
     stack.wait_log(first, "fleet: joined as uav1, layer 100 m", 10.0)
 
-    clash = second_service(stack, tmp_path / "clash", 105.0)
+    # 10 m above: on the 10 m vertical separation itself, no margin (issue 35, finding 2)
+    clash = second_service(stack, tmp_path / "clash", 110.0)
     assert wait_exit(clash, 60.0) == 1
-    assert "error: fleet: uav1 flies at 100 m, within 10 m of this UAV's layer 105 m" in clash.log()
+    assert ("error: fleet: uav1 flies at 100 m, within 15 m of this UAV's layer 110 m (fleet.vertical_separation_m "
+            "+ fleet.altitude_margin_m)") in clash.log()
     assert "ready:" not in clash.log()
 
-    other = second_service(stack, tmp_path / "other", 110.0)
+    other = second_service(stack, tmp_path / "other", 115.0)
     other.wait_ready("ready:", 60.0)
-    assert "fleet: joined as uav2, layer 110 m; uav1 at 100 m" in other.log()
-    stack.wait_log(first, "fleet: uav2 announced layer 110 m", 10.0)
+    assert "fleet: joined as uav2, layer 115 m; uav1 at 100 m" in other.log()
+    stack.wait_log(first, "fleet: uav2 announced layer 115 m", 10.0)
     watch = subprocess.run([sys.executable, "-m", "planner_service", "operator", "watch", "--once", "--plain",
                             "--connect", stack.endpoint, "--operator-key", str(stack.operator_key_path),
                             "--fleet-roster", str(ROSTER)],
                            capture_output=True, text=True, timeout=60)
     assert watch.returncode == 0, watch.stderr
-    assert "fleet      2 members: uav1 100 m (this), uav2 110 m" in watch.stdout, watch.stdout
+    assert "fleet      2 members: uav1 100 m (this), uav2 115 m" in watch.stdout, watch.stdout
     # both on the ground (uav2's vehicle not even there), each position from its own status
     assert "separation ok" in watch.stdout, watch.stdout
     other.proc.send_signal(signal.SIGKILL)  # as a companion computer that dies: no goodbye

@@ -18,7 +18,7 @@ from planner_service.harness.processes import Child, free_port
 from planner_service.service.config import OriginConfig, build_config, to_toml
 from planner_service.model.fleet.claims import Claim
 from planner_service.service.fleet.ledger import claims_of
-from protocol import FleetKeys, GeoOrigin, local_to_global
+from protocol import Event, FleetKeys, GeoOrigin, ProtocolError, local_to_global
 from protocol.fleet_signing import FleetVerifier, Unverified, make_vehicle_key, read_roster
 from protocol.messages import FleetIntentions, decode
 from protocol.zenoh_config import session_config
@@ -78,9 +78,44 @@ class Intentions:
             last = {m.vehicle: m for _, m in self.seen}
         return {v: claims_of(m) for v, m in last.items()}
 
+    def said(self, vehicle: str) -> list[FleetIntentions]:
+        """Every intentions message of ``vehicle``, in the order they arrived."""
+        with self._lock:
+            return [m for _, m in self.seen if m.vehicle == vehicle]
+
     def since(self, vehicle: str, t: float) -> list[tuple[float, set[str]]]:
         with self._lock:
             return [(at, {i.user_id for i in m.users}) for at, m in self.seen if m.vehicle == vehicle and at >= t]
+
+    def close(self) -> None:
+        self._sub.undeclare()
+        self.session.close()
+
+
+class Arrivals:
+    """Every member's arrivals at its points, from its own events (``waypoint_reached``, stamped
+    with its service's wall clock, the clock of its intentions' ``time_s``)."""
+
+    def __init__(self, endpoint: str, prefix: str = "uavmec") -> None:
+        self.session = zenoh.open(session_config("client", connect=[endpoint]))
+        self.seen: list[tuple[str, int, float]] = []
+        """(vehicle, hovering point, time_s) of each arrival."""
+        self._lock = threading.Lock()
+        self._sub = self.session.declare_subscriber(f"{prefix}/*/events", self._on)
+
+    def _on(self, sample: Any) -> None:
+        try:
+            event = decode(sample.payload.to_bytes(), Event)
+        except ProtocolError:
+            return
+        head = event.detail.split(":", 1)[0]
+        if event.event == "waypoint_reached" and head.startswith("point ") and head[6:].isdigit():
+            with self._lock:
+                self.seen.append((str(sample.key_expr).split("/")[1], int(head[6:]), event.time_s))
+
+    def of(self, vehicle: str) -> list[tuple[int, float]]:
+        with self._lock:
+            return [(k, t) for v, k, t in self.seen if v == vehicle]
 
     def close(self) -> None:
         self._sub.undeclare()

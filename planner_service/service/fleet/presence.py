@@ -2,7 +2,8 @@
 and the separation rule checked before it takes a request or commands its vehicle.
 
 Each UAV flies its own altitude layer (its scenario's ``altitude_m``); no two members' layers
-may lie closer than the larger of their ``min_layer_gap_m``. A service joining the fleet:
+may lie closer than the larger of their layer gaps (``airspace.layer_gap_m``: the vertical
+separation plus a margin for altitude errors). A service joining the fleet:
 
 1. asks which tokens are alive: another service already a member under its own vehicle id is
    refused (two services for one vehicle would both command it), and so is one that sees
@@ -15,8 +16,12 @@ may lie closer than the larger of their ``min_layer_gap_m``. A service joining t
    longer: each normally comes within milliseconds of its token, so the wait costs nothing
    unless one is missing, and a loaded computer is not taken for a missing layer);
 4. refuses to go on when a member's layer is too close to its own (a token with no signed,
-   fresh announcement is no member: anyone may declare a token). Two services started at once with one layer both
-   see the other in step 3 and both refuse: neither flies into the other's layer.
+   fresh announcement is no member: anyone may declare a token), or when an enrolled
+   vehicle's clock reads more than ``fleet.max_clock_offset_s`` from this computer's (its
+   signed times: the bounds on claims, the freshness of positions and the ownership of a
+   user all read the signed times against the reader's clock). Two services started at once
+   with one layer both see the other in step 3 and both refuse: neither flies into the
+   other's layer.
 
 Every message it puts on the fleet's keys is signed with its vehicle's key, and it reads only
 the enrolled vehicles' (``protocol.fleet_signing``; ``fleet.roster``): its announcement again
@@ -44,8 +49,9 @@ from protocol.messages import FleetMember, encode
 from protocol.text import printable
 
 from .ledger import FleetLedger
+from .airspace import MIN_HORIZONTAL_M, VERTICAL_SEPARATION_M
 from .roster import ANNOUNCE_EVERY_S, LOST_S, MAX_LAYER_GAP_M, Change, FleetRoster
-from .separation import MIN_HORIZONTAL_M, STALE_S, Judgement
+from .separation import STALE_S, Judgement
 from ..errors import ServiceError
 
 log = logging.getLogger("planner_service.fleet")
@@ -57,6 +63,12 @@ ANNOUNCE_WAIT_S = 5.0
 """Seconds a joining service waits at least for the announcements of the members it saw."""
 IGNORED_LOG_EVERY_S = 10.0
 """The count of fleet messages ignored is logged at most this often (a flood is one line)."""
+MAX_CLOCK_OFFSET_S = 2.0
+"""How far another member's clock may read from this computer's (``fleet.max_clock_offset_s``)."""
+MESSAGE_AGE_S = ANNOUNCE_EVERY_S + 0.5
+"""How old the freshest signed message of a member may be when it arrives (its announcement
+is signed every ``ANNOUNCE_EVERY_S``; a joining service may hear nothing fresher), which a
+clock offset measured on it does not show."""
 
 
 class MembershipError(ServiceError):
@@ -76,7 +88,23 @@ def layer_clashes(own: FleetMember, others: Mapping[str, FleetMember | None]) ->
         gap = max(own.min_gap_m, member.min_gap_m)
         if abs(own.layer_m - member.layer_m) < gap:
             out.append(f"{vehicle} flies at {member.layer_m:g} m, within {gap:g} m of this UAV's layer "
-                       f"{own.layer_m:g} m (fleet.min_layer_gap_m)")
+                       f"{own.layer_m:g} m (fleet.vertical_separation_m + fleet.altitude_margin_m)")
+    return out
+
+
+def clock_clashes(offsets: Mapping[str, float | None], max_offset_s: float) -> list[str]:
+    """Why this service may not fly beside the vehicles whose clocks read ``offsets`` ahead of
+    its own (None: nothing signed heard of it; ``FleetVerifier.clock_offset``): one sentence
+    per vehicle surely too far off. An offset is measured on the freshest signed message,
+    whose age on the way lowers it by up to ``MESSAGE_AGE_S``: ahead, it is at least what is
+    measured; behind, it may be that much less than measured."""
+    out = []
+    for vehicle, offset in sorted(offsets.items()):
+        if offset is None or -max_offset_s - MESSAGE_AGE_S <= offset <= max_offset_s:
+            continue
+        way, by = ("ahead of", offset) if offset > 0 else ("behind", -offset - MESSAGE_AGE_S)
+        out.append(f"{vehicle}'s clock reads {by:.1f} s {way} this computer's (at most {max_offset_s:g} s, "
+                   f"fleet.max_clock_offset_s): synchronise the clocks (NTP, chrony)")
     return out
 
 
@@ -86,13 +114,18 @@ class FleetPresence:
     def __init__(self, keys: FleetKeys, own: FleetMember, signer: FleetSigner, verifier: FleetVerifier,
                  min_horizontal_m: float = MIN_HORIZONTAL_M, stale_s: float = STALE_S,
                  max_gap_m: float = MAX_LAYER_GAP_M, lost_s: float = LOST_S,
-                 wall: Callable[[], float] = time.time) -> None:
+                 wall: Callable[[], float] = time.time, *,
+                 vertical_separation_m: float = VERTICAL_SEPARATION_M,
+                 max_clock_offset_s: float = MAX_CLOCK_OFFSET_S) -> None:
         self.keys = keys
         self.own = own
         self.signer = signer
         """This vehicle's key: every fleet message it puts is signed."""
         self.min_horizontal_m = min_horizontal_m
+        self.vertical_separation_m = vertical_separation_m
+        self.max_clock_offset_s = max_clock_offset_s
         self.stale_s = stale_s
+        self._clocks_said: set[str] = set()
         self._wall = wall
         self._conflicts: set[str] = set()
         self._unknown: set[str] = set()
@@ -130,7 +163,7 @@ class FleetPresence:
         self._token = session.liveliness().declare_token(self.keys.member(v))
         time.sleep(discovery_s)
         self.roster.settle(max(discovery_s, ANNOUNCE_WAIT_S))
-        clashes = layer_clashes(self.own, self._others())
+        clashes = layer_clashes(self.own, self._others()) + clock_clashes(self._clock_offsets(), self.max_clock_offset_s)
         if self.roster.publishers(v) > 1:  # started at the same moment under one id
             clashes.insert(0, f"another service announces itself as vehicle {v} too; one service per UAV")
         if clashes:
@@ -172,6 +205,20 @@ class FleetPresence:
                         "beyond the bounds); the latest: %s", count - seen, printable(latest, 200))
             self._ignored_logged = (now, count)
 
+    def _clock_offsets(self) -> dict[str, float | None]:
+        """How far each other enrolled vehicle with a live token reads ahead of this clock."""
+        now = self._wall()
+        return {k: self.roster.verifier.clock_offset(k, now) for k in self.roster.tokens() if k != self.own.vehicle}
+
+    def _log_clocks(self) -> None:
+        """Say once (an error) when a member's clock has drifted beyond the bound, and when it is back."""
+        off = {c.split("'", 1)[0]: c for c in clock_clashes(self._clock_offsets(), self.max_clock_offset_s)}
+        for vehicle in sorted(off.keys() - self._clocks_said):
+            log.error("fleet: %s", printable(off[vehicle], 200))
+        for vehicle in sorted(self._clocks_said - off.keys()):
+            log.warning("fleet: %s's clock within fleet.max_clock_offset_s again", printable(vehicle, 64))
+        self._clocks_said = set(off)
+
     def _others(self) -> dict[str, FleetMember | None]:
         return {k: m for k, m in self.roster.members().items() if k != self.own.vehicle}
 
@@ -197,12 +244,13 @@ class FleetPresence:
         """Judge the fleet's separation now and log what changed: a pair that lost it (an
         error), a pair that has it again, a member whose position became unknown or known."""
         self._log_ignored()
-        j = self.roster.separation(self.min_horizontal_m, self.stale_s)
+        self._log_clocks()
+        j = self.roster.separation(self.min_horizontal_m, self.stale_s, self.vertical_separation_m)
         conflicts = {c.split(":", 1)[0]: c for c in j.conflicts}
         unknown = {u.split(":", 1)[0]: u for u in j.unknown}
         for pair in sorted(conflicts.keys() - self._conflicts):
-            log.error("fleet: SEPARATION LOST %s (fleet.min_horizontal_m %g)",
-                      printable(conflicts[pair], 200), self.min_horizontal_m)
+            log.error("fleet: SEPARATION LOST %s (fleet.min_horizontal_m %g, fleet.vertical_separation_m %g)",
+                      printable(conflicts[pair], 200), self.min_horizontal_m, self.vertical_separation_m)
         for pair in sorted(self._conflicts - conflicts.keys()):
             log.warning("fleet: separation back for %s", printable(pair, 140))
         for vehicle in sorted(unknown.keys() - self._unknown):

@@ -41,7 +41,8 @@ from protocol import FleetKeys, ProtocolError, Status
 from protocol.fleet_signing import FleetVerifier, Unverified
 from protocol.messages import FleetMember, decode
 
-from .separation import MIN_HORIZONTAL_M, STALE_S, Judgement, Seen, judge
+from .airspace import MIN_HORIZONTAL_M, VERTICAL_SEPARATION_M
+from .separation import STALE_S, Judgement, Seen, judge
 
 SETTLE_POLL_S = 0.02
 MAX_PUBLISHERS_KEPT = 8
@@ -168,11 +169,19 @@ class FleetRoster:
         with self._lock:
             self.refused.append(why)
 
-    def separation(self, min_horizontal_m: float = MIN_HORIZONTAL_M, stale_s: float = STALE_S) -> Judgement:
+    def separation(self, min_horizontal_m: float = MIN_HORIZONTAL_M, stale_s: float = STALE_S,
+                   vertical_separation_m: float = VERTICAL_SEPARATION_M) -> Judgement:
         """The fleet's separation now, on the members' last statuses (``fleet.separation``)."""
         with self._lock:
             seen = dict(self._seen)
-        return judge(self.members(), seen, time.monotonic(), min_horizontal_m, stale_s, self._lost_now())
+        return judge(self.members(), seen, time.monotonic(), min_horizontal_m, stale_s, self._lost_now(),
+                     vertical_separation_m)
+
+    def tokens(self) -> list[str]:
+        """The enrolled vehicles whose member token is alive (members or not: a token counts
+        as a member only with a fresh signed announcement)."""
+        with self._lock:
+            return sorted(self._alive)
 
     def lost(self) -> list[str]:
         """The members gone while their vehicles were armed (not back yet, and last seen

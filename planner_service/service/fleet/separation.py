@@ -2,9 +2,9 @@
 
 Each member publishes its vehicle's position as its autopilot reports it (``status``: metres
 east, north and up of its own origin, which its announcement names); here they are put in
-one frame and every pair of armed vehicles is judged: closer than ``min_horizontal_m``
-horizontally while within the larger of their layer gaps vertically is a loss of
-separation. A member whose position is not known or is stale is reported as such: unknown
+one frame and every pair of armed vehicles is judged by the fleet's one rule
+(``airspace.separation_lost``: closer than ``min_horizontal_m`` horizontally while closer than
+``vertical_separation_m`` vertically). A member whose position is not known or is stale is reported as such: unknown
 is never "separated". Vehicles on the ground and disarmed are not judged (they stand at
 their homes, which may lie close together).
 
@@ -22,8 +22,7 @@ from typing import Mapping
 from protocol import GeoOrigin, Status, global_to_local, local_to_global
 from protocol.messages import FleetMember
 
-MIN_HORIZONTAL_M = 20.0
-"""Two UAVs within one layer must stay this far apart horizontally (``fleet.min_horizontal_m``)."""
+from .airspace import MIN_HORIZONTAL_M, VERTICAL_SEPARATION_M, separation_lost
 STALE_S = 3.0
 """A position older than this (seconds since its status arrived) is not known
 (``fleet.position_stale_s``): the status comes at 2 Hz or more."""
@@ -51,14 +50,15 @@ class Judgement:
 
 def judge(members: Mapping[str, FleetMember | None], seen: Mapping[str, Seen], now_s: float,
           min_horizontal_m: float = MIN_HORIZONTAL_M, stale_s: float = STALE_S,
-          lost: Mapping[str, Seen] | None = None) -> Judgement:
+          lost: Mapping[str, Seen] | None = None,
+          vertical_separation_m: float = VERTICAL_SEPARATION_M) -> Judgement:
     """The separation of ``members`` (alive, with their announcements) from the statuses
     ``seen`` of each, at ``now_s``; ``lost``: the last statuses, armed, of members whose
     service is gone."""
     unknown = [f"{vehicle}: its service is gone; its vehicle was armed when last seen "
                f"{now_s - last.at_s:.0f} s ago" for vehicle, last in sorted((lost or {}).items())
                if vehicle not in members]
-    where: dict[str, tuple[float, float, float, float]] = {}
+    where: dict[str, tuple[float, float, float]] = {}
     frame: GeoOrigin | None = None
     for vehicle, member in sorted(members.items()):
         last = seen.get(vehicle)
@@ -75,14 +75,14 @@ def judge(members: Mapping[str, FleetMember | None], seen: Mapping[str, Seen], n
         frame = frame or origin
         s = last.status
         x, y, z = global_to_local(frame, *local_to_global(origin, s.x_m, s.y_m, s.z_m))
-        where[vehicle] = (x, y, z, member.min_gap_m)
+        where[vehicle] = (x, y, z)
     conflicts, closest = [], ""
     best = float("inf")
     for (a, pa), (b, pb) in combinations(sorted(where.items()), 2):
         horizontal = ((pa[0] - pb[0]) ** 2 + (pa[1] - pb[1]) ** 2) ** 0.5
         vertical = abs(pa[2] - pb[2])
         text = f"{a}-{b}: {horizontal:.0f} m apart horizontally, {vertical:.0f} m vertically"
-        if horizontal < min_horizontal_m and vertical < max(pa[3], pb[3]):
+        if separation_lost(horizontal, vertical, min_horizontal_m, vertical_separation_m):
             conflicts.append(text)
         if horizontal < best:
             best, closest = horizontal, text

@@ -11,6 +11,7 @@ from protocol import MissionItem
 
 from ..events import ServiceEvent
 from ..planning import PlannedPath, PlannedPoint
+from .fleet import Claims
 from .mission import HeldMission
 
 
@@ -110,6 +111,14 @@ class PublishPlan:
 
 
 @dataclass(frozen=True)
+class Intend:
+    """Tell the fleet what this member claims now (its points and their users): the service
+    of a fleet member puts it in its signed intentions; a lone UAV's does nothing."""
+
+    claims: Claims
+
+
+@dataclass(frozen=True)
 class Log:
     level: Literal["info", "warning", "error"]
     text: str
@@ -131,5 +140,5 @@ class MarkFlown:
     still ends it)."""
 
 
-Effect = (MakePlan | Upload | ReadBack | Command | RecordService | RecordMission | Emit | PublishPlan | Log | EndSortie
-          | BeginSortie | MarkFlown)
+Effect = (MakePlan | Upload | ReadBack | Command | RecordService | RecordMission | Emit | PublishPlan | Intend | Log
+          | EndSortie | BeginSortie | MarkFlown)

@@ -17,6 +17,7 @@ from ..link.events import (ArmedChanged, Connected, Current, OnGround, LinkEvent
 from ..planning import PlannedPath
 from ..rows import RequestRow
 from .effects import Command, PlanBasis, Upload
+from .fleet import FleetView
 
 
 @dataclass(frozen=True)
@@ -173,10 +174,19 @@ class WarmedUp:
     """The planner's kernels are compiled (or loaded from numba's cache): plans may begin."""
 
 
-Input = (Tick | LinkEvent | Planned | PlanFailed | Uploaded | NotUploaded | ReadBackDone | ReadBackFailed | CommandDone
-         | CommandNotDone | RequestIn | OperatorAsked | SortieBegun | PartFailed | WarmedUp)
+@dataclass(frozen=True)
+class FleetHeard:
+    """What the other members of a fleet own and claim changed (their signed intentions, a
+    member come or gone): the users this member may not plan nor bind, the points it plans
+    without."""
 
-__all__ = ["ArmedChanged", "CommandDone", "CommandNotDone", "Connected", "Current", "Input", "JournalView",
+    view: FleetView
+
+
+Input = (Tick | LinkEvent | Planned | PlanFailed | Uploaded | NotUploaded | ReadBackDone | ReadBackFailed | CommandDone
+         | CommandNotDone | RequestIn | OperatorAsked | SortieBegun | PartFailed | WarmedUp | FleetHeard)
+
+__all__ = ["ArmedChanged", "CommandDone", "CommandNotDone", "Connected", "Current", "FleetHeard", "Input", "JournalView",
            "LinkEvent", "Lost", "ModeChanged", "NotUploaded", "OnGround", "OperatorAsked", "PartFailed", "PlanFailed",
            "Planned", "PositionChanged", "Reached", "ReadBackDone", "ReadBackFailed", "RequestIn", "Restarted",
            "Restored", "SortieBegun", "StatusText", "TelemetryMissing", "Tick", "Uploaded", "VehicleSnapshot"]

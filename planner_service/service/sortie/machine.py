@@ -42,6 +42,7 @@ from ...model import Scenario, hover_points, pack
 from ...model.reward import interval_reward
 from ..errors import PlanningError
 from ..link.base import HOLDING_MODES, MISSION_MODES, RETURNING_MODES
+from ...model.fleet.claims import lost_points
 from ...model.interval import NO_USER, return_energy_j, served_user
 from ..planning import PlannedPath, PlannedPoint, check_path, first_steps, hold_time_s, planning_battery_j
 from ..rows import RequestRow
@@ -50,6 +51,7 @@ from . import effects as fx
 from . import inputs as ins
 from .authority import Authority, next_sortie
 from .evidence import Evidence, Settled, judge
+from .fleet import Claims, FleetView, claims_now
 from .hold import HoldWatch, Sample
 from .holds import Binding, Holds
 from .life import Life
@@ -140,6 +142,10 @@ class Sortie:
     """What is in flight and when the next may go (``schedule.py``)."""
     evidence: Evidence = field(default_factory=Evidence)
     """What the vehicle's reports say of whose mission it flies (``evidence.py``)."""
+    fleet: FleetView = field(default_factory=FleetView)
+    """What the other members of a fleet own and claim, as last heard (``fleet.py``)."""
+    claims: Claims = field(default_factory=Claims)
+    """What this member last told the fleet it claims (``fleet.py``)."""
 
 
 Step = tuple[Sortie, list[fx.Effect]]
@@ -227,11 +233,42 @@ class SortieLogic:
                 return s, out
             case ins.StatusText() | ins.TelemetryMissing():
                 return s, out  # the link logs them; what they change shows in its telemetry
+            case ins.FleetHeard(view=view):
+                s = self._heard(s, view)
             case _:
                 assert_never(event)
         if not isinstance(event, ins.Tick):
             s = self._next(s, v, now, out)
-        return s, out
+        return self._intend(s, v, out), out
+
+    # --- the fleet ------------------------------------------------------------------------------
+    def _heard(self, s: Sortie, view: FleetView) -> Sortie:
+        """The other members' claims changed: users another member no longer owns are this
+        member's to plan again (a member gone, a plan changed), and a point this member flies
+        to that another now claims is given up at the next decision (``_plan_wanted``)."""
+        freed = set(s.fleet.owners) - set(view.owners)
+        s = replace(s, fleet=view)
+        if freed:
+            s = replace(s, schedule=s.schedule.request_in(self.rules.backoff))
+        return s
+
+    def _intend(self, s: Sortie, v: ins.VehicleSnapshot, out: list[fx.Effect]) -> Sortie:
+        """Tell the fleet what this member claims whenever it changes (``fleet.claims_now``):
+        the point it flies to from the moment its mission is on board, the point it holds."""
+        held = s.onboard.held if s.onboard.known else None
+        claims = claims_now(held, s.holds, v.seq, s.life.homing or s.life.over is not None)
+        if claims == s.claims:
+            return s
+        out.append(fx.Intend(claims))
+        return replace(s, claims=claims)
+
+    def _pending(self, s: Sortie) -> list[RequestRow]:
+        """The requests pending here that no other member owns."""
+        return [r for r in self.world.pending() if s.fleet.owner(r.user_id) is None]
+
+    def _request_for(self, s: Sortie, user_id: str) -> RequestRow | None:
+        """``user_id``'s request in force here, unless another member owns the user."""
+        return None if s.fleet.owner(user_id) is not None else self.world.request_for(user_id)
 
     # --- the periodic look at the vehicle --------------------------------------------------------
     def _tick(self, s: Sortie, v: ins.VehicleSnapshot, now: float, out: list[fx.Effect]) -> Sortie:
@@ -369,9 +406,9 @@ class SortieLogic:
         seq = s.holds.watch.seq
         point = s.onboard.held.point_at(seq)
         assert point is not None
-        request = self._served_here(point)
+        request = self._served_here(s, point)
         if request is None:
-            planned = self.world.request_for(point.user_id)
+            planned = self._request_for(s, point.user_id)
             services = self.world.services_of(point.user_id)
             backlog = planned.backlog if planned is not None else 0
             why = "nobody eligible near" + (": the planned user has no request" if planned is None else (
@@ -392,9 +429,9 @@ class SortieLogic:
         return replace(s, holds=replace(s.holds, binding=binding),
                        schedule=replace(s.schedule, last_hover_index=point.hover_index))
 
-    def _served_here(self, point: PlannedPoint) -> RequestRow | None:
+    def _served_here(self, s: Sortie, point: PlannedPoint) -> RequestRow | None:
         """The request the model's rule serves from ``point`` now (``model.served_user``)."""
-        rows = self.world.pending()
+        rows = self._pending(s)
         if not rows:
             return None
         users = np.array([[r.x_m, r.y_m, r.z_m] for r in rows], dtype=np.float64)
@@ -443,7 +480,9 @@ class SortieLogic:
             return s
         if b is None or b.request_id is None:
             return s
-        elsewhere = self.world.served_elsewhere(b.user_id)
+        other = s.fleet.owner(b.user_id)
+        elsewhere = (f"{other} serves {b.user_id} (claimed it first)" if other is not None
+                     else self.world.served_elsewhere(b.user_id))
         if elsewhere is not None:  # two members bound one user at once: the first keeps it
             out.append(fx.Emit(ev.WaypointReached(f"point {point.hover_index}: nothing recorded: {elsewhere}",
                                                    user_id=b.user_id, request_id=b.request_id)))
@@ -488,7 +527,7 @@ class SortieLogic:
         if not v.airborne:
             if s.life.started or s.life.flown or s.schedule.commanding == "start":
                 return None  # starting or taking off (a new mission now would restart it), or landed
-            if self.world.pending_count() < r.min_requests:
+            if len(self._pending(s)) < r.min_requests:
                 return None
             if s.onboard.held is not None and (s.authority.granted or not s.schedule.dirty
                                        or now - s.schedule.last_plan_at < r.replan_min_interval_s):
@@ -513,9 +552,14 @@ class SortieLogic:
             reward = self._service_reward(point, b.tasks) if serving and b else 0.0
             return fx.PlanBasis(f"arrived at point {point.hover_index}", s.schedule.version, w.seq, at_point=bound,
                                 serving=serving, serving_reward=reward)
+        lost = lost_points(s.claims.points - {s.claims.holding}, s.fleet.blocked)
+        holding = w is not None and w.phase == "holding"
+        if lost and not holding and v.seq > r.autopilot.first_item:
+            # flying to a point another member claims now (both claimed it at once): given up
+            return fx.PlanBasis(f"point {min(lost)} claimed by another member", s.schedule.version, v.seq - 1)
         if (s.schedule.dirty and v.seq == s.onboard.held.rtl_seq and r.autopilot.return_item_mode is None
                 and now - s.schedule.last_plan_at >= r.replan_min_interval_s
-                and self.world.pending_count() > 0 and v.xyz[2] >= r.area.min_flight_altitude_m
+                and self._pending(s) and v.xyz[2] >= r.area.min_flight_altitude_m
                 and self._could_turn_back(s, v)):
             return fx.PlanBasis("new requests on the way home", s.schedule.version, s.onboard.held.rtl_seq - 1)
         return None
@@ -525,7 +569,7 @@ class SortieLogic:
         step on the pending requests, with the battery the vehicle reports less the landing
         and the margin (the planner counts less still: what is spent while it searches), so
         a decision is skipped only where it would find nothing whatever it searched."""
-        rows = self.world.pending()
+        rows = self._pending(s)
         sc = self.rules.scenario
         battery = planning_battery_j(sc, (v.battery_fraction or 0.0) * sc.battery_j, 0.0, self.rules.energy_margin_j)
         counts = self.world.service_counts()

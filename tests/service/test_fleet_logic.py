@@ -1,0 +1,134 @@
+"""Every claim decision of a fleet member, in milliseconds (issue 35): what the sortie logic
+claims as it flies (``sortie.fleet``, told with ``Intend``), what it does with what it hears
+of the others (``FleetHeard``), and the claim rule shared with the offline planner
+(``model.fleet.claims``): two members deciding at once, a member's intentions late or lost,
+a member gone armed, clocks skewed."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+from planner_service.model.fleet.claims import BOUND, PLANNED, lost_points, others_points, owned_by_others, owner
+from planner_service.service.sortie import effects as fx
+from planner_service.service.sortie import inputs as ins
+from planner_service.service.sortie.fleet import Claims, FleetView
+from tests.service.test_sortie_logic import FakeWorld, fly_to_first_point, only, path, point
+
+
+def intents(effects: list[fx.Effect]) -> list[Claims]:
+    return [e.claims for e in only(effects, fx.Intend)]
+
+
+def test_a_member_claims_the_point_it_flies_to_from_the_upload_until_it_leaves_it() -> None:
+    """Finding 1: the claims named the point held or just left, never the one flown to."""
+    world = FakeWorld()
+    run, _ = fly_to_first_point(world)
+    # on board from the upload (before the takeoff): point 3 and its user a
+    assert intents(run.effects)[0] == Claims(flying_to=3, next_user="a")
+    assert run.s.claims == Claims(flying_to=3, next_user="a")
+    # arrived at 3: it holds 3 (bound to a) and claims 7, the point it flies to next
+    out = run.tick(seq=2, xyz=(119.0, 200.5, 100.0), boot_s=12.0)
+    assert intents(out) == [Claims(flying_to=7, next_user="b", holding=3, bound="a")]
+    # the decision made there replaces 7 by 9: claimed once the replacement is on board
+    (plan,) = only(out, fx.MakePlan)
+    (up,) = only(run.feed(ins.Planned(plan.basis, path(point(9, 400.0, 300.0, "b", 2)))), fx.Upload)
+    out = run.feed(ins.Uploaded(up))
+    assert run.s.claims == Claims(flying_to=9, next_user="b", holding=3, bound="a"), run.s.claims
+    # left 3 for 9: 3 is free, 9 still claimed
+    end = 12 + int(run.s.holds.binding.needed_s) + 2
+    for t in range(13, end):
+        run.tick(seq=2, xyz=(120.5, 199.5, 100.0), boot_s=float(t))
+    out = run.tick(seq=3, xyz=(160.0, 220.0, 100.0), boot_s=end + 1.0)
+    assert run.s.claims == Claims(flying_to=9, next_user="b"), run.s.claims
+    assert intents(out)[-1] == Claims(flying_to=9, next_user="b")
+
+
+def test_nothing_is_claimed_on_the_way_home_or_after_the_sortie() -> None:
+    world = FakeWorld()
+    run, _ = fly_to_first_point(world)
+    run.tick(seq=4, xyz=(60.0, 60.0, 100.0), boot_s=20.0)  # the RTL item: no point after it
+    assert run.s.claims.points == frozenset() and run.s.claims.next_user is None
+
+
+def test_two_members_that_chose_one_point_at_once_both_give_it_up() -> None:
+    """Both claimed point 3 in the same moment (neither had heard the other): each hears the
+    other's claim and plans again from where it is, keeping what it flew; neither holds there."""
+    world = FakeWorld()
+    run, _ = fly_to_first_point(world)
+    assert run.s.claims.flying_to == 3
+    out = run.feed(ins.FleetHeard(FleetView(blocked=frozenset({3}))))
+    (plan,) = only(out, fx.MakePlan)
+    assert plan.basis.reason == "point 3 claimed by another member" and plan.basis.keep_through == 1
+    # the planner plans without 3 (the service gives it the blocked points); the replacement
+    # keeps home and takeoff and flies to 9 from where the vehicle is
+    (up,) = only(run.feed(ins.Planned(plan.basis, path(point(9, 400.0, 300.0, "b", 2)))), fx.Upload)
+    assert up.keep_through == 1
+    out = run.feed(ins.Uploaded(up))
+    assert run.s.claims == Claims(flying_to=9, next_user="b") and intents(out) == [run.s.claims]
+    assert not only(run.tick(seq=2, xyz=(60.0, 90.0, 100.0), boot_s=10.0), fx.MakePlan)  # given up once
+    assert lost_points({3}, {3, 8}) == {3} and lost_points({3}, {8}) == frozenset()
+
+
+def test_a_user_another_member_owns_is_neither_planned_bound_nor_recorded_here() -> None:
+    world = FakeWorld()
+    run, _ = fly_to_first_point(world)
+    run.feed(ins.FleetHeard(FleetView(owners={"a": "uav2"})))
+    out = run.tick(seq=2, xyz=(120.0, 200.0, 100.0), boot_s=20.0)  # arrives at a's point
+    b = run.s.holds.binding
+    assert b is not None and b.user_id != "a", b  # a is uav2's: the rule binds another, or none
+    (plan,) = only(out, fx.MakePlan)
+    assert plan.basis.serving != "a"
+
+
+def test_a_hold_of_a_user_another_member_bound_first_records_nothing() -> None:
+    """Two members bound one user at once (each before the other's claim reached it): the one
+    whose claim wins keeps it; this one hears it and records nothing."""
+    world = FakeWorld()
+    run, _ = fly_to_first_point(world)
+    run.tick(seq=2, xyz=(120.0, 200.0, 100.0), boot_s=20.0)
+    b = run.s.holds.binding
+    assert b is not None and b.request_id is not None
+    run.feed(ins.FleetHeard(FleetView(owners={b.user_id: "uav2"})))
+    run.tick(seq=2, xyz=(120.0, 200.0, 100.0), boot_s=20.0 + b.needed_s + 1.0)
+    out = run.tick(seq=3, xyz=(200.0, 300.0, 100.0), boot_s=22.0 + b.needed_s)
+    assert not only(out, fx.RecordService)
+    assert any("nothing recorded: uav2 serves" in e.event.detail for e in only(out, fx.Emit))
+
+
+def test_users_a_member_no_longer_owns_are_planned_again() -> None:
+    """A member's intentions lost (its service gone) or changed: the users it owned are this
+    member's again at its next decision."""
+    world = FakeWorld()
+    run, _ = fly_to_first_point(world)
+    run.feed(ins.FleetHeard(FleetView(owners={"b": "uav2"})))
+    run.s = replace(run.s, schedule=replace(run.s.schedule, dirty=False))  # planned since
+    run.feed(ins.FleetHeard(FleetView(owners={"b": "uav2"}, blocked=frozenset({12}))))
+    assert not run.s.schedule.dirty  # nobody freed
+    run.feed(ins.FleetHeard(FleetView()))
+    assert run.s.schedule.dirty  # b is this member's to plan again
+
+
+def test_ownership_late_or_lost_intentions_and_a_member_gone_armed() -> None:
+    claims = {"uav1": {"u": (PLANNED, 100.0)}, "uav2": {"u": (PLANNED, 90.0)}, "uav3": {"u": (BOUND, 500.0)}}
+    assert owner("u", claims) == "uav3"  # a hold under way beats any plan
+    # uav3's intentions lost (its service gone): the earlier plan wins among the live
+    assert owned_by_others("uav1", claims, {"uav1", "uav2"}) == {"uav2": "uav2"}.__class__(u="uav2")
+    # uav2's message late: until it comes uav1 owns u; once it comes both agree on uav2
+    assert owned_by_others("uav1", {"uav1": claims["uav1"]}, {"uav1", "uav2"}) == {}
+    assert owned_by_others("uav2", claims, {"uav1", "uav2"}) == {}
+    # a member gone armed keeps its route out of everyone's plans (the ledger adds it); its
+    # claims go with its token
+    assert others_points("uav1", {"uav1": [1], "uav2": [4, 5], "uav3": [6]}, {"uav1", "uav2"}) == {4, 5}
+
+
+def test_every_member_computes_one_owner_whatever_its_own_clock() -> None:
+    """Clocks skewed: the rule compares the claimants' own times, never a reader's, so two
+    members whose clocks differ by any amount agree on the owner; a skew only biases which
+    claim is earlier (bounded at join: ``fleet.max_clock_offset_s``)."""
+    skew = 1.7  # uav2's clock reads 1.7 s ahead of uav1's
+    claims = {"uav1": {"u": (PLANNED, 1000.0 + 30.0)}, "uav2": {"u": (PLANNED, 1000.0 + skew + 29.0)}}
+    seen_by_uav1 = owned_by_others("uav1", claims, {"uav1", "uav2"})
+    seen_by_uav2 = owned_by_others("uav2", claims, {"uav1", "uav2"})
+    assert seen_by_uav1 == {} and seen_by_uav2 == {"u": "uav1"}  # both say uav1
+    tie = {"uav1": {"u": (PLANNED, 5.0)}, "uav2": {"u": (PLANNED, 5.0)}}
+    assert owner("u", tie) == "uav1"  # ties to the smaller id, on every member
