@@ -1,11 +1,15 @@
 """The live fleet: one service per UAV, one user space over a zenoh router mesh, nothing
 central (docs/OPERATIONS.md, "A fleet").
 
-- ``presence``: this service's membership (its token, its signed announcement, the layer rule
-  at join), and the separation watch on the members' signed positions;
+- ``presence``: this service's membership (its token, its signed announcement, the layer and
+  clock rules at join), and the separation watch on the members' signed positions;
 - ``roster``: who the members are (tokens with a fresh signed announcement), their layers
   and last positions; ``separation``: the pure judge of a pair's separation;
-- ``ledger``: the members' intentions and services (signed, bounded), read and written;
-- the claim rule itself is ``planner_service.model.fleet.claims``, shared with the offline
-  ``claims`` planner.
+- ``airspace``: the one definition of the layers' gap and of a loss of separation;
+- ``ledger``: the members' intentions and services (signed, bounded), read and written.
+
+The claim rule itself is ``planner_service.model.fleet.claims``, shared with the offline
+``claims`` planner. The sortie logic hears the fleet as a typed input (``FleetHeard``) and
+tells what it claims as an effect (``Intend``, ``sortie/fleet.py``); the service carries
+them between the two and this package.
 """
