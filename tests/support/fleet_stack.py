@@ -18,7 +18,7 @@ from planner_service.harness.processes import Child, free_port
 from planner_service.service.config import OriginConfig, build_config, to_toml
 from planner_service.model.fleet.claims import Claim
 from planner_service.service.fleet.ledger import claims_of
-from protocol import Event, FleetKeys, GeoOrigin, ProtocolError, local_to_global
+from protocol import Event, FleetKeys, GeoOrigin, ProtocolError, Status, local_to_global
 from protocol.fleet_signing import FleetVerifier, Unverified, make_vehicle_key, read_roster
 from protocol.messages import FleetIntentions, decode
 from protocol.zenoh_config import session_config
@@ -86,6 +86,62 @@ class Intentions:
     def since(self, vehicle: str, t: float) -> list[tuple[float, set[str]]]:
         with self._lock:
             return [(at, {i.user_id for i in m.users}) for at, m in self.seen if m.vehicle == vehicle and at >= t]
+
+    def close(self) -> None:
+        self._sub.undeclare()
+        self.session.close()
+
+
+class Positions:
+    """Every member's vehicle positions as its autopilot reported them (the signed statuses on
+    ``{prefix}/fleet/positions/*``, in the fleet's one local frame), with when each arrived
+    (this process's monotonic clock): the vehicles side by side in one time."""
+
+    def __init__(self, endpoint: str, roster: Path) -> None:
+        self.session = zenoh.open(session_config("client", connect=[endpoint]))
+        self.seen: list[tuple[float, str, float, float, float, bool]] = []
+        """(arrived, vehicle, x, y, z, armed)."""
+        self._lock = threading.Lock()
+        self._verifier = FleetVerifier(read_roster(roster))
+        self._sub = self.session.declare_subscriber(FleetKeys().positions, self._on)
+
+    def _on(self, sample: Any) -> None:
+        key = str(sample.key_expr)
+        try:
+            body, _ = self._verifier.open(key, FleetKeys().vehicle_of(key) or "", sample.payload.to_bytes(),
+                                          time.time(), 60.0)
+            s = decode(body, Status)
+        except (Unverified, ProtocolError):
+            return
+        with self._lock:
+            self.seen.append((time.monotonic(), s.vehicle, s.x_m, s.y_m, s.z_m, s.armed))
+
+    def pairs(self, within_s: float = 0.3) -> list[tuple[float, str, str, float, float]]:
+        """Each armed pair's positions reported within ``within_s`` of each other, in arrival
+        order: (when, a, b, horizontal m, vertical m)."""
+        with self._lock:
+            rows = sorted(r for r in self.seen if r[5])
+        out = []
+        last: dict[str, tuple[float, float, float, float]] = {}
+        for at, v, x, y, z, _ in rows:
+            for w, (t, wx, wy, wz) in last.items():
+                if w != v and at - t <= within_s:
+                    out.append((at, min(v, w), max(v, w), ((x - wx) ** 2 + (y - wy) ** 2) ** 0.5, abs(z - wz)))
+            last[v] = (at, x, y, z)
+        return out
+
+    def stacked(self, radius_m: float, at_least_s: float) -> list[str]:
+        """Pairs that stood within ``radius_m`` of each other horizontally (over one point,
+        whatever their layers) for ``at_least_s`` or longer: "uav1-uav2 8.2 s"."""
+        since: dict[tuple[str, str], float] = {}
+        longest: dict[tuple[str, str], float] = {}
+        for at, a, b, horizontal, _ in self.pairs():
+            if horizontal < radius_m:
+                start = since.setdefault((a, b), at)
+                longest[(a, b)] = max(longest.get((a, b), 0.0), at - start)
+            else:
+                since.pop((a, b), None)
+        return [f"{a}-{b} {t:.1f} s" for (a, b), t in sorted(longest.items()) if t >= at_least_s]
 
     def close(self) -> None:
         self._sub.undeclare()
