@@ -343,7 +343,8 @@ class FleetMember(_Message, tag="fleet_member"):
     layer_m: Annotated[float, msgspec.Meta(ge=0.0)]
     """The altitude (m above the origin) of its hovering points and legs."""
     min_gap_m: Annotated[float, msgspec.Meta(ge=0.0)]
-    """The least vertical gap it keeps to every other member's layer (``fleet.min_layer_gap_m``)."""
+    """The least vertical gap it keeps to every other member's layer (``fleet.vertical_separation_m`` +
+    ``fleet.altitude_margin_m``)."""
     origin_lat_deg: Annotated[float, msgspec.Meta(ge=-90.0, le=90.0)]
     origin_lon_deg: Annotated[float, msgspec.Meta(ge=-180.0, le=180.0)]
     origin_alt_m: float

@@ -85,7 +85,7 @@ def _fleet_roster(path: str | None) -> dict[str, Any]:
 
 def run(args: argparse.Namespace) -> int:
     from protocol import Keys, ProtocolError, SigningError
-    from protocol.client import PlannerClient
+    from protocol.client import PlannerClient, command_client
     from protocol.text import printable
 
     if args.reason and args.action not in ("start", "hold"):
@@ -114,8 +114,11 @@ def run(args: argparse.Namespace) -> int:
             signal.signal(sig, lambda *_: stop.set())
     try:
         try:
-            client = PlannerClient(args.connect or [DEFAULT_ENDPOINT], keys, timeout_s=args.timeout,
-                                   config_file=args.zenoh_config)
+            # a command: the one-shot client (command_client); the watch a peer, which waits for a
+            # service that is not there yet
+            opener = PlannerClient if args.action == "watch" else command_client
+            client = opener(args.connect or [DEFAULT_ENDPOINT], keys, timeout_s=args.timeout,
+                            config_file=args.zenoh_config)
         except ProtocolError as err:  # no session: nothing listening, a TLS handshake refused
             print(f"error: {err}", file=sys.stderr)
             return 1

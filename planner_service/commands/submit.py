@@ -40,7 +40,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from protocol import Keys, ProtocolError
-    from protocol.client import ClientError, PlannerClient
+    from protocol.client import ClientError, command_client
 
     try:
         keys = Keys(args.prefix, args.vehicle)
@@ -48,8 +48,8 @@ def run(args: argparse.Namespace) -> int:
         print(f"error: {err}", file=sys.stderr)
         return 2
     try:
-        client = PlannerClient(args.connect or [DEFAULT_ENDPOINT], keys, timeout_s=args.timeout,
-                               config_file=args.zenoh_config)
+        client = command_client(args.connect or [DEFAULT_ENDPOINT], keys, timeout_s=args.timeout,
+                                config_file=args.zenoh_config)
     except ProtocolError as err:  # a refused config file, or no session (ClientError)
         print(f"error: {err}", file=sys.stderr)
         return 1

@@ -2,8 +2,10 @@
 a user's request) sent from a fresh zenoh session through router 1 or router 2 got "no reply
 ... within 5 s" after 0.4-0.7 s: 27 of 30 lost through router 1 alone. The client queried at
 once, before the routes to the service's queryable existed. Now it waits for zenoh's matching
-status first: every command, from a fresh session each as the CLI opens one, is answered
-through either router."""
+status first, and a one-shot command opens a client session (``command_client``: a peer's
+routes change as it links to the service, and a query sent meanwhile was lost now and then):
+every command, from a new session each as the command line opens one, is answered through
+either router."""
 
 from __future__ import annotations
 
@@ -12,7 +14,7 @@ import time
 import pytest
 
 from protocol import Keys
-from protocol.client import ClientError, PlannerClient, request_for
+from protocol.client import ClientError, command_client, request_for
 from protocol.signing import load_key
 from tests.support.fleet_stack import FleetStack
 
@@ -26,7 +28,7 @@ def lost_commands(endpoint: str, key: bytes, count: int) -> list[str]:
     lost: list[str] = []
     for n in range(count):
         command = "status" if n % 2 else "hold"
-        with PlannerClient([endpoint], Keys(vehicle="uav1"), timeout_s=5.0) as client:
+        with command_client([endpoint], Keys(vehicle="uav1"), timeout_s=5.0) as client:
             try:
                 reply = client.operator(command, "arrival test", key=key)
             except ClientError as err:
@@ -41,7 +43,7 @@ def lost_requests(endpoint: str, count: int, first_user: int) -> list[str]:
     lost: list[str] = []
     for n in range(count):
         user = f"u-{first_user + n}"
-        with PlannerClient([endpoint], Keys(vehicle="uav1"), timeout_s=5.0) as client:
+        with command_client([endpoint], Keys(vehicle="uav1"), timeout_s=5.0) as client:
             try:
                 ack = client.submit_to_fleet(request_for(user, 100.0 + n, 120.0, 3))
             except ClientError as err:

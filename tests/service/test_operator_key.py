@@ -89,6 +89,10 @@ def test_only_the_key_holder_commands_and_a_replay_is_refused(stack: Stack) -> N
     assert "Traceback" not in service.log()
 
 
+PROBE = b'{"kind": "probe"}'
+"""What the test sends to find the rogue reachable (the service answers it an error)."""
+
+
 class Rogue:
     """A queryable on the operator key beside the service's (any peer may declare one without
     access control): it keeps every command it is asked and answers each as accepted."""
@@ -96,20 +100,23 @@ class Rogue:
     def __init__(self, endpoint: str, keys: Keys) -> None:
         self.session = zenoh.open(client_config([endpoint], mode="client"))
         self.captured: list[bytes] = []
+        self.probed = 0
         self.keys = keys
         self._queryable = self.session.declare_queryable(keys.operator, self._on)
-        self._token = self.session.liveliness().declare_token("rogue/here")  # after its queryable
 
-    def seen_by(self, session: Any, timeout_s: float = 10.0) -> bool:
-        """Whether ``session`` knows the rogue (its token, declared after its queryable)."""
+    def reached_from(self, session: Any, timeout_s: float = 10.0) -> bool:
+        """Whether a query of ``session`` on the operator key reaches the rogue (probes until
+        one does: the routes to a queryable reach a session some time after it is declared)."""
         deadline = time.monotonic() + timeout_s
-        while time.monotonic() < deadline:
-            if any(r.ok is not None for r in session.liveliness().get("rogue/here", timeout=0.5)):
-                return True
-        return False
+        while time.monotonic() < deadline and not self.probed:
+            list(session.get(self.keys.operator, payload=PROBE, timeout=0.5, target=zenoh.QueryTarget.ALL))
+        return self.probed > 0
 
     def _on(self, query: Any) -> None:
         payload = query.payload.to_bytes()
+        if payload == PROBE:
+            self.probed += 1
+            return
         self.captured.append(payload)
         cmd = decode_operator_command(payload)
         forged = OperatorReply(command=cmd.command, accepted=True, authority="operator", phase="flying",
@@ -123,7 +130,6 @@ class Rogue:
                 if r.ok is not None and b"forged" not in r.ok.payload.to_bytes()]
 
     def close(self) -> None:
-        self._token.undeclare()
         self._queryable.undeclare()
         self.session.close()
 
@@ -144,7 +150,7 @@ def test_a_captured_start_is_refused_after_a_restart_and_no_rogue_reply_is_belie
     rogue = Rogue(stack.endpoint, Keys())
     try:
         with PlannerClient([stack.endpoint]) as operator:
-            assert rogue.seen_by(operator.session), "the operator's session never learnt of the rogue peer"
+            assert rogue.reached_from(operator.session), "no query of the operator's session reached the rogue"
             key = stack.operator_key()
             started = operator.operator("start", "range clear", 10.0, key=key)
             assert started.accepted and started.message != "forged" and started.authority == "operator", started
