@@ -266,6 +266,11 @@ class SortieLogic:
         """The requests pending here that no other member owns."""
         return [r for r in self.world.pending() if s.fleet.owner(r.user_id) is None]
 
+    def _pending_count(self, s: Sortie) -> int:
+        """How many requests are pending here that no other member owns (read at every tick:
+        the journal's count for a lone UAV)."""
+        return len(self._pending(s)) if s.fleet.owners else self.world.pending_count()
+
     def _request_for(self, s: Sortie, user_id: str) -> RequestRow | None:
         """``user_id``'s request in force here, unless another member owns the user."""
         return None if s.fleet.owner(user_id) is not None else self.world.request_for(user_id)
@@ -527,7 +532,7 @@ class SortieLogic:
         if not v.airborne:
             if s.life.started or s.life.flown or s.schedule.commanding == "start":
                 return None  # starting or taking off (a new mission now would restart it), or landed
-            if len(self._pending(s)) < r.min_requests:
+            if self._pending_count(s) < r.min_requests:
                 return None
             if s.onboard.held is not None and (s.authority.granted or not s.schedule.dirty
                                        or now - s.schedule.last_plan_at < r.replan_min_interval_s):
@@ -559,7 +564,7 @@ class SortieLogic:
             return fx.PlanBasis(f"point {min(lost)} claimed by another member", s.schedule.version, v.seq - 1)
         if (s.schedule.dirty and v.seq == s.onboard.held.rtl_seq and r.autopilot.return_item_mode is None
                 and now - s.schedule.last_plan_at >= r.replan_min_interval_s
-                and self._pending(s) and v.xyz[2] >= r.area.min_flight_altitude_m
+                and self._pending_count(s) > 0 and v.xyz[2] >= r.area.min_flight_altitude_m
                 and self._could_turn_back(s, v)):
             return fx.PlanBasis("new requests on the way home", s.schedule.version, s.onboard.held.rtl_seq - 1)
         return None
