@@ -1,6 +1,7 @@
-"""The operator's live view (``python -m planner_service operator watch``), pure: what the
-service last published (status, plan, events) and answered (the state's pending requests)
-in, plain text lines out. No terminal control here: the command decides how to redraw.
+"""The operator's live view as text (``python -m planner_service operator watch``), pure: one
+vehicle of the fleet picture (``live.picture``, the live map's read model too: what the
+services published and answered) in, plain text lines out. No terminal control here: the
+command decides how to redraw.
 
 Every text from the wire (modes, user ids, details, the degraded reason) goes through
 ``protocol.text.printable``: a peer that publishes an ESC sequence or a newline shows as
@@ -10,44 +11,15 @@ escapes, it cannot rewrite the operator's screen or forge a line.
 from __future__ import annotations
 
 import time
-from collections import deque
-from dataclasses import dataclass, field
 
-from protocol import Event, PendingRequest, Plan, Status
+from protocol import PendingRequest, Plan, Status
 from protocol.messages import FleetMember
-
-from .service.fleet.separation import Judgement
 from protocol.text import printable
+
+from .live.picture import FleetPicture, VehicleRecord
 
 MAX_POINTS_SHOWN = 8
 MAX_PENDING_SHOWN = 8
-
-
-@dataclass
-class WatchView:
-    """What the operator's view knows; updated by the subscriptions, read by ``render``."""
-
-    vehicle: str
-    status: Status | None = None
-    status_at: float | None = None
-    """When ``status`` arrived (the view's monotonic clock)."""
-    plan: Plan | None = None
-    events: deque[Event] = field(default_factory=lambda: deque(maxlen=8))
-    pending: list[PendingRequest] | None = None
-    pending_note: str = ""
-    """Why ``pending`` is not known ("" when it is)."""
-    alive: bool | None = None
-    """The service's liveliness token: seen, gone, or not yet known."""
-    fleet: dict[str, FleetMember | None] = field(default_factory=dict)
-    """The fleet's members alive under the prefix and their layers (None: not read yet);
-    empty for a lone UAV."""
-    separation: Judgement | None = None
-    """The fleet's separation on the members' own positions (None for a lone UAV)."""
-    claims: dict[str, list[str]] = field(default_factory=dict)
-    """The users each live member claims (its next point's and its hold's)."""
-    fleet_ignored: int = 0
-    """Fleet messages and tokens ignored (not enrolled, unsigned, stale, replayed, beyond the
-    bounds): a rogue peer at work, or a member missing from the watch's roster."""
 
 
 def _t(text: object, limit: int = 80) -> str:
@@ -58,16 +30,18 @@ def _clock(time_s: float) -> str:
     return time.strftime("%H:%M:%S", time.localtime(time_s)) if time_s > 0 else "--:--:--"
 
 
-def render(view: WatchView, now: float) -> list[str]:
-    """The view as lines of plain text (no control characters), newest events last."""
+def render(picture: FleetPicture, vehicle: str, now: float) -> list[str]:
+    """``vehicle``'s view as lines of plain text (no control characters), newest events last;
+    ``now``: the monotonic clock the picture was fed with."""
+    view = picture.vehicles.get(vehicle) or VehicleRecord(vehicle)
     alive = {None: "not seen yet", True: "alive", False: "GONE (liveliness withdrawn)"}[view.alive]
     age = "no status yet" if view.status_at is None else f"status {max(now - view.status_at, 0.0):.1f} s old"
-    lines = [f"{_t(view.vehicle, 64)}: service {alive}; {age}"]
+    lines = [f"{_t(picture.prefix, 64)}/{_t(vehicle, 64)}: service {alive}; {age}"]
     if view.status is not None:
         lines += status_lines(view.status)
-    lines += _fleet_lines(view)
+    lines += _fleet_lines(picture, vehicle)
     lines += _plan_lines(view.plan)
-    lines += _pending_lines(view)
+    lines += _pending_lines(view.pending, view.pending_note)
     lines.append("events" if view.events else "events     none yet")
     for ev in view.events:
         who = f" {_t(ev.user_id, 64)}" if ev.user_id else ""
@@ -97,23 +71,22 @@ def status_lines(s: Status) -> list[str]:
     return lines
 
 
-def _fleet_lines(view: WatchView) -> list[str]:
+def _fleet_lines(view: FleetPicture, this: str) -> list[str]:
     """One line for the fleet's members (none for a lone UAV): vehicle, layer, this one."""
-    ignored = [f"fleet      {view.fleet_ignored} messages ignored (not enrolled, unsigned, stale or replayed)"]
-    if not view.fleet:
-        return ignored if view.fleet_ignored else []
-    this = view.vehicle.rsplit("/", 1)[-1]
+    ignored = [f"fleet      {view.ignored} messages ignored (not enrolled, unsigned, stale or replayed)"]
+    if not view.members:
+        return ignored if view.ignored else []
 
     def one(vehicle: str, m: FleetMember | None) -> str:
         layer = "layer unknown" if m is None else f"{m.layer_m:g} m"
         return f"{_t(vehicle, 64)} {layer}" + (" (this)" if vehicle == this else "")
-    lines = [f"fleet      {len(view.fleet)} member{'s' if len(view.fleet) != 1 else ''}: "
-             + ", ".join(one(v, m) for v, m in sorted(view.fleet.items()))]
+    lines = [f"fleet      {len(view.members)} member{'s' if len(view.members) != 1 else ''}: "
+             + ", ".join(one(v, m) for v, m in sorted(view.members.items()))]
     claimed = [f"{_t(v, 64)} {', '.join(_t(u, 64) for u in users)}" for v, users in sorted(view.claims.items())
-               if v in view.fleet and users]
+               if v in view.members and users]
     if claimed:
         lines.append("claims     " + "; ".join(claimed))
-    if view.fleet_ignored:
+    if view.ignored:
         lines += ignored
     j = view.separation
     if j is not None:
@@ -139,12 +112,12 @@ def _plan_lines(plan: Plan | None) -> list[str]:
     return lines
 
 
-def _pending_lines(view: WatchView) -> list[str]:
-    if view.pending is None:
-        return [f"pending    {_t(view.pending_note, 120) or 'not known yet'}"]
-    if not view.pending:
+def _pending_lines(pending: list[PendingRequest] | None, note: str) -> list[str]:
+    if pending is None:
+        return [f"pending    {_t(note, 120) or 'not known yet'}"]
+    if not pending:
         return ["pending    none"]
     shown = ", ".join(f"{_t(r.user_id, 64)} ({r.tasks} tasks at {r.x_m:.0f}, {r.y_m:.0f})"
-                      for r in view.pending[:MAX_PENDING_SHOWN])
-    more = f", and {len(view.pending) - MAX_PENDING_SHOWN} more" if len(view.pending) > MAX_PENDING_SHOWN else ""
-    return [f"pending    {len(view.pending)}: {shown}{more}"]
+                      for r in pending[:MAX_PENDING_SHOWN])
+    more = f", and {len(pending) - MAX_PENDING_SHOWN} more" if len(pending) > MAX_PENDING_SHOWN else ""
+    return [f"pending    {len(pending)}: {shown}{more}"]

@@ -106,3 +106,14 @@ def px4_ready(px4: Px4) -> Px4:
     """``px4`` once its pre-arm checks pass (it can arm and fly a mission)."""
     px4.wait_ready()
     return px4
+
+
+def pytest_terminal_summary(terminalreporter: Any) -> None:
+    """Skipped browser tests are said loudly at the end of the run (as a missing SITL would
+    leave its tests unproved): the one command that installs what they need."""
+    from tests.support.browser import SKIP_REASON
+
+    skipped = [r for r in terminalreporter.stats.get("skipped", []) if SKIP_REASON in str(r.longrepr)]
+    if skipped:
+        terminalreporter.write_sep("!", f"{len(skipped)} LIVE MAP BROWSER TESTS SKIPPED", red=True, bold=True)
+        terminalreporter.write_line(SKIP_REASON, red=True)

@@ -14,6 +14,7 @@ SORTIE, SERVICE, HARNESS = "planner_service.sortie", "planner_service.service", 
 FLEET_LIVE, ERRORS = "planner_service.service.fleet", "planner_service.service.errors"
 """The live fleet's package, a layer of its own inside the service's (the service uses it; it
 uses none of the service but its errors), and the service's errors (pure exceptions)."""
+LIVE, WEB = "planner_service.live", "planner_service.web"
 EVERYTHING = None
 ALLOWED: dict[str, set[str] | None] = {
     "protocol": set(),
@@ -29,11 +30,14 @@ ALLOWED: dict[str, set[str] | None] = {
     SERVICE: {"protocol", SETTINGS, MODEL, POLICY, MCTS, FLEET_LIVE, ERRORS},
     FLEET_LIVE: {"protocol", MODEL, ERRORS},  # the members' exchange; the claim rule is the model's
     ERRORS: set(),
-    HARNESS: {"protocol", SETTINGS, MODEL, POLICY, SORTIE, SERVICE, FLEET_LIVE, ERRORS, "planner_service.fleet"},
+    HARNESS: {"protocol", SETTINGS, MODEL, POLICY, SORTIE, SERVICE, FLEET_LIVE, ERRORS, "planner_service.fleet",
+              LIVE, WEB},
+    LIVE: {"protocol", FLEET_LIVE},  # the operator's read model, fed from the members' exchange
+    WEB: {"protocol", LIVE},  # the live map's server: the picture and its feed
     "planner_service.bench": EVERYTHING,
     "planner_service.commands": EVERYTHING,
     "planner_service.cli": EVERYTHING,
-    "planner_service.operator_view": {"protocol", FLEET_LIVE},  # the separation's judge, the roster
+    "planner_service.operator_view": {"protocol", LIVE},  # the picture, as text
     "planner_service.__main__": EVERYTHING,
     "planner_service": EVERYTHING,
     "sim_bridge": {"protocol", SETTINGS, MODEL},

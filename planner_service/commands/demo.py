@@ -1,7 +1,9 @@
 """The main job on the embedded default: the vehicle stub, simulated ground users and the
 service on loopback, one sortie flown with the stub's speed-up. Progress (served users,
 battery, throughput) on the terminal; summary.json, trajectory.png and mission.plan (the
-first complete mission, QGroundControl format) in --out, with the logs and the journal.
+first complete mission, QGroundControl format) in --out, with the logs and the journal. The
+live map's address (``operator web``'s page) is printed as the sortie begins; --web keeps it
+open after the landing until Ctrl-C.
 With --mavlink URL no stub is started: the service flies the autopilot there (ArduCopter
 SITL, PX4 SITL: README, "Flying ArduCopter SITL or PX4 SITL"). Every process it starts is
 stopped, also on error or Ctrl-C."""
@@ -41,6 +43,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--mavlink", default=None, metavar="URL", type=_mavlink_url,
                         help="fly the autopilot at this connection string (e.g. tcp:127.0.0.1:5760 for ArduCopter "
                              "SITL) instead of starting the stub; --speedup must be its speed-up")
+    parser.add_argument("--web", action="store_true",
+                        help="keep the live map (its address is printed when the sortie begins) and the services "
+                             "open after the sortie, until Ctrl-C")
     parser.add_argument("--config", default=None, metavar="FILE",
                         help="service configuration to start from (its [scenario], [safety], [planner]; e.g. "
                              "docs/sitl-copter.toml for ArduCopter SITL); the demo sets zenoh, the journal and the "
@@ -79,7 +84,7 @@ def run(args: argparse.Namespace) -> int:
     summary = _flown(lambda: run_demo(
         out, users=args.users or 10, speedup=args.speedup, budget_ms=args.budget_ms, backend=args.backend,
         flavour=args.flavour, seed=args.seed, timeout_s=args.timeout, mavlink=args.mavlink, algo=args.algo,
-        config=Path(args.config) if args.config else None, echo=_echo))
+        config=Path(args.config) if args.config else None, echo=_echo, web=args.web))
     if isinstance(summary, int):
         return summary
     print(f"\n{summary['intervals']} services to {summary['served_users']} users, "
@@ -117,7 +122,7 @@ def run_fleet(args: argparse.Namespace, out: Path) -> int:
         return 2
     summary = _flown(lambda: run_fleet_demo(out, uavs=args.uavs, users=args.users or 12, speedup=args.speedup,
                                             budget_ms=args.budget_ms, seed=args.seed, timeout_s=args.timeout,
-                                            echo=_echo))
+                                            echo=_echo, web=args.web))
     if isinstance(summary, int):
         return summary
     for vehicle, s in summary["per_uav"].items():

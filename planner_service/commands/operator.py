@@ -1,4 +1,5 @@
-"""The operator's command line. ``watch``: a live view of the service (phase, mode, battery
+"""The operator's command line. ``web``: the live map in the browser (``operator_web.py``).
+``watch``: a live view of the service (phase, mode, battery
 and its source, position, authority, the fleet's members, layers and separation, the plan,
 pending users, the last events), redrawn from its status, plan and event publications and
 its state query, until Ctrl-C; plain text (on a terminal that cannot clear, or into a file
@@ -26,8 +27,8 @@ from typing import Any
 from protocol.arguments import USAGE_ERROR, positive_float, positive_int
 from protocol.client_args import DEFAULT_ENDPOINT, add_client_arguments
 
-HELP = "the operator's command line: watch the service live, or start / hold / status"
-ACTIONS = ("watch", "start", "hold", "status")
+HELP = "the operator's command line: watch the service live (as text, or the live map in the browser), or start / hold / status"
+ACTIONS = ("watch", "web", "start", "hold", "status")
 DEFAULT_KEY = "operator.key"
 """The service's default key file: ``operator.key`` beside its default journal (both in the
 folder it starts in)."""
@@ -37,7 +38,7 @@ CLEAR = "\x1b[H\x1b[2J"
 
 def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("action", choices=ACTIONS,
-                        help="watch: live view until Ctrl-C; start: give the service authority over modes and arming; "
+                        help="watch: live view until Ctrl-C; web: the live map in the browser until Ctrl-C; start: give the service authority over modes and arming; "
                              "hold: take it back; status: ask")
     parser.add_argument("--reason", default="", metavar="TEXT",
                         help="start or hold: why, in words (at most 256 characters; kept in the service's log and in "
@@ -57,9 +58,12 @@ def configure(parser: argparse.ArgumentParser) -> None:
                         help="watch: print one view (after waiting up to --timeout for a status) and exit: 0 if a "
                              "status came, 1 if not")
     parser.add_argument("--fleet-roster", metavar="FILE", default=None,
-                        help="watch: the fleet's roster (fleet.roster_file): the members' signed announcements and "
+                        help="watch, web: the fleet's roster (fleet.roster_file): the members' signed announcements and "
                              "positions are read against it; without it the fleet's messages cannot be verified and "
                              "no member is shown")
+    from .operator_web import configure as configure_web
+
+    configure_web(parser)
     parser.add_argument("--plain", action="store_true",
                         help="watch: never clear the screen, print each changed view after the last (the default "
                              "when TERM is dumb or the output is not a terminal)")
@@ -97,6 +101,9 @@ def run(args: argparse.Namespace) -> int:
     if args.action != "watch" and (args.once or args.plain):
         print("error: --once and --plain are for watch", file=sys.stderr)
         return USAGE_ERROR
+    if args.action != "web" and (args.vehicle_key or args.tiles or args.origin or args.tls_cert or args.tls_key):
+        print("error: --vehicle-key, --tiles, --origin, --tls-cert and --tls-key are for web", file=sys.stderr)
+        return USAGE_ERROR
     try:
         args.key = _key(args.operator_key)
     except SigningError as err:
@@ -107,6 +114,10 @@ def run(args: argparse.Namespace) -> int:
     except SigningError as err:
         print(f"error: --fleet-roster: {printable(str(err), 400)}", file=sys.stderr)
         return 1
+    if args.action == "web":
+        from .operator_web import run as run_web
+
+        return run_web(args)
     keys = Keys(args.prefix, args.vehicle)
     stop = threading.Event()
     if args.action == "watch":  # Ctrl-C (or SIGTERM) ends the watch between two redraws
@@ -157,43 +168,19 @@ def _command(client: Any, args: argparse.Namespace) -> int:
 
 
 def _watch(client: Any, args: argparse.Namespace, stop: threading.Event) -> int:
-    import zenoh
-
-    from protocol import FleetKeys, ProtocolError
+    from protocol import ProtocolError
     from protocol.client import ClientError
 
-    from protocol.fleet_signing import FleetVerifier
+    from ..live.feed import LiveFeed
+    from ..live.picture import FleetPicture
+    from ..operator_view import render
 
-    from ..service.fleet.ledger import FleetLedger
-    from ..service.fleet.roster import FleetRoster
-    from ..operator_view import WatchView, render
-
-    view = WatchView(vehicle=f"{client.keys.prefix}/{client.keys.vehicle}")
-    view.events = type(view.events)(maxlen=args.events)
+    vehicle = client.keys.vehicle
+    picture = FleetPicture(client.keys.prefix, events_kept=args.events)
     lock = threading.Lock()
-
-    def update(**fields: Any) -> None:
-        with lock:
-            for name, value in fields.items():
-                setattr(view, name, value)
-
-    def on_event(ev: Any) -> None:
-        with lock:
-            view.events.append(ev)
-
-    def on_alive(sample: Any) -> None:
-        update(alive=sample.kind == zenoh.SampleKind.PUT)
-
-    client.follow_status(lambda s: update(status=s, status_at=time.monotonic()))
-    client.follow_plans(lambda p: update(plan=p))
-    client.follow_events(on_event)
-    alive_sub = client.session.liveliness().declare_subscriber(client.keys.alive, on_alive, history=True)
-    verifier = FleetVerifier(args.fleet_keys)  # the watch only reads: it signs nothing
-    roster = FleetRoster(FleetKeys(client.keys.prefix), verifier)
-    roster.follow(client.session)
-    ledger = FleetLedger(FleetKeys(client.keys.prefix), "", lambda: roster.members().keys(), roster.lost, None,
-                         verifier)
-    ledger.follow(client.session)
+    # the live map's read model and feed; the pending requests asked here, of this vehicle only
+    feed = LiveFeed(client.session, picture, lock, fleet_keys=args.fleet_keys, state_every_s=None)
+    feed.start()
     term = os.environ.get("TERM", "")
     plain = args.plain or not sys.stdout.isatty() or term in ("", "dumb", "unknown")
     last: list[str] | None = None
@@ -203,26 +190,34 @@ def _watch(client: Any, args: argparse.Namespace, stop: threading.Event) -> int:
             try:
                 reply = client.operator("status", timeout_s=min(args.timeout, 1.0), key=args.key)
                 state = reply.state if reply.state is not None else client.state(timeout_s=min(args.timeout, 1.0))
-                update(pending=list(state.pending), pending_note="")
-                if view.status is None:  # no publication yet: the state's snapshot will do
-                    update(status=state.status, status_at=time.monotonic())
-                if state.plan is not None and (view.plan is None or state.plan.plan_id > view.plan.plan_id):
-                    update(plan=state.plan)  # published before the watch began
+                with lock:
+                    picture.on_pending(vehicle, list(state.pending))
+                    seen = picture.vehicle(vehicle)
+                    if seen.status is None:  # no publication yet: the state's snapshot will do
+                        picture.on_status(vehicle, state.status, time.monotonic())
+                    if state.plan is not None and (seen.plan is None or state.plan.plan_id > seen.plan.plan_id):
+                        picture.on_plan(vehicle, state.plan)  # published before the watch began
             except ClientError as err:
-                update(pending_note=f"no answer to the operator's status ({err.field}: {err.message})")
+                with lock:
+                    picture.on_pending(vehicle, None, f"no answer to the operator's status ({err.field}: {err.message})")
             except ProtocolError as err:
-                update(pending_note=f"the operator's status answer was refused ({err.field}: {err.message})")
-            if args.once and view.status is None and time.monotonic() < deadline:
+                with lock:
+                    picture.on_pending(vehicle, None,
+                                       f"the operator's status answer was refused ({err.field}: {err.message})")
+            with lock:
+                has_status = picture.vehicle(vehicle).status is not None
+            if args.once and not has_status and time.monotonic() < deadline:
                 stop.wait(0.1)
                 continue
-            if args.once and view.alive is None and client.wait_for_service(timeout_s=1.0):
-                update(alive=True)  # the token's history may reach the subscriber after the state's answer
+            if args.once and client.wait_for_service(timeout_s=1.0):
+                with lock:  # the token's history may reach the subscriber after the state's answer
+                    if picture.vehicle(vehicle).alive is None:
+                        picture.on_alive(vehicle, True)
             if args.once:  # one view: with the layers and positions of the members the roster knows of
-                roster.settle(min(args.timeout, 2.0), positions=True)
-            update(fleet=roster.members(), separation=roster.separation(), fleet_ignored=roster.ignored,
-                   claims={v: sorted(c) for v, c in ledger.claims().items()})
+                feed.settle(min(args.timeout, 2.0))
+            feed.read_fleet()
             with lock:
-                lines = render(view, time.monotonic())
+                lines = render(picture, vehicle, time.monotonic())
             if plain:
                 if last is None or lines[1:] != last[1:]:  # the header's age changes every time
                     print("\n".join(lines) + "\n" + "-" * 40, flush=True)
@@ -231,12 +226,10 @@ def _watch(client: Any, args: argparse.Namespace, stop: threading.Event) -> int:
                 sys.stdout.flush()
             last = lines
             if args.once:
-                return 0 if view.status is not None else 1
+                return 0 if has_status else 1
             stop.wait(args.refresh)
     finally:
-        alive_sub.undeclare()
-        ledger.close()
-        roster.close()
+        feed.close()
     if not plain:
         print()
     return 0

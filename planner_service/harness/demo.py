@@ -21,6 +21,7 @@ from ..service.config import build_config, to_toml
 from ..service.errors import ServiceError
 from ..service.journal import Journal
 from ..service.sortie import item_from_dict
+from .live_map import LiveMap
 from .offline import plan_offline
 from .processes import Child, free_port, start_vehicle_and_service
 from .report import sortie_summary
@@ -33,12 +34,14 @@ class DemoError(ServiceError):
 def run_demo(out: Path, *, users: int = 10, speedup: float = 25.0, budget_ms: float = 150.0,
              backend: str = "pymavlink", flavour: str | None = None, seed: int = 1, timeout_s: float = 180.0,
              mavlink: str | None = None, config: Path | None = None, algo: str = "mcts", offline: bool = True,
-             echo: Callable[[str], None] = print) -> dict[str, Any]:
+             echo: Callable[[str], None] = print, web: bool = False) -> dict[str, Any]:
     """Fly one sortie; returns the summary (also written to ``out/summary.json``). With
     ``mavlink`` (a connection string) no stub is started: the service flies the autopilot there
     (SITL or a real one), and ``speedup`` must be that autopilot's (the users' clock runs at it).
     With ``offline`` the same scenario and seed are also planned offline (the model alone,
-    ``offline.py``, ``bench --flight``'s other half) and the summary says how the flown sortie compares."""
+    ``offline.py``, ``bench --flight``'s other half) and the summary says how the flown sortie compares.
+    The live map's address is printed once the service is up; with ``web`` the page (and the
+    service) stay until Ctrl-C after the landing."""
     out.mkdir(parents=True, exist_ok=True)
     journal_path = out / "journal.sqlite"
     for stale in (journal_path, out / "journal.sqlite-wal", out / "journal.sqlite-shm"):
@@ -66,6 +69,7 @@ def run_demo(out: Path, *, users: int = 10, speedup: float = 25.0, budget_ms: fl
     events: list[Event] = []
     landed = threading.Event()
     start = time.monotonic()
+    live = LiveMap([endpoint], service_config.keys().prefix, echo=echo)
     try:
         vehicle = f"the autopilot at {mavlink}" if mavlink else f"vehicle stub ({flavour}, x{speedup:g})"
         echo(f"demo: {vehicle}, service ({backend}, {budget_ms:g} ms), {users} users at x{speedup:g}; logs in {out}")
@@ -75,6 +79,7 @@ def run_demo(out: Path, *, users: int = 10, speedup: float = 25.0, budget_ms: fl
         with PlannerClient([endpoint], service_config.keys()) as client:
             if not client.wait_for_service(20.0):
                 raise DemoError("the service's liveliness token never appeared")
+            live.open({service_config.keys().vehicle: out / "operator.key"})
 
             def on_event(ev: Event) -> None:
                 events.append(ev)
@@ -102,7 +107,10 @@ def run_demo(out: Path, *, users: int = 10, speedup: float = 25.0, budget_ms: fl
                     last_print = now
                     echo(_progress_line(statuses[-1], events, now - start))
             time.sleep(0.6)  # the last status publications after the landing
+            if web:
+                live.linger()
     finally:
+        live.close()
         codes = {child.name: child.stop() for child in reversed(children)}
     wall = time.monotonic() - start
     bad = {name: code for name, code in codes.items() if code not in (0, -2, 130)}

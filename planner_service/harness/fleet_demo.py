@@ -30,6 +30,7 @@ from ..service.config import build_config, to_toml
 from ..service.errors import ServiceError
 from ..service.journal import Journal
 from .demo import DemoError, area_axes
+from .live_map import LiveMap
 from .processes import Child, free_port
 from .report import sortie_summary
 
@@ -143,8 +144,10 @@ def enrol_fleet(folder: Path, vehicles: list[str]) -> Path:
 
 def run_fleet_demo(out: Path, *, uavs: int = 3, users: int = 12, speedup: float = 25.0, budget_ms: float = 150.0,
                    seed: int = 1, timeout_s: float = 300.0, offline: bool = True,
-                   echo: Callable[[str], None] = print) -> dict[str, Any]:
-    """Fly one sortie with ``uavs`` UAVs; returns the summary (also ``out/summary.json``)."""
+                   echo: Callable[[str], None] = print, web: bool = False) -> dict[str, Any]:
+    """Fly one sortie with ``uavs`` UAVs; returns the summary (also ``out/summary.json``). The
+    live map's address is printed once the services are up; with ``web`` the page (and the
+    fleet) stay until Ctrl-C after the landings."""
     out.mkdir(parents=True, exist_ok=True)
     defaults = build_config({}, {})
     default = defaults.scenario()
@@ -163,6 +166,7 @@ def run_fleet_demo(out: Path, *, uavs: int = 3, users: int = 12, speedup: float 
     echo(f"demo: {uavs} UAVs (vehicle stubs x{speedup:g}), {uavs} services, 2 routers, {users} users "
          f"submitting to the fleet; logs in {out}")
     session = None
+    live = LiveMap(routers, Keys().prefix, echo=echo)
     try:
         for i, endpoint in enumerate(routers):
             child = Child("sim_bridge", ["router", "--listen", endpoint, *(["--connect", routers[0]] if i else [])],
@@ -199,6 +203,8 @@ def run_fleet_demo(out: Path, *, uavs: int = 3, users: int = 12, speedup: float 
             echo(f"  {vehicle}: layer {sc.altitude_m:g} m, home {sc.base_x_m:g} m east")
         session = zenoh.open(session_config("client", connect=routers))
         watch = Watch(session, Keys().prefix)
+        live.roster = roster
+        live.open({vehicle: out / vehicle / "operator.key" for vehicle in vehicles})
         connect = [arg for e in routers for arg in ("--connect", e)]
         children.append(Child("sim_bridge", ["users", "--fleet", *connect, "--count", str(users), "--speedup",
                                              str(speedup), "--seed", str(seed),
@@ -220,7 +226,10 @@ def run_fleet_demo(out: Path, *, uavs: int = 3, users: int = 12, speedup: float 
         flown_s = time.monotonic() - users_started
         time.sleep(0.6)
         watch.close()
+        if web:
+            live.linger()
     finally:
+        live.close()
         if session is not None:
             session.close()
         codes = {f"{c.name} {c.log_path.parent.name}": c.stop() for c in reversed(children)}

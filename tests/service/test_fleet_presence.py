@@ -16,7 +16,8 @@ import pytest
 import zenoh
 
 from planner_service.service.fleet.roster import FleetRoster
-from planner_service.operator_view import WatchView, render
+from planner_service.live.picture import FleetPicture
+from planner_service.operator_view import render
 from planner_service.harness.processes import free_port
 from planner_service.service.fleet.presence import MembershipError, FleetPresence, clock_clashes, layer_clashes
 from protocol import FleetKeys, Keys, ProtocolError, Status, encode
@@ -262,11 +263,12 @@ def test_the_operators_view_shows_each_live_members_claims() -> None:
     """``operator watch``: under the members, what each live member claims (its next point's
     user and its hold's); a gone member's last claims are not shown, control characters in a
     member's words are escaped."""
-    view = WatchView(vehicle="fleettest/uav1", fleet={"uav1": member("uav1", 100.0), "uav2": member("uav2", 120.0)},
-                     claims={"uav1": ["u-3"], "uav2": ["u-7", "u\x1b[2J"], "uav9": ["u-1"]})
-    lines = render(view, 0.0)
+    view = FleetPicture("fleettest")
+    view.on_fleet({"uav1": member("uav1", 100.0), "uav2": member("uav2", 120.0)}, None,
+                  {"uav1": ["u-3"], "uav2": ["u-7", "u\x1b[2J"], "uav9": ["u-1"]})
+    lines = render(view, "uav1", 0.0)
     (claims,) = [line for line in lines if line.startswith("claims")]
-    assert claims.startswith("claims     uav1 u-3; uav2 u-7, u")
+    assert claims.startswith("claims     uav1 u-3; uav2 u\\x1b[2J, u-7")  # sorted, the escape shown
     assert "uav9" not in claims and "\x1b" not in claims
 
 

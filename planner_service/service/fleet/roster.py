@@ -180,6 +180,12 @@ class FleetRoster:
         return judge(self.members(), seen, time.monotonic(), min_horizontal_m, stale_s, self._lost_now(),
                      vertical_separation_m)
 
+    def positions(self) -> dict[str, Seen]:
+        """Each live member's last signed status (its vehicle's own position) and when it
+        arrived (the monotonic clock)."""
+        with self._lock:
+            return dict(self._seen)
+
     def tokens(self) -> list[str]:
         """The enrolled vehicles whose member token is alive (members or not: a token counts
         as a member only with a fresh signed announcement)."""

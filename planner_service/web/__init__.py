@@ -1,0 +1,1 @@
+"""The live map: its web server and the page it serves (static/)."""
