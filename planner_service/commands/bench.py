@@ -22,6 +22,10 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--e2e", action="store_true",
                         help="instead: end-to-end latency on loopback, request -> mission accepted by the vehicle stub "
                              "(real service and stub processes; the planner's time excluded)")
+    parser.add_argument("--web", action="store_true",
+                        help="with --e2e: the same figures without and with the live map open (operator web in its own "
+                             "process, the page in headless Chromium where found), alternating rounds in one run; the "
+                             "ratio with / without (use --e2e-requests 800 or more: p99 needs samples)")
     parser.add_argument("--e2e-requests", type=int, default=200, help="requests timed with --e2e (default: 200)")
     parser.add_argument("--e2e-budget-ms", type=float, default=20.0, help="planner budget with --e2e (default: 20)")
     parser.add_argument("--link", action="store_true",
@@ -69,6 +73,10 @@ def seed_range(text: str) -> list[int]:
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.web and not args.e2e:
+        print("error: --web goes with --e2e (the end-to-end latency without and with the live map open)",
+              file=sys.stderr)
+        return 2
     if args.e2e:
         return _run_e2e(args)
     if args.link:
@@ -110,7 +118,16 @@ def _run_e2e(args: argparse.Namespace) -> int:
     if args.e2e_requests < 1 or not args.e2e_budget_ms > 0:
         print("error: --e2e-requests must be at least 1 and --e2e-budget-ms positive", file=sys.stderr)
         return 2
-    results = run_e2e(args.e2e_requests, args.e2e_budget_ms, progress=lambda msg: print(msg, file=sys.stderr, flush=True))
+    progress = lambda msg: print(msg, file=sys.stderr, flush=True)  # noqa: E731
+    if args.web:
+        from ..bench.e2e import format_e2e_with_page, run_e2e_with_page
+
+        both = run_e2e_with_page(args.e2e_requests, args.e2e_budget_ms, progress=progress)
+        print(json.dumps(both, indent=1) if args.json else format_e2e_with_page(both))
+        return 0
+    results = run_e2e(args.e2e_requests, args.e2e_budget_ms, progress=progress)
+    for samples in ("e2e_samples", "ack_samples"):
+        del results[samples]
     print(json.dumps(results, indent=1) if args.json else format_e2e(results))
     return 0
 

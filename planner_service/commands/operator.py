@@ -101,8 +101,10 @@ def run(args: argparse.Namespace) -> int:
     if args.action != "watch" and (args.once or args.plain):
         print("error: --once and --plain are for watch", file=sys.stderr)
         return USAGE_ERROR
-    if args.action != "web" and (args.vehicle_key or args.tiles or args.origin or args.tls_cert or args.tls_key):
-        print("error: --vehicle-key, --tiles, --origin, --tls-cert and --tls-key are for web", file=sys.stderr)
+    if args.action != "web" and (args.vehicle_key or args.tiles or args.origin or args.tls_cert or args.tls_key
+                                  or args.token_file):
+        print("error: --vehicle-key, --tiles, --origin, --tls-cert, --tls-key and --token-file are for web",
+              file=sys.stderr)
         return USAGE_ERROR
     try:
         args.key = _key(args.operator_key)

@@ -18,6 +18,10 @@ from typing import Any
 from protocol.arguments import USAGE_ERROR
 
 DEFAULT_LISTEN = "127.0.0.1:8765"
+DEFAULT_NICE = 10
+"""The live map is the operator's eyes, not the flight: where its server shares the CPU with
+a service (a companion computer, the ground station that routes the fleet, ``bench --e2e
+--web``), the service's work comes first (docs/LIVE-MAP.md, "What it costs")."""
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
@@ -36,6 +40,12 @@ def configure(parser: argparse.ArgumentParser) -> None:
                           "for GeoJSON and the map tiles")
     web.add_argument("--tiles", default=None, metavar="DIR",
                      help="web: local map tiles, DIR/Z/X/Y.png (slippy-map numbering), drawn under the fleet")
+    web.add_argument("--token-file", metavar="FILE", default=None,
+                     help="web: read the login token from FILE (at least 16 characters, mode 0600) instead of drawing "
+                          "one at start: for scripts and a fixed bookmark")
+    web.add_argument("--nice", type=int, default=DEFAULT_NICE, metavar="N",
+                     help=f"web: lower this process's CPU priority by N (default {DEFAULT_NICE}; 0 keeps it): where the "
+                          "page's server shares a computer with a service or a router, it yields to them")
     web.add_argument("--tiles-zoom", type=int, default=17, metavar="Z", help="web: the tiles' zoom level (default 17)")
 
 
@@ -82,6 +92,27 @@ def _operator_keys(args: argparse.Namespace) -> dict[str, bytes]:
     return keys
 
 
+MIN_TOKEN_CHARS = 16
+
+
+def read_token(path: str) -> str:
+    """The login token in ``path``; ``ValueError`` naming what is wrong (others may read it,
+    too short)."""
+    import os
+    import stat
+
+    try:
+        mode = os.stat(path).st_mode
+        token = Path(path).read_text().strip()
+    except OSError as err:
+        raise ValueError(f"--token-file: {err.strerror}: {path}") from None
+    if stat.S_IMODE(mode) & 0o077:
+        raise ValueError(f"--token-file: {path} may be read by others (mode {stat.S_IMODE(mode):o}); chmod 600 it")
+    if len(token) < MIN_TOKEN_CHARS:
+        raise ValueError(f"--token-file: {len(token)} characters; at least {MIN_TOKEN_CHARS}")
+    return token
+
+
 def run(args: argparse.Namespace) -> int:
     """Serve the live map until Ctrl-C (0), or a usage error (2) / no session (1)."""
     from protocol import ProtocolError, SigningError
@@ -93,10 +124,20 @@ def run(args: argparse.Namespace) -> int:
     from ..live.picture import FleetPicture
     from ..web.server import LiveMapServer, RunningServer
 
+    import logging
+    import os
+
+    if args.nice:
+        os.nice(max(min(args.nice, 19), 0))
+    # what the server saw (logins refused, commands sent, pages following) on stderr
+    logging.basicConfig(level=logging.INFO, stream=sys.stderr, format="%(asctime)s %(levelname)s %(message)s")
+    for noisy in ("aiohttp.access", "zenoh"):
+        logging.getLogger(noisy).setLevel(logging.WARNING)
     try:
         host, port = parse_listen(args.listen)
         origin = _origin(args.origin)
         operator_keys = _operator_keys(args)
+        token = read_token(args.token_file) if args.token_file else None
     except ValueError as err:
         print(f"error: {err}", file=sys.stderr)
         return USAGE_ERROR
@@ -135,7 +176,7 @@ def run(args: argparse.Namespace) -> int:
     running = None
     try:
         feed.start()
-        server = LiveMapServer(feed, tiles=None if args.tiles is None else Path(args.tiles),
+        server = LiveMapServer(feed, token, tiles=None if args.tiles is None else Path(args.tiles),
                                tiles_zoom=args.tiles_zoom, secure=context is not None)
         try:
             running = RunningServer(server, host, port, context).start()

@@ -53,14 +53,14 @@ def tied_to_parent() -> Callable[[], None] | None:
 
 
 class Child:
-    """``python -m MODULE ARGS`` with stderr in ``log_path``."""
+    """``python -m MODULE ARGS`` with stderr in ``log_path`` (``Command``: any program)."""
 
-    def __init__(self, module: str, args: list[str], log_path: Path) -> None:
+    def __init__(self, module: str, args: list[str], log_path: Path, program: list[str] | None = None) -> None:
         env = dict(os.environ, PYTHONPATH=str(REPO) + os.pathsep + os.environ.get("PYTHONPATH", ""))
         self.name = f"{module} {args[0] if args else ''}".strip()
         self.log_path = log_path
         self._log = open(log_path, "w")
-        self.proc = subprocess.Popen([sys.executable, "-m", module, *args], cwd=REPO, env=env,
+        self.proc = subprocess.Popen(program or [sys.executable, "-m", module, *args], cwd=REPO, env=env,
                                      stdout=subprocess.DEVNULL, stderr=self._log, start_new_session=True,
                                      preexec_fn=tied_to_parent())
 
@@ -91,6 +91,13 @@ class Child:
         if not self._log.closed:
             self._log.close()
         return int(self.proc.returncode)
+
+
+class Command(Child):
+    """Another program (``argv``) as a child: stderr in ``log_path``, stopped as a child is."""
+
+    def __init__(self, argv: list[str], log_path: Path) -> None:
+        super().__init__(Path(argv[0]).name, [], log_path, program=argv)
 
 
 def start_vehicle_and_service(folder: Path, vehicle_args: list[str] | None, children: list[Child]) -> None:

@@ -42,8 +42,9 @@ log = logging.getLogger(__name__)
 STATIC = Path(__file__).with_name("static")
 COOKIE = "uavmec_live"
 CSRF_HEADER, CSRF_VALUE = "X-Requested-With", "uavmec-live-map"
-SEND_EVERY_S = 0.2
-"""Least time between two snapshots on one stream (5 per second at most)."""
+SEND_EVERY_S = 0.5
+"""Least time between two snapshots on one stream: 2 a second at most, an update still within 1 s of a
+status (each redraw costs the page's computer; docs/PERFORMANCE.md, "With the live map open")."""
 REFRESH_S = 1.0
 """A snapshot at least this often, changed or not: the ages and the staleness alerts move
 with time even when nothing arrives."""
@@ -167,6 +168,7 @@ class LiveMapServer:
         response = web.StreamResponse(headers={"Content-Type": "text/event-stream", "Cache-Control": "no-store",
                                                "X-Accel-Buffering": "no"})
         await response.prepare(request)
+        log.info("live map: a page follows the picture (%s)", request.remote)
         try:
             while True:
                 self._changed.clear()

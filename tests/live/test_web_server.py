@@ -1,13 +1,11 @@
 """``operator web``'s server over HTTP on loopback (no browser): who may read and command,
-what it serves, and the command line's refusals. A real zenoh session, a real aiohttp
+and what it serves (the command line's refusals: tests/test_cli_errors.py). A real zenoh session, a real aiohttp
 server, urllib as the client."""
 
 from __future__ import annotations
 
 import http.cookiejar
 import json
-import subprocess
-import sys
 import threading
 import urllib.error
 import urllib.request
@@ -23,9 +21,6 @@ from planner_service.live.picture import FleetPicture
 from planner_service.web.server import LiveMapServer, RunningServer
 from protocol import GeoOrigin, Status
 from protocol.zenoh_config import session_config
-
-REPO = Path(__file__).resolve().parents[2]
-
 
 @pytest.fixture
 def served(tmp_path: Path) -> Iterator[tuple[RunningServer, LiveFeed]]:
@@ -119,13 +114,16 @@ def test_tiles_are_served_from_their_folder_only(served: tuple[RunningServer, Li
         assert fetch(running.url + sneaky, opener=opener)[0] == 404, sneaky
 
 
-def test_the_command_line_refuses_a_clear_page_on_the_network() -> None:
-    done = subprocess.run([sys.executable, "-m", "planner_service", "operator", "web", "--listen", "0.0.0.0:8765"],
-                          cwd=REPO, capture_output=True, text=True, timeout=60)
-    assert done.returncode == 2 and "--tls-cert" in done.stderr, done.stderr
-    done = subprocess.run([sys.executable, "-m", "planner_service", "operator", "web", "--listen", "nonsense"],
-                          cwd=REPO, capture_output=True, text=True, timeout=60)
-    assert done.returncode == 2 and "is not HOST:PORT" in done.stderr, done.stderr
-    done = subprocess.run([sys.executable, "-m", "planner_service", "operator", "watch", "--tiles", "x"],
-                          cwd=REPO, capture_output=True, text=True, timeout=60)
-    assert done.returncode == 2 and "are for web" in done.stderr, done.stderr
+def test_a_token_file_others_may_read_or_too_short_is_refused(tmp_path: Path) -> None:
+    from planner_service.commands.operator_web import read_token
+
+    token = tmp_path / "token"
+    token.write_text("a-token-of-enough-length\n")
+    token.chmod(0o644)
+    with pytest.raises(ValueError, match="may be read by others"):
+        read_token(str(token))
+    token.chmod(0o600)
+    assert read_token(str(token)) == "a-token-of-enough-length"
+    token.write_text("short")
+    with pytest.raises(ValueError, match="at least 16"):
+        read_token(str(token))
