@@ -27,7 +27,7 @@ from protocol import Event
 from protocol.client import PlannerClient
 
 from ..service.config import build_config, to_toml
-from ..harness.processes import Child, Command, free_port, start_vehicle_and_service
+from ..harness.processes import Child, ProgramChild, free_port, start_vehicle_and_service
 
 
 def percentile(values: list[float], q: float) -> float:
@@ -158,7 +158,7 @@ def open_page(tmp: Path, endpoint: str, children: list[Child]) -> str:
     browser = shutil.which("chromium") or shutil.which("chromium-browser")
     if browser is not None:
         profile = tmp / "chromium"
-        children.append(Command([browser, "--headless=new", "--no-sandbox", "--disable-gpu", "--no-first-run",
+        children.append(ProgramChild([browser, "--headless=new", "--no-sandbox", "--disable-gpu", "--no-first-run",
                                  "--disable-background-networking", "--disable-component-update", "--disable-sync",
                                  f"--user-data-dir={profile}", "--remote-debugging-port=0", login], tmp / "chromium.log"))
         # timed once the page is open and drawn: a browser starting up is not what an open page costs

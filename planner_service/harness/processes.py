@@ -53,7 +53,7 @@ def tied_to_parent() -> Callable[[], None] | None:
 
 
 class Child:
-    """``python -m MODULE ARGS`` with stderr in ``log_path`` (``Command``: any program)."""
+    """``python -m MODULE ARGS`` with stderr in ``log_path`` (``ProgramChild``: any program)."""
 
     def __init__(self, module: str, args: list[str], log_path: Path, program: list[str] | None = None) -> None:
         env = dict(os.environ, PYTHONPATH=str(REPO) + os.pathsep + os.environ.get("PYTHONPATH", ""))
@@ -93,7 +93,7 @@ class Child:
         return int(self.proc.returncode)
 
 
-class Command(Child):
+class ProgramChild(Child):
     """Another program (``argv``) as a child: stderr in ``log_path``, stopped as a child is."""
 
     def __init__(self, argv: list[str], log_path: Path) -> None:
