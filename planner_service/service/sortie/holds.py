@@ -30,6 +30,9 @@ class Binding:
     why_not: str = ""
     done: bool = False
     """The user said its upload is done (a newer request with no tasks)."""
+    lost_to: str | None = None
+    """The member heard owning the user during the hold (it bound the user first): kept once
+    heard, since its claim goes when its own hold ends, maybe before this one's."""
 
 
 @dataclass(frozen=True)

@@ -244,10 +244,15 @@ class SortieLogic:
     # --- the fleet ------------------------------------------------------------------------------
     def _heard(self, s: Sortie, view: FleetView) -> Sortie:
         """The other members' claims changed: users another member no longer owns are this
-        member's to plan again (a member gone, a plan changed), and a point this member flies
-        to that another now claims is given up at the next decision (``_plan_wanted``)."""
+        member's to plan again (a member gone, a plan changed), a point this member flies to
+        that another now claims is given up at the next decision (``_plan_wanted``), and a
+        hold whose user another member owns (it bound the user first) will record nothing,
+        even if that member's claim is gone by the end of the hold."""
         freed = set(s.fleet.owners) - set(view.owners)
         s = replace(s, fleet=view)
+        b = s.holds.binding
+        if b is not None and b.request_id is not None and b.lost_to is None and view.owner(b.user_id) is not None:
+            s = replace(s, holds=replace(s.holds, binding=replace(b, lost_to=view.owner(b.user_id))))
         if freed:
             s = replace(s, schedule=s.schedule.request_in(self.rules.backoff))
         return s
@@ -485,7 +490,7 @@ class SortieLogic:
             return s
         if b is None or b.request_id is None:
             return s
-        other = s.fleet.owner(b.user_id)
+        other = s.fleet.owner(b.user_id) or b.lost_to
         elsewhere = (f"{other} serves {b.user_id} (claimed it first)" if other is not None
                      else self.world.served_elsewhere(b.user_id))
         if elsewhere is not None:  # two members bound one user at once: the first keeps it
