@@ -232,6 +232,37 @@ def test_a_member_gone_with_its_vehicle_armed_is_not_forgotten(mesh: Callable[[]
     assert a.roster.lost() == []
 
 
+def test_a_member_gone_silent_with_its_vehicle_armed_is_not_forgotten_before_its_token_goes(
+        mesh: Callable[[], Any], caplog: pytest.LogCaptureFixture) -> None:
+    """uav2's radio goes out of reach: its announcements and positions stop, but its token
+    lives on until zenoh's lease ends. Between its announcement going stale (10 s) and the
+    token's end, uav2 was neither a member nor lost: judged by nobody ("position known
+    again" was even logged), its route free to plan. Over emulated radios (bench --fleet
+    --scale, one radio cut for 15 s) that window lasted 10 s. It is lost as a member gone."""
+    a_session = mesh()
+    a = presence(KEYS, member("uav1", 100.0))
+    a.join(a_session, DISCOVERY_S)
+    b_session = mesh()
+    b = presence(KEYS, member("uav2", 110.0))
+    b.join(b_session, DISCOVERY_S)
+    put_position(a_session, KEYS, Status(vehicle="uav1", armed=True, z_m=100.0))
+    wait_until(lambda: (put_position(b_session, KEYS, Status(vehicle="uav2", armed=True, z_m=110.0)),
+                        put_position(a_session, KEYS, Status(vehicle="uav1", armed=True, z_m=100.0)),
+                        a.check_separation().unknown)[2] == (), 10.0, "uav2's position")
+    b._stop.set()  # the radio is out of reach: nothing more from uav2, its token still alive
+    with caplog.at_level(logging.INFO, logger="planner_service.fleet"):
+        wait_until(lambda: "uav2" not in a.members(), 20.0, "uav2's announcement stale")
+        assert "uav2" in a.roster.tokens()  # the token lives: not gone
+
+        def unknown() -> list[str]:
+            put_position(a_session, KEYS, Status(vehicle="uav1", armed=True, z_m=100.0))  # uav1's own, fresh
+            return [u.split(";")[0] for u in a.check_separation().unknown]
+        wait_until(lambda: unknown() == ["uav2: not heard (its announcements stopped)"], 10.0, "uav2 unknown")
+    assert a.roster.lost() == ["uav2"]
+    assert "uav2's position known again" not in caplog.text
+    b.leave()
+
+
 def test_of_two_services_started_at_once_for_one_vehicle_one_at_most_goes_on(mesh: Callable[[], Any]) -> None:
     """Each refuses when it sees the other's token before declaring its own, or two
     publishers announcing the vehicle after: one may go on (the other saw it first, or

@@ -177,8 +177,8 @@ class FleetRoster:
         """The fleet's separation now, on the members' last statuses (``fleet.separation``)."""
         with self._lock:
             seen = dict(self._seen)
-        return judge(self.members(), seen, time.monotonic(), min_horizontal_m, stale_s, self._lost_now(),
-                     vertical_separation_m)
+        return judge(self.members(), seen, time.monotonic(), min_horizontal_m, stale_s, self._gone_now(),
+                     vertical_separation_m, self._silent_now())
 
     def positions(self) -> dict[str, Seen]:
         """Each live member's last signed status (its vehicle's own position) and when it
@@ -198,9 +198,24 @@ class FleetRoster:
         return sorted(self._lost_now())
 
     def _lost_now(self) -> dict[str, Seen]:
+        """The members gone and those gone silent, each armed when last seen."""
+        return {**self._silent_now(), **self._gone_now()}
+
+    def _gone_now(self) -> dict[str, Seen]:
         since = time.monotonic() - self.lost_s
         with self._lock:
             return {v: s for v, s in self._lost.items() if s.at_s >= since}
+
+    def _silent_now(self) -> dict[str, Seen]:
+        """Members whose token lives but whose announcements stopped (a radio out of reach:
+        the token lasts until zenoh's lease ends, seconds later) with their vehicles armed when
+        last seen: no longer members, yet not gone; lost as a member gone is, or their
+        claims and airspace would vanish unjudged in between."""
+        now = time.monotonic()
+        with self._lock:
+            return {v: self._seen[v] for v in self._alive
+                    if v in self._said_at and now - self._said_at[v] > ANNOUNCE_STALE_S
+                    and v in self._seen and self._seen[v].status.armed and now - self._seen[v].at_s <= self.lost_s}
 
     def _open(self, sample: Any, vehicle: str, max_age_s: float) -> bytes | None:
         """The signed message in ``sample`` from enrolled ``vehicle``, or None (refused, counted)."""

@@ -51,13 +51,16 @@ class Judgement:
 def judge(members: Mapping[str, FleetMember | None], seen: Mapping[str, Seen], now_s: float,
           min_horizontal_m: float = MIN_HORIZONTAL_M, stale_s: float = STALE_S,
           lost: Mapping[str, Seen] | None = None,
-          vertical_separation_m: float = VERTICAL_SEPARATION_M) -> Judgement:
+          vertical_separation_m: float = VERTICAL_SEPARATION_M, silent: Mapping[str, Seen] | None = None) -> Judgement:
     """The separation of ``members`` (alive, with their announcements) from the statuses
     ``seen`` of each, at ``now_s``; ``lost``: the last statuses, armed, of members whose
-    service is gone."""
+    service is gone; ``silent``: of those whose announcements stopped, their tokens alive."""
     unknown = [f"{vehicle}: its service is gone; its vehicle was armed when last seen "
                f"{now_s - last.at_s:.0f} s ago" for vehicle, last in sorted((lost or {}).items())
                if vehicle not in members]
+    unknown += [f"{vehicle}: not heard (its announcements stopped); its vehicle was armed when last seen "
+                f"{now_s - last.at_s:.0f} s ago" for vehicle, last in sorted((silent or {}).items())
+                if vehicle not in members and vehicle not in (lost or {})]
     where: dict[str, tuple[float, float, float]] = {}
     frame: GeoOrigin | None = None
     for vehicle, member in sorted(members.items()):
