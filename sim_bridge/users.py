@@ -381,6 +381,8 @@ def run_users(client: PlannerClient, scenario: Scenario, count: int, tp: TaskPar
         advance_users(walkers, streams, (now - last) * speedup, sim, params, p, tp)
         last = now
         for w in walkers:
+            if stop.is_set():  # each submit may take a round trip over a slow radio: many take seconds
+                break
             if wants_to_send(w, sim, tp):
                 submit(client, w, sim, tp, params)
         if all(w.done for w in walkers):

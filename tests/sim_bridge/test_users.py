@@ -7,6 +7,8 @@ from __future__ import annotations
 
 import argparse
 import re
+import threading
+import time
 from pathlib import Path
 
 import msgspec
@@ -18,8 +20,9 @@ from planner_service.model.mobility import draw_arrivals, draw_tasks, move_users
 from planner_service.service.intake import Accepted, Intake, fairness_rule
 from planner_service.service.journal import Journal
 from protocol import Area, TaskAck, UserPlace, encode
+from protocol.client import ClientError
 from sim_bridge.users import (TaskParams, WalkParams, Walker, advance_users, arrive, learn_served, new_walkers, on_ack,
-                              model_pace, on_place, on_refused, request_of, sent, step, user_streams, wants_to_send)
+                              model_pace, on_place, on_refused, request_of, sent, step, run_users, user_streams, wants_to_send)
 
 SCENARIO = field()
 P = pack(SCENARIO)
@@ -322,3 +325,31 @@ def test_a_stop_asked_while_the_users_process_finishes_never_kills_it(python_env
             time.sleep(0.002)
         code = proc.wait(5.0)
         assert code == 0, (code, said, proc.stderr.read().decode(errors="replace")[-3000:])
+
+
+class SlowService:
+    """A service a slow radio away: each request takes ``answer_s`` to be refused; a stop is
+    asked during the first."""
+
+    def __init__(self, stop: threading.Event, answer_s: float) -> None:
+        self.stop, self.answer_s, self.asked = stop, answer_s, 0
+
+    def follow_places(self, _callback: object) -> None:
+        pass
+
+    def submit_request(self, request: object) -> None:
+        self.asked += 1
+        self.stop.set()
+        time.sleep(self.answer_s)
+        raise ClientError("service", "busy")
+
+
+def test_users_stop_within_one_request_when_each_request_takes_a_slow_round_trip() -> None:
+    """Over emulated radios (bench --fleet --scale, 100 ms each way) 20 users' requests in one
+    round took longer than the 10 s a stop waits: the users went on submitting after the stop,
+    one after another, and were killed. A stop ends the round at the request under way."""
+    stop = threading.Event()
+    service = SlowService(stop, answer_s=0.5)
+    started = time.monotonic()
+    run_users(service, SCENARIO, 20, TaskParams(interval_s=1.0, backlog_max=SCENARIO.task_max), 10.0, 1, stop)  # type: ignore[arg-type]
+    assert service.asked == 1 and time.monotonic() - started < 5.0, service.asked
