@@ -187,11 +187,14 @@ class Vehicle:
         return Signer(key, TimestampStore(stamps))
 
     # --- loop ------------------------------------------------------------------------------
-    def run(self, stop: threading.Event) -> None:
-        """Serve until ``stop`` is set."""
+    def run(self, stop: threading.Event, on_listening: Callable[[], None] | None = None) -> None:
+        """Serve until ``stop`` is set; ``on_listening`` is called once the "listening" line
+        is logged (several vehicles in one process announce themselves all up after it)."""
         log.info("vehicle (%s) listening on %s, speed-up %g, position after %g s%s", self.config.flavour,
                  self.config.url, self.config.speedup, self.config.gps_delay_s,
                  ", signing enforced" if self.signer is not None else "")
+        if on_listening is not None:
+            on_listening()
         try:
             while not stop.is_set():
                 wait = self._last_tick + self.config.tick_s - self.clock()
