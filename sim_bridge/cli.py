@@ -1,4 +1,5 @@
-"""``python -m sim_bridge``: the software vehicle, simulated users and a lossy link."""
+"""``python -m sim_bridge``: the software vehicle, simulated users, a lossy link, a router and
+emulated radio links."""
 
 from __future__ import annotations
 
@@ -13,6 +14,7 @@ COMMANDS = {
     "users": "sim_bridge.commands.users",
     "lossy-proxy": "sim_bridge.commands.lossy_proxy",
     "router": "sim_bridge.commands.router",
+    "wire": "sim_bridge.commands.wire",
 }
 
 
@@ -21,7 +23,7 @@ def build_parser() -> OneLineParser:
     parser = OneLineParser(
         prog="python -m sim_bridge",
         description="Simulated counterparts of the planner: a MAVLink vehicle (SITL-stub), "
-        "ground users over zenoh, a lossy UDP link, and a zenoh router.",
+        "ground users over zenoh, a lossy UDP link, a zenoh router, and emulated radio links between network namespaces.",
     )
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     for name, path in COMMANDS.items():

@@ -8,6 +8,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from pathlib import Path
 
 HELP = "performance figures: decision latency, playouts/s, speed-up over a plain reference"
 
@@ -55,8 +56,26 @@ def configure(parser: argparse.ArgumentParser) -> None:
                              "(--decisions each, default 30; with --quick the paper's size only, 10 decisions); "
                              "with --flight: fleets of --uavs flown on loopback against the offline fleet planner, "
                              "the traffic each UAV sends and the decision time (medians over --seeds; --quick: 1 seed)")
-    parser.add_argument("--uavs", default="1,2,3", metavar="N,N,...",
-                        help="fleet sizes with --fleet --flight (default 1,2,3)")
+    parser.add_argument("--scale", action="store_true",
+                        help="with --fleet: fleets of --uavs (default 5,10,20) flown past one machine's loopback: each "
+                             "UAV's computer, each router and the ground station a network namespace, the UAVs' "
+                             "radios emulated (--delay-ms, --jitter-ms, --loss) and one cut mid-sortie; traffic per UAV, "
+                             "intentions heard, served by two, holds of two, agreement after the cut, CPU and memory, "
+                             "flown/offline, and the traffic's model in N (needs root; docs/PERFORMANCE.md)")
+    parser.add_argument("--uavs", default=None, metavar="N,N,...",
+                        help="fleet sizes with --fleet --flight (default 1,2,3) or --fleet --scale (default 5,10,20)")
+    parser.add_argument("--delay-ms", type=float, default=100.0, help="with --scale: the radios' one-way delay (default 100)")
+    parser.add_argument("--jitter-ms", type=float, default=10.0, help="with --scale: its uniform spread (default 10)")
+    parser.add_argument("--loss", type=float, default=0.05, help="with --scale: each packet's loss probability (default 0.05)")
+    parser.add_argument("--users-per-uav", type=int, default=4, help="with --scale: simulated users per UAV (default 4)")
+    parser.add_argument("--cut-at-s", type=float, default=20.0,
+                        help="with --scale: uav1's radio cut this many seconds after the users begin (default 20)")
+    parser.add_argument("--cut-for-s", type=float, default=15.0,
+                        help="with --scale: ... and restored this much later (default 15: longer than zenoh's 10 s lease)")
+    parser.add_argument("--zenoh-mode", choices=("client", "peer"), default="client",
+                        help="with --scale: the services' zenoh mode (default client: each UAV links to one ground "
+                             "router; peer: each also links to every other UAV it hears of, over the radios)")
+    parser.add_argument("--keep", default=None, metavar="DIR", help="with --scale: keep every log and journal in DIR")
     parser.add_argument("--users", type=int, default=12, help="simulated users with --fleet --flight (default 12)")
 
 
@@ -81,6 +100,11 @@ def run(args: argparse.Namespace) -> int:
         return _run_e2e(args)
     if args.link:
         return _run_link(args)
+    if args.scale and not args.fleet:
+        print("error: --scale goes with --fleet (fleets past one machine)", file=sys.stderr)
+        return 2
+    if args.fleet and args.scale:
+        return _run_fleet_scale(args)
     if args.fleet and args.flight:
         return _run_fleet_flight(args)
     if args.flight:
@@ -144,14 +168,51 @@ def _run_link(args: argparse.Namespace) -> int:
     return 0
 
 
+def uav_counts(text: str) -> list[int] | None:
+    try:
+        return [int(n) for n in text.split(",") if n]
+    except ValueError:
+        print(f"error: --uavs {text!r} is not a number list", file=sys.stderr)
+        return None
+
+
+def _run_fleet_scale(args: argparse.Namespace) -> int:
+    from ..bench.fleet_scale import format_fleet_scale, run_fleet_scale
+    from ..harness.demo import DemoError
+    from ..harness.sites import Radio, SitesError, can_make_sites
+
+    counts = uav_counts(args.uavs or "5,10,20")
+    if counts is None:
+        return 2
+    if not counts or any(not 1 <= n <= 40 for n in counts) or args.users_per_uav < 1 or not args.speedup > 0:
+        print("error: --uavs 1 to 40 each, --users-per-uav and --speedup positive", file=sys.stderr)
+        return 2
+    if args.delay_ms < 0 or args.jitter_ms < 0 or not 0 <= args.loss < 1 or args.cut_at_s < 0 or args.cut_for_s < 0:
+        print("error: --delay-ms, --jitter-ms, --cut-at-s and --cut-for-s must not be negative, --loss in [0, 1)",
+              file=sys.stderr)
+        return 2
+    why = can_make_sites()
+    if why:
+        print(f"error: --scale cannot make its sites here: {why}", file=sys.stderr)
+        return 2
+    try:
+        results = run_fleet_scale(counts, Radio(args.delay_ms, args.jitter_ms, args.loss), args.users_per_uav,
+                                  args.speedup, args.budget_ms, args.seeds[0], args.cut_at_s, args.cut_for_s,
+                                  progress=lambda msg: print(msg, file=sys.stderr, flush=True),
+                                  keep=Path(args.keep) if args.keep else None, zenoh_mode=args.zenoh_mode)
+    except (DemoError, SitesError) as err:
+        print(f"error: a fleet flight failed: {err}", file=sys.stderr)
+        return 1
+    print(json.dumps(results, indent=1) if args.json else format_fleet_scale(results))
+    return 0
+
+
 def _run_fleet_flight(args: argparse.Namespace) -> int:
     from ..bench.fleet_flight import format_fleet_flight, run_fleet_flight
 
     seeds = args.seeds
-    try:
-        counts = [int(n) for n in args.uavs.split(",") if n]
-    except ValueError:
-        print(f"error: --uavs {args.uavs!r} is not a number list", file=sys.stderr)
+    counts = uav_counts(args.uavs or "1,2,3")
+    if counts is None:
         return 2
     if not counts or any(not 1 <= n <= 8 for n in counts) or args.users < 1 or not args.speedup > 0:
         print("error: --uavs 1 to 8 each, --users and --speedup positive", file=sys.stderr)

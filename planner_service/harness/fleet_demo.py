@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import json
 import shutil
-import socket
 import threading
 import time
 from collections import Counter, defaultdict
@@ -28,10 +27,12 @@ from ..model.fleet import Fleet, uav_scenarios
 from ..policy import PolicySpec
 from ..service.config import build_config, to_toml
 from ..service.errors import ServiceError
+from .placement import Loopback, Placement
 from ..service.journal import Journal
 from .demo import DemoError, area_axes
 from .live_map import LiveMap
-from .processes import Child, free_port
+from .processes import Child, cpu_seconds, peak_rss_mb
+from .doubles import served_at_once, stacked_holds
 from .report import sortie_summary
 
 LAYER_M = 20.0
@@ -40,6 +41,8 @@ LAYER_M = 20.0
 BASE_STEP_M = 40.0
 """UAV j's home lies j times this east of the origin: twice ``fleet.min_horizontal_m``,
 since the UAVs climb through each other's layers above their homes."""
+FENCE_MARGIN_M = 100.0
+"""The stub's own default geofence margin around the area (``vehicle --fence-margin``)."""
 OFFLINE_ALGO = "claims"
 """The offline fleet planner the flight is held against: the rule the services fly (a user
 is the UAV's that claims it first, docs/PLANNER.md)."""
@@ -83,6 +86,8 @@ class Watch:
         self.events: list[tuple[str, Event]] = []
         self.fleet_bytes: Counter[str] = Counter()
         self.status_bytes: Counter[str] = Counter()
+        self.fleet_kinds: Counter[str] = Counter()
+        """Bytes on the fleet's keys by kind (positions, uavs, intentions, served), all members."""
         self.fleet = FleetKeys(prefix)
         self._calm_since: float | None = None
         self._subs = [session.declare_subscriber(self.fleet.statuses, self._status),
@@ -107,8 +112,10 @@ class Watch:
         # {prefix}/fleet/{kind}/{vehicle}[/@adv/...]: announcements, intentions, services
         parts = str(sample.key_expr).split("/")
         if len(parts) >= 4:
+            size = len(sample.payload.to_bytes())
             with self.lock:
-                self.fleet_bytes[parts[3]] += len(sample.payload.to_bytes())
+                self.fleet_bytes[parts[3]] += size
+                self.fleet_kinds[parts[2]] += size
 
     def over(self, vehicles: list[str], calm_s: float = 3.0) -> bool:
         """The sortie is over: a UAV has landed and none has been armed for ``calm_s`` (a
@@ -144,12 +151,20 @@ def enrol_fleet(folder: Path, vehicles: list[str]) -> Path:
 
 def run_fleet_demo(out: Path, *, uavs: int = 3, users: int = 12, speedup: float = 25.0, budget_ms: float = 150.0,
                    seed: int = 1, timeout_s: float = 300.0, offline: bool = True,
-                   echo: Callable[[str], None] = print, web: bool = False) -> dict[str, Any]:
+                   echo: Callable[[str], None] = print, web: bool = False, placement: Placement | None = None,
+                   settings: dict[str, str] | None = None,
+                   during: Callable[[float], None] | None = None, zenoh_mode: str = "peer") -> dict[str, Any]:
     """Fly one sortie with ``uavs`` UAVs; returns the summary (also ``out/summary.json``). The
     live map's address is printed once the services are up; with ``web`` the page (and the
-    fleet) stay until Ctrl-C after the landings."""
+    fleet) stay until Ctrl-C after the landings. ``placement``: where each process runs
+    (default: all on loopback); ``settings``: more of the services' settings (``safety.*``:
+    also the layers' ceiling); ``during``: called while the fleet flies with the seconds since
+    the users began (a bench cuts a link there); ``zenoh_mode``: the services' (``peer``:
+    each listens and links to every other it hears of; ``client``: each to one router)."""
     out.mkdir(parents=True, exist_ok=True)
-    defaults = build_config({}, {})
+    placement = placement or Loopback()
+    settings = settings or {}
+    defaults = _config(settings)
     default = defaults.scenario()
     lowest = lowest_layer_m(default, uavs, defaults.safety.max_altitude_m)
     if lowest < defaults.safety.min_flight_altitude_m:
@@ -160,8 +175,10 @@ def run_fleet_demo(out: Path, *, uavs: int = 3, users: int = 12, speedup: float 
     fleet = fleet_of(uavs)
     scenarios = uav_scenarios(base, fleet)
     origin = defaults.origin_point()
-    routers = [f"tcp/127.0.0.1:{free_port()}" for _ in range(2)]
+    routers = [placement.router_endpoint(i) for i in range(2)]
     children: list[Child] = []
+    watched: dict[str, Child] = {}
+    """The routers' and the UAVs' processes, whose CPU and memory the summary reports."""
     start = time.monotonic()
     echo(f"demo: {uavs} UAVs (vehicle stubs x{speedup:g}), {uavs} services, 2 routers, {users} users "
          f"submitting to the fleet; logs in {out}")
@@ -169,27 +186,31 @@ def run_fleet_demo(out: Path, *, uavs: int = 3, users: int = 12, speedup: float 
     live = LiveMap(routers, Keys().prefix, echo=echo)
     try:
         for i, endpoint in enumerate(routers):
-            child = Child("sim_bridge", ["router", "--listen", endpoint, *(["--connect", routers[0]] if i else [])],
-                          out / f"router{i + 1}.log")
+            args = ["router", "--listen", endpoint, *(["--connect", routers[0]] if i else [])]
+            child = Child("sim_bridge", args, out / f"router{i + 1}.log",
+                          program=placement.program(placement.router_site(i), "sim_bridge", args))
             children.append(child)
+            watched[f"router{i + 1}"] = child
             child.wait_ready("router listening")
         vehicles = [f"uav{j + 1}" for j in range(uavs)]
         roster = enrol_fleet(out / "fleet-keys", vehicles)
+        for vehicle in vehicles:
+            (out / vehicle).mkdir(exist_ok=True)
+            for stale in (out / vehicle).glob("journal.sqlite*"):
+                stale.unlink()
+        homes = [local_to_global(GeoOrigin(origin.lat_deg, origin.lon_deg, origin.alt_m), sc.base_x_m, sc.base_y_m, 0.0)
+                 for sc in scenarios]
+        fence = stub_fence(uavs, defaults.safety.max_altitude_m)
+        service_urls = start_stubs(out, vehicles, homes, speedup, placement, children, watched, fence)
         for j, (vehicle, sc) in enumerate(zip(vehicles, scenarios)):
             folder = out / vehicle
-            folder.mkdir(exist_ok=True)
-            for stale in folder.glob("journal.sqlite*"):
-                stale.unlink()
-            port = free_port(socket.SOCK_DGRAM)
-            lat, lon, alt = local_to_global(GeoOrigin(origin.lat_deg, origin.lon_deg, origin.alt_m), sc.base_x_m,
-                                            sc.base_y_m, 0.0)
-            stub = Child("sim_bridge", ["vehicle", "--mavlink", f"udpin:127.0.0.1:{port}", "--speedup", str(speedup),
-                                        "--origin", f"{lat:.7f},{lon:.7f},{alt:.2f}"], folder / "vehicle.log")
-            children.append(stub)
-            stub.wait_ready("listening")
+            service_url = service_urls[vehicle]
             config = _config({
-                "zenoh.mode": "peer", "zenoh.listen": f"tcp/127.0.0.1:{free_port()}", "zenoh.connect": ",".join(routers),
-                "zenoh.vehicle": vehicle, "mavlink.url": f"udpout:127.0.0.1:{port}", "mavlink.start_mission": "true",
+                **settings,
+                "zenoh.mode": zenoh_mode,
+                "zenoh.listen": placement.service_endpoint(vehicle) if zenoh_mode == "peer" else "",
+                "zenoh.connect": ",".join(routers),
+                "zenoh.vehicle": vehicle, "mavlink.url": service_url, "mavlink.start_mission": "true",
                 "planner.budget_ms": str(budget_ms), "planner.seed": str(seed + j),
                 # a member's first plan waits for its share of the users (the others' claims
                 # are not its to count: waiting for all, a late member would never fly)
@@ -197,8 +218,11 @@ def run_fleet_demo(out: Path, *, uavs: int = 3, users: int = 12, speedup: float 
                 "fleet.enabled": "true", "fleet.discovery_s": "1.0", "fleet.roster_file": str(roster),
                 "fleet.key_file": str(roster.parent / f"{vehicle}.key"), **scenario_settings(default, sc)})
             (folder / "planner.toml").write_text(to_toml(config))
-            service = Child("planner_service", ["serve", "--config", str(folder / "planner.toml")], folder / "service.log")
+            args = ["serve", "--config", str(folder / "planner.toml")]
+            service = Child("planner_service", args, folder / "service.log",
+                            program=placement.program(placement.service_site(vehicle), "planner_service", args))
             children.append(service)
+            watched[f"service {vehicle}"] = service
             service.wait_ready("ready:", 120.0)
             echo(f"  {vehicle}: layer {sc.altitude_m:g} m, home {sc.base_x_m:g} m east")
         session = zenoh.open(session_config("client", connect=routers))
@@ -210,6 +234,7 @@ def run_fleet_demo(out: Path, *, uavs: int = 3, users: int = 12, speedup: float 
                                              str(speedup), "--seed", str(seed),
                                              *build_config({}, {}).scenario_arguments()], out / "users.log"))
         users_started = time.monotonic()
+        cpu_before = {name: cpu_seconds(c.proc.pid) for name, c in watched.items()}
         last_print = 0.0
         while not watch.over(vehicles):
             now = time.monotonic()
@@ -222,8 +247,11 @@ def run_fleet_demo(out: Path, *, uavs: int = 3, users: int = 12, speedup: float 
             if now - last_print >= 2.0:
                 last_print = now
                 echo(_progress(watch, vehicles, now - start))
+            if during is not None:
+                during(now - users_started)
             time.sleep(0.2)
         flown_s = time.monotonic() - users_started
+        usage = process_usage(watched, cpu_before, flown_s)
         time.sleep(0.6)
         watch.close()
         if web:
@@ -237,6 +265,10 @@ def run_fleet_demo(out: Path, *, uavs: int = 3, users: int = 12, speedup: float 
     if bad:
         raise DemoError(f"children exited badly: {bad}")
     summary = fleet_summary(out, vehicles, scenarios, base, watch, flown_s)
+    summary["processes"] = usage
+    summary["fleet"]["stacked_holds"] = stacked_holds(
+        [s for v in vehicles for s in watch.statuses[v]], 2 * defaults.safety.hold_radius_m)
+    summary["fleet"]["users_served_at_once"] = served_at_once(watch.events, speedup)
     summary.update(uavs=uavs, users=users, speedup=speedup, budget_ms=budget_ms, seed=seed, layer_m=LAYER_M,
                    base_step_m=BASE_STEP_M, wall_s=time.monotonic() - start)
     if offline:
@@ -248,6 +280,54 @@ def run_fleet_demo(out: Path, *, uavs: int = 3, users: int = 12, speedup: float 
     (out / "summary.json").write_text(json.dumps(summary, indent=1))
     plot_paths(out / "paths.png", base, watch, summary)
     return summary
+
+
+def stub_fence(uavs: int, max_altitude_m: float) -> list[str]:
+    """The stubs' geofence (a stand-in for each autopilot's own), around the fleet's area from
+    each UAV's home, the stub's origin: the area grown by the homes' spread east, so that UAV
+    j's fence does not start j * ``BASE_STEP_M`` east of the area's west edge and refuse the
+    points west of that; its ceiling above the highest layer (a raised ceiling raises it)."""
+    return ["--fence-alt-max", f"{max(150.0, max_altitude_m + LAYER_M):g}",
+            "--fence-margin", f"{FENCE_MARGIN_M + BASE_STEP_M * (uavs - 1):g}"]
+
+
+def start_stubs(out: Path, vehicles: list[str], homes: list[tuple[float, float, float]], speedup: float,
+                placement: Placement, children: list[Child], watched: dict[str, Child],
+                extra: list[str]) -> dict[str, str]:
+    """Every UAV's vehicle stub, each once listening: one process each, or all in one
+    (``vehicle --count N``: one interpreter for twenty) where the placement says so, their
+    homes ``BASE_STEP_M`` apart east from the first, ``extra`` arguments to each; the URL each
+    service reaches its own by."""
+    site = placement.stub_site()
+    if placement.stubs_in_one_process and len(vehicles) > 1:
+        lat, lon, alt = homes[0]
+        args = ["vehicle", "--count", str(len(vehicles)), "--mavlink", placement.stubs_url(), "--speedup",
+                str(speedup), "--origin", f"{lat:.7f},{lon:.7f},{alt:.2f}", "--spacing-m", f"{BASE_STEP_M:g}", *extra]
+        stub = Child("sim_bridge", args, out / "vehicles.log", program=placement.program(site, "sim_bridge", args))
+        children.append(stub)
+        watched["vehicles"] = stub
+        stub.wait_ready(f"{len(vehicles)} vehicles listening", 60.0)
+        return {v: placement.vehicle_urls(v, j)[1] for j, v in enumerate(vehicles)}
+    urls = {}
+    for j, (vehicle, (lat, lon, alt)) in enumerate(zip(vehicles, homes)):
+        stub_url, urls[vehicle] = placement.vehicle_urls(vehicle, j)
+        args = ["vehicle", "--mavlink", stub_url, "--speedup", str(speedup), "--origin", f"{lat:.7f},{lon:.7f},{alt:.2f}",
+                *extra]
+        stub = Child("sim_bridge", args, out / vehicle / "vehicle.log", program=placement.program(site, "sim_bridge", args))
+        children.append(stub)
+        watched[f"vehicle {vehicle}"] = stub
+        stub.wait_ready("listening")
+    return urls
+
+
+def process_usage(watched: dict[str, Child], cpu_before: dict[str, float | None], wall_s: float) -> dict[str, Any]:
+    """Each watched process's share of one core while the fleet flew, and its peak memory."""
+    out = {}
+    for name, child in watched.items():
+        before, after = cpu_before.get(name), cpu_seconds(child.proc.pid)
+        out[name] = {"cpu_percent": None if before is None or after is None else 100.0 * (after - before) / wall_s,
+                     "peak_rss_mb": peak_rss_mb(child.proc.pid)}
+    return out
 
 
 def _config(settings: dict[str, str]) -> Any:
@@ -302,6 +382,7 @@ def fleet_summary(out: Path, vehicles: list[str], scenarios: list[Scenario], bas
         },
         "traffic_bytes_per_s": {v: {"fleet_keys": watch.fleet_bytes[v] / flown_s,
                                     "status": watch.status_bytes[v] / flown_s} for v in vehicles},
+        "fleet_keys_by_kind_bytes_per_s": {k: n / flown_s / len(vehicles) for k, n in sorted(watch.fleet_kinds.items())},
     }
 
 

@@ -96,6 +96,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--retries", type=positive_int, default=5, help="re-requests before an upload is abandoned (default 5)")
     parser.add_argument("--fence-margin", type=non_negative_float, default=100.0,
                         help="geofence: the scenario area grown by this many metres (default 100)")
+    parser.add_argument("--fence-alt-max", type=positive_float, default=150.0, metavar="METRES",
+                        help="geofence ceiling: a mission item above this many metres over home is refused "
+                             "INVALID_PARAM7 (ArduPilot's FENCE_ALT_MAX; default %(default)g)")
     parser.add_argument("--max-mission-items", type=positive_int, default=512,
                         help="mission capacity: a larger upload is answered NO_SPACE (default 512)")
     parser.add_argument("--signing-key", default=None, metavar="FILE",
@@ -223,7 +226,8 @@ def _vehicle_config(args: argparse.Namespace, scenario: Scenario, origin: GeoOri
         url=_numbered_url(args.mavlink, i), flavour=args.flavour, scenario=scenario,
         origin=_origin_east(origin, args.spacing_m * i), speedup=args.speedup, system_id=args.sysid + i,
         item_timeout_s=args.item_timeout, max_retries=args.retries, fence_margin_m=args.fence_margin,
-        max_mission_items=args.max_mission_items, signing_key_file=args.signing_key,
+        max_mission_items=args.max_mission_items, max_altitude_m=args.fence_alt_max,
+        signing_key_file=args.signing_key,
         signing_timestamp_file=_timestamp_file(args, i), state_file=_numbered(args.state_file, args.count, i),
         track_file=_numbered(args.track, args.count, i), recharge_s=args.recharge_s, gps_delay_s=args.gps_delay_s,
         disarm_delay_s=args.disarm_delay_s, max_stream_hz=args.max_stream_hz,

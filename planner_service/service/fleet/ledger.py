@@ -31,6 +31,8 @@ own threads).
 
 from __future__ import annotations
 
+import logging
+import statistics
 import threading
 import time
 from collections import deque
@@ -44,6 +46,8 @@ from protocol.fleet_signing import FUTURE_S, FleetSigner, FleetVerifier, Unverif
 from protocol.messages import FleetIntentions, FleetServed, Intention, decode, encode
 
 from ...model.fleet.claims import BOUND, PLANNED, Claim, others_points, owned_by_others
+
+log = logging.getLogger(__name__)
 
 SERVED_CACHE = 256
 """Services each member keeps in its publisher's cache for members that join late."""
@@ -102,6 +106,13 @@ def first_route(route: Iterable[int]) -> list[int]:
     return list(dict.fromkeys(int(k) for k in route))[:MAX_ROUTE]
 
 
+def heard_line(ages_ms: list[float]) -> str:
+    """``N intentions heard, p50 X ms, p99 Y ms, max Z ms``: read back by ``bench --fleet --scale``."""
+    cuts = statistics.quantiles(ages_ms, n=100, method="inclusive") if len(ages_ms) > 1 else ages_ms * 99
+    return (f"{len(ages_ms)} intentions heard, p50 {cuts[49]:.0f} ms, p99 {cuts[98]:.0f} ms, "
+            f"max {max(ages_ms):.0f} ms")
+
+
 class FleetLedger:
     """One member's side of the exchange: ``open`` on a session, ``intend`` on every plan,
     ``served`` on every service, ``take_served`` to read the others'."""
@@ -129,6 +140,9 @@ class FleetLedger:
         self._served: deque[FleetServed] = deque(maxlen=MAX_SERVED_QUEUED)
         self._seen: set[tuple[str, str, float]] = set()
         self.refused: deque[str] = deque(maxlen=16)
+        self.heard_ms: deque[float] = deque(maxlen=4096)
+        """How long each of the others' intentions took from its signature to this member
+        (its signed time against this member's clock): the fleet's agreement delay."""
         self._decl: list[Any] = []
         self._intent_pub: Any = None
         self._served_pub: Any = None
@@ -153,6 +167,8 @@ class FleetLedger:
                 recovery=zext.RecoveryConfig(heartbeat=True)))
 
     def close(self) -> None:
+        if self.heard_ms:
+            log.info("fleet: %s", heard_line(list(self.heard_ms)))
         for thing in reversed(self._decl):
             try:
                 thing.undeclare()
@@ -261,6 +277,7 @@ class FleetLedger:
             return
         claims, now = claims_of(message), time.monotonic()
         with self._lock:
+            self.heard_ms.append(max(0.0, (self._wall() - signed_at) * 1000.0))
             if message.vehicle not in self._intentions and len(self._intentions) >= MAX_MEMBERS:
                 return
             self._intentions[message.vehicle] = {i.user_id: i.due_s for i in message.users}
