@@ -56,7 +56,7 @@ CASES: list[tuple[str, tuple[str, ...], str]] = [
     (PS, ("operator", "start", "--reason", "x" * 300), "--reason: 300 characters; at most 256"),
     (PS, ("operator", "watch", "--refresh", "-1"), "argument --refresh: -1 is not positive"),
     (PS, ("plan", "--iterations", "many"), "argument --iterations: invalid int value: 'many'"),
-    (PS, ("plan", "--uavs", "0"), "--uavs: uavs: must lie in (0, 16], got 0"),
+    (PS, ("plan", "--uavs", "0"), "--uavs: uavs: must lie in (0, 64], got 0"),
     (PS, ("plan", "--uavs", "2", "--layer-m", "-1"), "--layer-m: layer_m: must not be negative, got -1"),
     (PS, ("plan", "--uavs", "2", "--algo", "mcts"), "--algo mcts plans one UAV; with --uavs choose from ['claims', "
                                                     "'dec-mcts', 'independent', 'joint']"),

@@ -20,7 +20,8 @@ from datetime import datetime
 from pathlib import Path
 from typing import Any, Callable
 
-from ..harness.fleet_demo import LAYER_M, run_fleet_demo
+from ..harness.demo import DemoError
+from ..harness.fleet_demo import BASE_STEP_M, LAYER_M, run_fleet_demo
 from ..harness.placement import SitePlacement
 from ..harness.sites import Radio, Sites
 from .fleet_flight import decision_ms
@@ -30,6 +31,10 @@ LOG_TIME = re.compile(r"^(\d{4}-\d\d-\d\d \d\d:\d\d:\d\d,\d{3}) ")
 BACKBONE = Radio(delay_ms=2.0)
 """The ground's own links (routers, the ground station) to the hub: a wired LAN."""
 CUT_UAV = "uav1"
+HOMES_SPAN_M = 480.0
+"""The homes lie along the area's side (500 m), this far from the first to the last at most."""
+MIN_HOME_STEP_M = 20.0
+"""``fleet.min_horizontal_m``'s default: homes closer would put a climb out of separation."""
 
 
 def heard(folder: Path) -> list[dict[str, float]]:
@@ -113,6 +118,12 @@ def fly_at_scale(folder: Path, uavs: int, radio: Radio, users: int, speedup: flo
     # The layers 20 m apart from 40 m: past 5 UAVs above the legal 120 m (the first limit met,
     # docs/PERFORMANCE.md); the emulated airspace raises its ceiling to fit them all.
     ceiling_m = max(120.0, 40.0 + LAYER_M * (uavs - 1))
+    # The homes 40 m apart east fit 13 along the area's side; more stand closer, never closer
+    # than the separation's horizontal minimum (they climb through each other's layers there).
+    home_step_m = min(BASE_STEP_M, float(int(HOMES_SPAN_M / max(1, uavs - 1))))
+    if home_step_m < MIN_HOME_STEP_M:
+        raise DemoError(f"{uavs} homes {home_step_m:g} m apart: closer than fleet.min_horizontal_m "
+                        f"({MIN_HOME_STEP_M:g} m)")
     settings = {"safety.max_altitude_m": f"{ceiling_m:g}",
                 # sites this process made, reachable by nothing else on the machine
                 "fleet.insecure": "true"}
@@ -122,7 +133,7 @@ def fly_at_scale(folder: Path, uavs: int, radio: Radio, users: int, speedup: flo
         try:
             summary = run_fleet_demo(folder, uavs=uavs, users=users, speedup=speedup, budget_ms=budget_ms, seed=seed,
                                      timeout_s=900.0, echo=echo, placement=SitePlacement(sites), settings=settings,
-                                     during=cut, zenoh_mode=zenoh_mode)
+                                     during=cut, zenoh_mode=zenoh_mode, home_step_m=home_step_m)
         finally:
             sites.leave()
     return row(folder, vehicles, summary, cut, ceiling_m)
@@ -140,7 +151,7 @@ def row(folder: Path, vehicles: list[str], summary: dict[str, Any], cut: CutOnce
     services = [p for name, p in processes.items() if name.startswith("service ")]
     every_ms = decision_ms(folder)
     return {
-        "uavs": len(vehicles), "ceiling_m": ceiling_m,
+        "uavs": len(vehicles), "ceiling_m": ceiling_m, "home_step_m": summary["base_step_m"],
         "fleet_keys_bytes_per_s": statistics.median(t["fleet_keys"] for t in traffic),
         "status_bytes_per_s": statistics.median(t["status"] for t in traffic),
         "fleet_keys_by_kind_bytes_per_s": summary["fleet_keys_by_kind_bytes_per_s"],

@@ -48,7 +48,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
                         help="seeds with --flight (default 1-12: one seed's flight differs from another's by more "
                              "than one planner's from another's; 3 algorithms take about 16 minutes)")
     parser.add_argument("--algos", default="mcts,greedy,random", help="algorithms with --flight (default mcts,greedy,random)")
-    parser.add_argument("--speedup", type=float, default=25.0, help="the stub's speed-up with --flight (default 25)")
+    parser.add_argument("--speedup", type=float, default=None,
+                        help="the stubs' speed-up with --flight (default 25) or --scale (default 10: the radios' "
+                             "delays are wall time, so a faster flight meets them as longer)")
     parser.add_argument("--budget-ms", type=float, default=150.0, help="planner budget with --flight (default 150)")
     parser.add_argument("--fleet", action="store_true",
                         help="instead: every fleet planner's decision time per UAV (median, p95) and message size "
@@ -92,6 +94,8 @@ def seed_range(text: str) -> list[int]:
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.speedup is None:
+        args.speedup = 10.0 if args.scale else 25.0
     if args.web and not args.e2e:
         print("error: --web goes with --e2e (the end-to-end latency without and with the live map open)",
               file=sys.stderr)
@@ -180,6 +184,7 @@ def _run_fleet_scale(args: argparse.Namespace) -> int:
     from ..bench.fleet_scale import format_fleet_scale, run_fleet_scale
     from ..harness.demo import DemoError
     from ..harness.sites import Radio, SitesError, can_make_sites
+    from ..model import ScenarioError
 
     counts = uav_counts(args.uavs or "5,10,20")
     if counts is None:
@@ -200,7 +205,7 @@ def _run_fleet_scale(args: argparse.Namespace) -> int:
                                   args.speedup, args.budget_ms, args.seeds[0], args.cut_at_s, args.cut_for_s,
                                   progress=lambda msg: print(msg, file=sys.stderr, flush=True),
                                   keep=Path(args.keep) if args.keep else None, zenoh_mode=args.zenoh_mode)
-    except (DemoError, SitesError) as err:
+    except (DemoError, SitesError, ScenarioError) as err:
         print(f"error: a fleet flight failed: {err}", file=sys.stderr)
         return 1
     print(json.dumps(results, indent=1) if args.json else format_fleet_scale(results))

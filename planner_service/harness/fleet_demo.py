@@ -48,8 +48,8 @@ OFFLINE_ALGO = "claims"
 is the UAV's that claims it first, docs/PLANNER.md)."""
 
 
-def fleet_of(uavs: int) -> Fleet:
-    return Fleet(uavs=uavs, layer_m=LAYER_M, base_step_m=BASE_STEP_M)
+def fleet_of(uavs: int, home_step_m: float = BASE_STEP_M) -> Fleet:
+    return Fleet(uavs=uavs, layer_m=LAYER_M, base_step_m=home_step_m)
 
 
 def offline_fleet(base: Scenario, users: int, fleet: Fleet, seed: int, budget_ms: float) -> dict[str, Any]:
@@ -153,14 +153,16 @@ def run_fleet_demo(out: Path, *, uavs: int = 3, users: int = 12, speedup: float 
                    seed: int = 1, timeout_s: float = 300.0, offline: bool = True,
                    echo: Callable[[str], None] = print, web: bool = False, placement: Placement | None = None,
                    settings: dict[str, str] | None = None,
-                   during: Callable[[float], None] | None = None, zenoh_mode: str = "peer") -> dict[str, Any]:
+                   during: Callable[[float], None] | None = None, zenoh_mode: str = "peer",
+                   home_step_m: float = BASE_STEP_M) -> dict[str, Any]:
     """Fly one sortie with ``uavs`` UAVs; returns the summary (also ``out/summary.json``). The
     live map's address is printed once the services are up; with ``web`` the page (and the
     fleet) stay until Ctrl-C after the landings. ``placement``: where each process runs
     (default: all on loopback); ``settings``: more of the services' settings (``safety.*``:
     also the layers' ceiling); ``during``: called while the fleet flies with the seconds since
     the users began (a bench cuts a link there); ``zenoh_mode``: the services' (``peer``:
-    each listens and links to every other it hears of; ``client``: each to one router)."""
+    each listens and links to every other it hears of; ``client``: each to one router); ``home_step_m``: the homes' spacing east (more UAVs than fit
+    the area's side at ``BASE_STEP_M`` stand closer, never under ``fleet.min_horizontal_m``)."""
     out.mkdir(parents=True, exist_ok=True)
     placement = placement or Loopback()
     settings = settings or {}
@@ -172,7 +174,7 @@ def run_fleet_demo(out: Path, *, uavs: int = 3, users: int = 12, speedup: float 
                         f"and safety.max_altitude_m ({defaults.safety.min_flight_altitude_m:g}, "
                         f"{defaults.safety.max_altitude_m:g} m)")
     base = default.replace(altitude_m=lowest, base_z_m=lowest)
-    fleet = fleet_of(uavs)
+    fleet = fleet_of(uavs, home_step_m)
     scenarios = uav_scenarios(base, fleet)
     origin = defaults.origin_point()
     routers = [placement.router_endpoint(i) for i in range(2)]
@@ -200,8 +202,8 @@ def run_fleet_demo(out: Path, *, uavs: int = 3, users: int = 12, speedup: float 
                 stale.unlink()
         homes = [local_to_global(GeoOrigin(origin.lat_deg, origin.lon_deg, origin.alt_m), sc.base_x_m, sc.base_y_m, 0.0)
                  for sc in scenarios]
-        fence = stub_fence(uavs, defaults.safety.max_altitude_m)
-        service_urls = start_stubs(out, vehicles, homes, speedup, placement, children, watched, fence)
+        fence = stub_fence(uavs, defaults.safety.max_altitude_m, home_step_m)
+        service_urls = start_stubs(out, vehicles, homes, speedup, placement, children, watched, fence, home_step_m)
         for j, (vehicle, sc) in enumerate(zip(vehicles, scenarios)):
             folder = out / vehicle
             service_url = service_urls[vehicle]
@@ -270,7 +272,7 @@ def run_fleet_demo(out: Path, *, uavs: int = 3, users: int = 12, speedup: float 
         [s for v in vehicles for s in watch.statuses[v]], 2 * defaults.safety.hold_radius_m)
     summary["fleet"]["users_served_at_once"] = served_at_once(watch.events, speedup)
     summary.update(uavs=uavs, users=users, speedup=speedup, budget_ms=budget_ms, seed=seed, layer_m=LAYER_M,
-                   base_step_m=BASE_STEP_M, wall_s=time.monotonic() - start)
+                   base_step_m=home_step_m, wall_s=time.monotonic() - start)
     if offline:
         planned = offline_fleet(base, users, fleet, seed, budget_ms)
         summary["offline"] = {"algo": OFFLINE_ALGO, **{k: planned[k] for k in (
@@ -282,27 +284,27 @@ def run_fleet_demo(out: Path, *, uavs: int = 3, users: int = 12, speedup: float 
     return summary
 
 
-def stub_fence(uavs: int, max_altitude_m: float) -> list[str]:
+def stub_fence(uavs: int, max_altitude_m: float, home_step_m: float = BASE_STEP_M) -> list[str]:
     """The stubs' geofence (a stand-in for each autopilot's own), around the fleet's area from
     each UAV's home, the stub's origin: the area grown by the homes' spread east, so that UAV
-    j's fence does not start j * ``BASE_STEP_M`` east of the area's west edge and refuse the
+    j's fence does not start j * ``home_step_m`` east of the area's west edge and refuse the
     points west of that; its ceiling above the highest layer (a raised ceiling raises it)."""
     return ["--fence-alt-max", f"{max(150.0, max_altitude_m + LAYER_M):g}",
-            "--fence-margin", f"{FENCE_MARGIN_M + BASE_STEP_M * (uavs - 1):g}"]
+            "--fence-margin", f"{FENCE_MARGIN_M + home_step_m * (uavs - 1):g}"]
 
 
 def start_stubs(out: Path, vehicles: list[str], homes: list[tuple[float, float, float]], speedup: float,
                 placement: Placement, children: list[Child], watched: dict[str, Child],
-                extra: list[str]) -> dict[str, str]:
+                extra: list[str], home_step_m: float = BASE_STEP_M) -> dict[str, str]:
     """Every UAV's vehicle stub, each once listening: one process each, or all in one
     (``vehicle --count N``: one interpreter for twenty) where the placement says so, their
-    homes ``BASE_STEP_M`` apart east from the first, ``extra`` arguments to each; the URL each
+    homes ``home_step_m`` apart east from the first, ``extra`` arguments to each; the URL each
     service reaches its own by."""
     site = placement.stub_site()
     if placement.stubs_in_one_process and len(vehicles) > 1:
         lat, lon, alt = homes[0]
         args = ["vehicle", "--count", str(len(vehicles)), "--mavlink", placement.stubs_url(), "--speedup",
-                str(speedup), "--origin", f"{lat:.7f},{lon:.7f},{alt:.2f}", "--spacing-m", f"{BASE_STEP_M:g}", *extra]
+                str(speedup), "--origin", f"{lat:.7f},{lon:.7f},{alt:.2f}", "--spacing-m", f"{home_step_m:g}", *extra]
         stub = Child("sim_bridge", args, out / "vehicles.log", program=placement.program(site, "sim_bridge", args))
         children.append(stub)
         watched["vehicles"] = stub

@@ -19,8 +19,8 @@ class Fleet:
     UAV 0 flies the scenario unchanged, so a fleet of one is today's model.
     """
 
-    uavs: int = setting(1, gt=0, le=16)
-    """[N] UAVs over the same users (16: far more than any experiment needs; a bound, so a typo
+    uavs: int = setting(1, gt=0, le=64)
+    """[N] UAVs over the same users (64: past the 20 the scale bench flies; a bound, so a typo
     does not start a thousand searches)."""
     layer_m: float = setting(10.0, ge=0)
     """Vertical spacing of the UAVs' altitude layers: transits at different heights cannot
