@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import signal
 import sys
 import threading
 import time
@@ -26,6 +25,7 @@ from typing import Any
 
 from protocol.arguments import USAGE_ERROR, positive_float, positive_int
 from protocol.client_args import DEFAULT_ENDPOINT, add_client_arguments
+from protocol.stopping import stop_on_signals
 
 HELP = "the operator's command line: watch the service live (as text, or the live map in the browser), or start / hold / status"
 ACTIONS = ("watch", "web", "start", "hold", "status")
@@ -123,8 +123,7 @@ def run(args: argparse.Namespace) -> int:
     keys = Keys(args.prefix, args.vehicle)
     stop = threading.Event()
     if args.action == "watch":  # Ctrl-C (or SIGTERM) ends the watch between two redraws
-        for sig in (signal.SIGINT, signal.SIGTERM):
-            signal.signal(sig, lambda *_: stop.set())
+        stop_on_signals(stop)
     try:
         try:
             # a command: the one-shot client (command_client); the watch a peer, which waits for a

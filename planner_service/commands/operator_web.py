@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import argparse
 import ipaddress
-import signal
 import ssl
 import sys
 import threading
@@ -16,6 +15,7 @@ from pathlib import Path
 from typing import Any
 
 from protocol.arguments import USAGE_ERROR
+from protocol.stopping import stop_on_signals
 
 DEFAULT_LISTEN = "127.0.0.1:8765"
 DEFAULT_NICE = 10
@@ -171,8 +171,7 @@ def run(args: argparse.Namespace) -> int:
     feed = LiveFeed(session, FleetPicture(args.prefix, origin), lock, fleet_keys=args.fleet_keys,
                     operator_keys=operator_keys)
     stop = threading.Event()
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, lambda *_: stop.set())
+    stop_on_signals(stop)
     running = None
     try:
         feed.start()

@@ -6,11 +6,11 @@ SIGTERM."""
 from __future__ import annotations
 
 import argparse
-import signal
 import sys
 import threading
 
 from protocol.arguments import existing_file, zenoh_endpoint
+from protocol.stopping import stop_on_signals
 
 HELP = "a zenoh router (a session in router mode) for client-mode services and users"
 
@@ -32,8 +32,7 @@ def run(args: argparse.Namespace) -> int:
     from protocol.zenoh_config import error_text, session_config
 
     stop = threading.Event()
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, lambda *_: stop.set())
+    stop_on_signals(stop)
     try:
         conf = session_config("router", args.listen, args.connect, False, args.zenoh_config)
         session = zenoh.open(conf)

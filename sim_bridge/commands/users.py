@@ -10,12 +10,12 @@ from __future__ import annotations
 
 import argparse
 import logging
-import signal
 import sys
 import threading
 
 from protocol.arguments import positive_float, positive_int
 from protocol.client_args import DEFAULT_ENDPOINT, add_client_arguments
+from protocol.stopping import stop_on_signals
 
 HELP = "simulated ground users that move by random waypoint and submit their task backlogs over zenoh"
 
@@ -75,8 +75,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"error: {err}", file=sys.stderr)
         return 2
     stop = threading.Event()
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, lambda *_: stop.set())
+    stop_on_signals(stop)
     try:
         client = PlannerClient(args.connect or [DEFAULT_ENDPOINT], keys, config_file=args.zenoh_config)
     except ProtocolError as err:  # a refused config file, or no session (ClientError)

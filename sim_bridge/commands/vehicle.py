@@ -15,12 +15,12 @@ from __future__ import annotations
 import argparse
 import contextlib
 import logging
-import signal
 import sys
 import threading
 from typing import TYPE_CHECKING, Callable
 
 from protocol.arguments import USAGE_ERROR, non_negative_float, positive_float, positive_int
+from protocol.stopping import stop_on_signals
 
 if TYPE_CHECKING:  # the real imports wait for run(): `--help` must not pay for numba and pymavlink
     from planner_service.model import Scenario
@@ -158,8 +158,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"vehicle: {exc}", file=sys.stderr)
         return 2
     stop = threading.Event()
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, lambda *_: stop.set())
+    stop_on_signals(stop)
     if len(vehicles) == 1:
         vehicles[0].run(stop)
         return 0
