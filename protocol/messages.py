@@ -391,6 +391,11 @@ class FleetIntentions(_Message, tag="fleet_intentions", kw_only=True):
     """The user its hold serves, from the moment the hold is bound (a typed claim that beats
     every plan's estimate; of two, the one bound first), with ``bound_at_s`` (wall clock)."""
     bound_at_s: float | None = None
+    holding: Annotated[int, msgspec.Meta(ge=0, le=100_000)] | None = None
+    """The hovering point of its hold (arrived, not yet left), one of ``points``. Two members
+    that arrived at one point before either heard the other's claim (the claim travels a
+    radio) both hold it: the one whose vehicle id sorts first keeps it, the other ends its
+    hold (``FleetLedger.yield_points``)."""
 
 
 class FleetServed(_Message, tag="fleet_served"):

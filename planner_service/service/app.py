@@ -445,7 +445,8 @@ class Service:
         the services they flew, counted (docs/OPERATIONS.md, "A fleet")."""
         if self.fleet is None or not isinstance(self.world, FleetWorld):
             return
-        heard = FleetView(self.fleet.ledger.owners(), self.fleet.ledger.blocked_points())
+        ledger = self.fleet.ledger
+        heard = FleetView(ledger.owners(), ledger.blocked_points(), ledger.yield_points())
         if heard != self.state.fleet:
             self._feed(ins.FleetHeard(heard))
         for done in self.fleet.ledger.take_served():
@@ -650,7 +651,7 @@ class Service:
             self._bound_at = (claims.bound, self.wall())
         users = {claims.next_user} - {None, claims.bound}
         self.fleet.ledger.intend(dict(self._plan_dues), self.wall(), users, claims.points, self._route,
-                                 self._bound_at)
+                                 self._bound_at, claims.holding)
         if log.isEnabledFor(logging.DEBUG):  # the others' owners are worked out for the line alone
             log.debug("fleet: claims %s; others own %s", claims, sorted(self.fleet.ledger.taken()))
 

@@ -1065,3 +1065,25 @@ def test_px4s_switch_after_the_returns_disarming_is_its_own_before_its_landed_st
     run.feed(ins.ModeChanged("AUTO.LOITER", commanded=False), mode="AUTO.LOITER")
     run.feed(ins.OnGround("EXTENDED_SYS_STATE"), airborne=False)
     assert run.s.authority.granted
+
+
+def test_of_two_members_holding_one_point_the_one_whose_id_sorts_after_ends_its_hold() -> None:
+    """Over 100 ms radios (N = 10, x10) uav3 and uav5 both chose point 6 within half a second,
+    each before hearing the other, arrived, and held there together for 6 s: a hold of two at
+    one point. Heard during the hold, the member the other keeps the point for ends its own,
+    as a hold whose user is done ends, and records what it carried."""
+    world = FakeWorld()
+    run, _ = fly_to_first_point(world)
+    (plan,) = only(run.tick(seq=2, xyz=(120.0, 200.0, 100.0), boot_s=20.0), fx.MakePlan)
+    (up,) = only(run.feed(ins.Planned(plan.basis, path(point(9, 400.0, 300.0, "b", 2)))), fx.Upload)
+    run.feed(ins.Uploaded(up))
+    needed = run.s.holds.binding.needed_s
+    assert run.s.claims.holding is not None
+    out = run.tick(seq=2, boot_s=20.0 + needed / 4)
+    assert not only(out, fx.Command)
+    out = run.feed(ins.FleetHeard(FleetView(yield_to={run.s.claims.holding: "uav3"})))
+    out += run.tick(seq=2, boot_s=21.0 + needed / 4)
+    (cmd,) = only(out, fx.Command)
+    assert (cmd.kind, cmd.seq) == ("set_current", 3) and "uav3 holds point" in cmd.why
+    (svc,) = only(run.tick(seq=3, xyz=(150.0, 200.0, 100.0), boot_s=22.0 + needed / 4), fx.RecordService)
+    assert 0 < svc.tasks < 10

@@ -137,6 +137,8 @@ class FleetLedger:
         for these only."""
         self._points: dict[str, set[int]] = {}
         self._routes: dict[str, set[int]] = {}
+        self._holding: dict[str, int | None] = {}
+        """The point each member holds now (its last intentions'), if any."""
         self._served: deque[FleetServed] = deque(maxlen=MAX_SERVED_QUEUED)
         self._seen: set[tuple[str, str, float]] = set()
         self.refused: deque[str] = deque(maxlen=16)
@@ -179,19 +181,21 @@ class FleetLedger:
 
     # --- this member's side ------------------------------------------------------------------
     def intend(self, due: Mapping[str, float], now_s: float, claims: Iterable[str] = (),
-               points: Iterable[int] = (), route: Iterable[int] = (), bound: tuple[str, float] | None = None) -> None:
+               points: Iterable[int] = (), route: Iterable[int] = (), bound: tuple[str, float] | None = None,
+               holding: int | None = None) -> None:
         """Say which users this member's plan means to serve and when (wall clock), which of
         them it claims (``claims``: the next point's user), the user its hold serves and when
         it was bound (``bound``), and the hovering points it claims (``points``: its next
-        point, its hold's)."""
+        point, its hold's, ``holding``)."""
         users = sorted(due.items(), key=lambda kv: kv[1])[:MAX_INTENTIONS]
         claimed = sorted(set(claims) & set(due))[:MAX_CLAIMS - (bound is not None)]
         held = sorted(set(int(k) for k in points))[:MAX_CLAIMS]
         message = FleetIntentions(
             vehicle=self.vehicle, time_s=now_s, users=[Intention(u, d) for u, d in users], claims=claimed,
             points=held, route=first_route(route), bound=None if bound is None else bound[0],
-            bound_at_s=None if bound is None else bound[1])
+            bound_at_s=None if bound is None else bound[1], holding=holding if holding in held else None)
         with self._lock:
+            self._holding[self.vehicle] = message.holding
             self._intentions[self.vehicle] = dict(users)
             self._claims[self.vehicle] = claims_of(message)
             self._points[self.vehicle] = set(held)
@@ -222,6 +226,18 @@ class FleetLedger:
         with self._lock:
             claimed = others_points(self.vehicle, self._points, self._alive())
             return claimed | {k for v in lost for k in self._routes.get(v, ())}
+
+    def yield_points(self) -> dict[int, str]:
+        """The point this member holds that another live member holds too and keeps (its
+        vehicle id sorts first: every member judges the same), with that member: two that
+        arrived before either heard the other; this one ends its hold."""
+        alive = set(self._alive())
+        with self._lock:
+            own = self._holding.get(self.vehicle)
+            if own is None:
+                return {}
+            first = sorted(v for v, k in self._holding.items() if k == own and v in alive and v != self.vehicle)
+        return {own: first[0]} if first and first[0] < self.vehicle else {}
 
     def claims(self) -> dict[str, dict[str, Claim]]:
         """Every member's last claims (vehicle -> user -> claim), live or not."""
@@ -283,6 +299,7 @@ class FleetLedger:
             self._intentions[message.vehicle] = {i.user_id: i.due_s for i in message.users}
             self._claims[message.vehicle] = claims
             self._points[message.vehicle] = set(message.points)
+            self._holding[message.vehicle] = message.holding if message.holding in message.points else None
             self._routes[message.vehicle] = set(first_route(message.route))
             claimed = self._claimed.setdefault(message.vehicle, {})
             for user in claims:

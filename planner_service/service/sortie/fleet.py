@@ -30,6 +30,9 @@ class FleetView:
     blocked: frozenset[int] = frozenset()
     """The hovering points this member plans without: those another live member claims, and
     the rest of the route of a member gone with its vehicle armed."""
+    yield_to: Mapping[int, str] = field(default_factory=dict)
+    """The point this member holds that another member holds too and keeps (its id sorts
+    first), with that member: this member ends its hold there."""
 
     def owner(self, user_id: str) -> str | None:
         return self.owners.get(user_id)

@@ -452,14 +452,15 @@ class SortieLogic:
         return None if i == NO_USER else rows[i]
 
     def _maybe_end_hold(self, s: Sortie, out: list[fx.Effect]) -> Sortie:
-        """End the hold once the bound request is served: the replacement uploaded at the
+        """End the hold once the bound request is served, or once another member holding the
+        point too keeps it (``_yield_why``): the replacement uploaded at the
         arrival restarted the autopilot's hold timer (ArduPilot restarts the current item
         when the items after it change; PX4 flies the item marked current), so the service,
         not the timer, ends it, as soon as the next item is the decision made from this
         point (uploaded) and the reports show the hold the request needs. Only under its
         authority, not degraded: without, it commands nothing and the timer ends the hold."""
         w, held = s.holds.watch, s.onboard.held
-        why = s.holds.served_why()
+        why = s.holds.served_why() or self._yield_why(s)
         if why is None or w is None or held is None:
             return s
         if not s.authority.granted or s.life.degraded is not None:
@@ -470,6 +471,16 @@ class SortieLogic:
         assert point is not None
         out.append(fx.Command("set_current", w.seq + 1, f"hold at point {point.hover_index} ended: {why}"))
         return replace(s, holds=replace(s.holds, early_end=w.seq), schedule=s.schedule.command_sent("set_current"))
+
+    @staticmethod
+    def _yield_why(s: Sortie) -> str | None:
+        """Why the hold watched ends now for another member's (it holds the point too and
+        keeps it: its id sorts first), or None."""
+        w, k = s.holds.watch, s.claims.holding
+        if w is None or w.phase != "holding" or s.holds.early_end == w.seq or k is None:
+            return None
+        other = s.fleet.yield_to.get(k)
+        return None if other is None else f"{other} holds point {k} too and keeps it (its id sorts first)"
 
     def _abandon(self, s: Sortie, why: str, out: list[fx.Effect]) -> Sortie:
         """The hold watched, if any, ended from outside (``why``) and judged as it stands."""
