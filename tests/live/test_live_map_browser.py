@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 import os
+import statistics
 import threading
 import time
 from collections import defaultdict
@@ -36,6 +37,10 @@ from tests.support.fleet_stack import FleetStack
 pytestmark = [pytest.mark.browser, pytest.mark.timeout(240)]
 SPEEDUP = "20"
 START = {"mavlink.start_mission": "true", "planner.min_requests": "3"}
+PAGE_LAG_S = 3.0
+"""How far the page may be behind a vehicle's report: a poll of the roster (0.2 s), a snapshot
+at most twice a second, the browser's drawing; nominally under a second, and on a loaded
+2-core machine (two test processes, SITLs, Chromium) seen near 2 s once."""
 
 
 class Heard:
@@ -58,11 +63,12 @@ class Heard:
         with self.lock:
             self.plans[vehicle] = decode(sample.payload.to_bytes(), Plan)
 
-    def near(self, vehicle: str, x: float, y: float, since: float) -> float | None:
-        """The least distance from (x, y) of ``vehicle``'s statuses heard since ``since``."""
+    def near_time(self, vehicle: str, x: float, y: float, wall_s: float, within_s: float) -> float | None:
+        """The least distance from (x, y) of ``vehicle``'s statuses stamped within ``within_s``
+        of ``wall_s`` (their own ``time_s``, the service's wall clock)."""
         with self.lock:
-            recent = [s for at, s in self.statuses[vehicle] if at >= since]
-        return min((math.dist((s.x_m, s.y_m), (x, y)) for s in recent), default=None)
+            around = [s for _, s in self.statuses[vehicle] if abs(s.time_s - wall_s) <= within_s]
+        return min((math.dist((s.x_m, s.y_m), (x, y)) for s in around), default=None)
 
 
 @pytest.fixture
@@ -131,25 +137,41 @@ def watch_login_start_and_alert(stack: FleetStack, driver: Any, server: RunningS
 
     # start uav1 from its card: the service's authority becomes the operator's
     driver.find_element("css selector", ".vehicle-card[data-vehicle='uav1'] button.start").click()
-    answer = wait_for(lambda: driver.find_element("css selector", ".vehicle-card[data-vehicle='uav1'] .answer").text,
-                      15.0, "the start's answer on the page")
+    card_answer = ".vehicle-card[data-vehicle='uav1'] .answer"
+    answer = wait_for(lambda: "pending" not in driver.find_element("css selector", card_answer).get_attribute("class")
+                      and driver.find_element("css selector", card_answer).text, 15.0, "the start's answer on the page")
     assert answer.startswith("accepted"), answer
     wait_for(lambda: any(s.authority == "operator" for _, s in heard.statuses["uav1"][-3:]), 10.0,
              "uav1's own status saying the operator's authority")
 
-    # each vehicle within 5 m of a status it published in the last second, while they fly
+    # Each vehicle drawn where the picture the page holds puts it, and that where the vehicle
+    # reported being (within 5 m of its status of that moment), while they fly; the page's lag
+    # behind the reports bounded apart. (Judged on "a status of the last second", a loaded CI
+    # machine failed it once: uav2 206 m off at x20, 200 m a second: a picture 2 s behind.)
     wait_for(lambda: all(any(s.armed for _, s in heard.statuses[v][-3:]) for v in ("uav1", "uav2", "uav3")), 60.0,
              "all three flying")
-    checked = 0
-    for _ in range(10):
+    checked, lags = 0, []
+    deadline = time.monotonic() + 60.0
+    while checked < 30 and time.monotonic() < deadline:
         time.sleep(0.5)
-        shown = drawn(driver, ".vehicle")
-        at = time.monotonic()
-        for v in shown:
-            off = heard.near(v["vehicle"], float(v["x"]), float(v["y"]), at - 1.0)
-            assert off is not None and off <= 5.0, f"{v['vehicle']} drawn {off} m from its statuses of the last second"
+        page = driver.execute_script(
+            "return {drawn: [...document.querySelectorAll('.vehicle')].map(e => ({...e.dataset})),"
+            " version: document.body.dataset.version, picture: window.livePicture}")
+        if page["picture"] is None or str(page["picture"]["version"]) != page["version"]:
+            continue  # a picture received, its drawing not yet done
+        now = time.time()
+        pictured = {v["id"]: v for v in page["picture"]["vehicles"]}
+        for v in page["drawn"]:
+            p = pictured[v["vehicle"]]
+            assert math.dist((float(v["x"]), float(v["y"])), (p["x_m"], p["y_m"])) < 0.01, (v, p)
+            reported = page["picture"]["time_s"] - p["status_age_s"]  # when the status shown arrived
+            off = heard.near_time(v["vehicle"], p["x_m"], p["y_m"], reported, 1.0)
+            assert off is not None and off <= 5.0, f"{v['vehicle']} drawn {off} m from its statuses of that moment"
+            lags.append(now - reported)
             checked += 1
-    assert checked == 30
+    assert checked >= 30, checked
+    print(f"\nthe page behind the vehicles' reports: median {statistics.median(lags):.2f} s, max {max(lags):.2f} s")
+    assert max(lags) <= PAGE_LAG_S, lags
 
     # a plan's points in order, and the users where they asked from
     def plan_shown() -> bool:
