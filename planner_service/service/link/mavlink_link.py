@@ -56,6 +56,7 @@ from .progress import mission_progress  # noqa: E402
 from .reports import Begin, Pass, ReportSequencer  # noqa: E402
 from .rtt import RetryTimer  # noqa: E402
 from .streams import INTERVAL_CMD, QUIET_INTERVAL_US, Request  # noqa: E402
+from .udp_peers import safe_peers  # noqa: E402
 from .upload import MissionDownload, MissionUpload, cancel_message  # noqa: E402
 
 M = mavutil.mavlink
@@ -170,6 +171,7 @@ class PymavlinkLink(VehicleLink):
         if tcp:
             kwargs.update(autoreconnect=False, retries=0)  # we reconnect ourselves (see the module's notes)
         conn = mavutil.mavlink_connection(s.url, **kwargs)
+        safe_peers(conn)  # udpin: the reader adds peers while a send iterates them
         if tcp:
             # pymavlink only prints on an end of stream and returns b"" for ever after:
             # raise instead, so the reader sees the autopilot go and reconnects.
