@@ -7,6 +7,7 @@ sends: with a plain set the error comes within milliseconds, with the snapshot s
 
 from __future__ import annotations
 
+import gc
 import socket
 import threading
 import time
@@ -60,3 +61,28 @@ def test_sends_go_on_while_new_peers_arrive() -> None:
             t.join(10)
         conn.close()
     assert sent > 100 and len(conn.clients) > 1, (sent, len(conn.clients))
+
+
+def test_no_thread_can_add_between_the_copy_and_its_iteration() -> None:
+    """The race CI met after the first fix, made certain: a garbage collection at every
+    allocation, whose callback (Python code, as a finaliser would be) adds a peer. Copying
+    through ``list(iter(...))`` let the add in between and raised; ``set.copy`` does not."""
+    peers = SnapshotSet({("127.0.0.1", 1), ("127.0.0.1", 2)})
+    added = 0
+
+    def add_a_peer(phase: str, _info: dict) -> None:
+        nonlocal added
+        if phase == "start":
+            added += 1
+            set.add(peers, ("127.0.0.1", 1000 + added))
+
+    threshold = gc.get_threshold()
+    gc.callbacks.append(add_a_peer)
+    gc.set_threshold(1)
+    try:
+        seen = [sorted(peers) for _ in range(50)]  # raised with the list copy
+    finally:
+        gc.callbacks.remove(add_a_peer)
+        gc.set_threshold(*threshold)
+    assert added > 0, "no collection ran: the test proved nothing"
+    assert all(len(s) >= 2 for s in seen)
