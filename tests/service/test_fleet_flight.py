@@ -109,9 +109,11 @@ def fly_lose_and_follow(fleet: FleetStack, uav1: Uav, uav2: Uav, wire: Intention
     uav2.service.proc.send_signal(signal.SIGKILL)
     lost_at = time.monotonic()
     wait_until(lambda: "fleet: uav2 left" in uav1.service.log(), 30.0, lambda: f"uav1 seeing uav2 go\n{fleet.logs()}")
-    # the users' view: uav2's word forgotten once its token is gone...
-    wait_until(lambda: all("uav2" not in places.followed[u].members() for u in owned), 30.0,
-               lambda: f"uav2's places forgotten: { {u: places.followed[u].members() for u in owned} }")
+    # the users' view: uav2's word forgotten once its token is gone (of the users followed:
+    # uav2 may own the probe too)...
+    followed = owned & places.followed.keys()
+    wait_until(lambda: all("uav2" not in places.followed[u].members() for u in followed), 30.0,
+               lambda: f"uav2's places forgotten: { {u: places.followed[u].members() for u in followed} }")
     take_over(fleet, uav1, uav2, wire, owned, lost_at)
     # ...and each of its users that uav1 planned since was told its place there (a user served
     # by a hold's binding, never planned, has no place to be told)
