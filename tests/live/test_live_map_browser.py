@@ -194,8 +194,13 @@ def watch_login_start_and_alert(stack: FleetStack, driver: Any, server: RunningS
     # a forced separation loss: an enrolled member reports itself where uav1 flies
     intruder = Intruder(stack, session, heard)
     try:
+        def state() -> str:
+            with heard.lock:
+                armed = [v for v in ("uav1", "uav2", "uav3") if heard.statuses[v][-1][1].armed]
+            separation = driver.execute_script("return window.livePicture && window.livePicture.separation")
+            return f"a SEPARATION LOST alert on the page (armed now: {armed}; the page's separation {separation})"
         alert = wait_for(lambda: [a.text for a in driver.find_elements("css selector", "#alerts .alert-error")
-                                  if "SEPARATION LOST" in a.text], 15.0, "a SEPARATION LOST alert on the page")
+                                  if "SEPARATION LOST" in a.text], 15.0, state)
         assert "uav4" in alert[0], alert
         assert driver.find_element("id", "separation").get_attribute("data-state") == "lost"
         shot = os.environ.get("LIVE_MAP_SCREENSHOT")
@@ -207,8 +212,8 @@ def watch_login_start_and_alert(stack: FleetStack, driver: Any, server: RunningS
 
 
 class Intruder:
-    """uav4 (enrolled) joins in a layer of its own and reports its vehicle armed where uav1 is,
-    every 0.3 s until closed."""
+    """uav4 (enrolled) joins in a layer of its own and reports its vehicle armed where uav1 is
+    (or another vehicle still armed), every 0.3 s until closed."""
 
     def __init__(self, stack: FleetStack, session: Any, heard: Heard) -> None:
         signer = FleetSigner("uav4", load_private_key(stack.keys / "uav4.key"))
@@ -222,8 +227,9 @@ class Intruder:
 
     def _report(self) -> None:
         while not self.stop.wait(0.3):
-            with self.heard.lock:
-                last = self.heard.statuses["uav1"][-1][1]
+            with self.heard.lock:  # where a vehicle still flies (on a loaded machine uav1 may have landed)
+                lasts = [self.heard.statuses[v][-1][1] for v in ("uav1", "uav2", "uav3") if self.heard.statuses[v]]
+            last = next((s for s in lasts if s.armed), lasts[0])
             self.presence.publish_position(Status(vehicle="uav4", time_s=time.time(), phase="flying", armed=True,
                                                   mode="AUTO", x_m=last.x_m, y_m=last.y_m, z_m=last.z_m,
                                                   position_ok=True))
