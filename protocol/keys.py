@@ -235,19 +235,30 @@ class FleetKeys:
         return self._key("served/*")
 
     def position(self, vehicle: str) -> str:
-        """Publication: ``vehicle``'s own position, signed (its ``status`` in a fleet envelope),
-        on which the fleet's separation is judged."""
+        """Publication: ``vehicle``'s own position, signed (a ``fleet_position`` in a fleet
+        envelope, with each status), on which the members judge the fleet's separation."""
         return self._key(f"positions/{_check_chunk('vehicle', vehicle)}")
 
     @property
     def positions(self) -> str:
         return self._key("positions/*")
 
+    def signed_status(self, vehicle: str) -> str:
+        """Publication: ``vehicle``'s whole ``status``, signed, with each status: the
+        operator's live map reads an enrolled member's status here. The members do not
+        subscribe to it (each reads the others' ``position``, about half its size): zenoh sends
+        it only where someone subscribes."""
+        return self._key(f"statuses/{_check_chunk('vehicle', vehicle)}")
+
+    @property
+    def signed_statuses(self) -> str:
+        return self._key("statuses/*")
+
     def vehicle_of(self, key_expr: str) -> str | None:
-        """The vehicle id that ends a member, announcement, intentions, served or position
-        key; None for any other key."""
+        """The vehicle id that ends a member, announcement, intentions, served, position or
+        signed status key; None for any other key."""
         for head in (self._key("members/"), self._key("uavs/"), self._key("intentions/"), self._key("served/"),
-                     self._key("positions/")):
+                     self._key("positions/"), self._key("statuses/")):
             if key_expr.startswith(head) and _CHUNK.fullmatch(key_expr[len(head):]):
                 return key_expr[len(head):]
         return None

@@ -3,7 +3,7 @@ places under one prefix, the services' liveliness tokens, and (with the fleet's 
 members' signed announcements, positions and claims.
 
 Whose word counts: with the fleet's roster, an enrolled vehicle's status is taken from its
-signed position (``{prefix}/fleet/positions/{vehicle}``, the same status signed by the
+signed status (``{prefix}/fleet/statuses/{vehicle}``, the same status signed by the
 vehicle's key) and never from the plain ``{prefix}/{vehicle}/status``, which any peer could
 publish on an open network; the plain keys are read for vehicles the roster does not
 enrol (a lone UAV, whose keys zenoh's access control guards). Every message is decoded and
@@ -25,17 +25,17 @@ import zenoh
 
 from protocol import Event, FleetKeys, Keys, Plan, ProtocolError, Status, UserPlace, decode
 from protocol.client import ClientError, PlannerClient
-from protocol.fleet_signing import FleetVerifier
+from protocol.fleet_signing import FleetVerifier, Unverified
 
 from ..service.fleet.ledger import FleetLedger
-from ..service.fleet.roster import FleetRoster
+from ..service.fleet.roster import POSITION_MAX_AGE_S, FleetRoster
 from .picture import FleetPicture
 
 log = logging.getLogger(__name__)
 
 POLL_S = 0.2
-"""How often the roster's signed positions and the fleet's judgement are read into the picture
-(the roster keeps them; a status arrives at 2 Hz, so a position shows within 0.2 s of it)."""
+"""How often the roster's members, the fleet's judgement and the claims are read into the
+picture (the roster and the ledger keep them; the statuses come as they arrive)."""
 STATE_EVERY_S = 2.0
 MAX_VEHICLES = 256
 """Vehicles kept at most: a rogue peer publishing under endless vehicle names cannot grow the
@@ -56,7 +56,7 @@ class LiveFeed:
         self.on_change = on_change
         self.prefix = picture.prefix
         self.fleet_keys = dict(fleet_keys or {})
-        """The roster's public keys: the vehicles whose signed positions are their statuses."""
+        """The roster's public keys: the vehicles whose statuses count only signed."""
         self.operator_keys = dict(operator_keys or {})
         """The operator key of each vehicle ("*": every vehicle's) for the pending requests."""
         self.state_every_s = state_every_s
@@ -67,7 +67,7 @@ class LiveFeed:
         self._thread: threading.Thread | None = None
         self.roster: FleetRoster | None = None
         self.ledger: FleetLedger | None = None
-        self._positions_at: dict[str, float] = {}
+        self.verifier: FleetVerifier | None = None
 
     def start(self) -> None:
         s = self.session
@@ -79,7 +79,8 @@ class LiveFeed:
             s.liveliness().declare_subscriber(f"{self.prefix}/*/alive", self._on_alive, history=True),
         ]
         keys = FleetKeys(self.prefix)
-        verifier = FleetVerifier(self.fleet_keys)  # it only reads: it signs nothing
+        verifier = self.verifier = FleetVerifier(self.fleet_keys)  # it only reads: it signs nothing
+        self._subs.append(s.declare_subscriber(keys.signed_statuses, self._on_signed_status))
         self.roster = FleetRoster(keys, verifier)
         self.roster.follow(s, timeout_s=0.5)
         self.ledger = FleetLedger(keys, "", lambda: self.roster.members().keys(), self.roster.lost, None, verifier)
@@ -128,6 +129,23 @@ class LiveFeed:
             return None
         return parts[0]
 
+    def _on_signed_status(self, sample: Any) -> None:
+        """An enrolled member's status, signed by its vehicle's key (``FleetKeys.signed_status``)."""
+        key = str(sample.key_expr)
+        vehicle = FleetKeys(self.prefix).vehicle_of(key)
+        if vehicle not in self.fleet_keys or sample.kind != zenoh.SampleKind.PUT:
+            return
+        try:
+            body, _ = self.verifier.open(key, vehicle, sample.payload.to_bytes(), time.time(), POSITION_MAX_AGE_S)
+            status = decode(body, Status)
+        except (Unverified, ProtocolError):
+            return  # counted by the verifier (a forgery, a replay) or not ours to parse
+        if status.vehicle != vehicle:
+            return
+        with self.lock:
+            self.picture.on_status(vehicle, status, time.monotonic())
+        self.on_change()
+
     def _handler(self, leaf: str, kind: Any) -> Callable[[Any], None]:
         def handle(sample: Any) -> None:
             vehicle = self._vehicle(str(sample.key_expr), leaf)
@@ -175,17 +193,13 @@ class LiveFeed:
         return self.roster.settle(timeout_s, positions=True)
 
     def read_fleet(self) -> None:
-        """The roster's members, signed positions, judgement and claims into the picture."""
+        """The roster's members, the fleet's judgement and the claims into the picture."""
         assert self.roster is not None and self.ledger is not None
-        members, positions = self.roster.members(), self.roster.positions()
+        members = self.roster.members()
         judgement = self.roster.separation() if members or self.roster.lost() else None
         claims = {v: sorted(c) for v, c in self.ledger.claims().items() if v in members}
         with self.lock:
             before = self.picture.version
-            for vehicle, seen in positions.items():
-                if self._positions_at.get(vehicle) != seen.at_s:
-                    self._positions_at[vehicle] = seen.at_s
-                    self.picture.on_status(vehicle, seen.status, seen.at_s)
             self.picture.on_fleet(members, judgement, claims, self.roster.lost(), self.roster.ignored)
             changed = self.picture.version != before
         if changed:

@@ -5,8 +5,8 @@ own origin."""
 
 from __future__ import annotations
 
-from protocol import GeoOrigin, Status, global_to_local, local_to_global
-from protocol.messages import FleetMember
+from protocol import GeoOrigin, global_to_local, local_to_global
+from protocol.messages import FleetMember, FleetPosition
 from planner_service.service.fleet.separation import Seen, judge
 
 HOME = GeoOrigin()
@@ -18,7 +18,7 @@ def member(vehicle: str, origin: GeoOrigin = HOME, gap_m: float = 10.0) -> Fleet
 
 
 def seen(vehicle: str, x: float, y: float, z: float, armed: bool = True, at_s: float = 100.0) -> Seen:
-    return Seen(Status(vehicle=vehicle, x_m=x, y_m=y, z_m=z, armed=armed), at_s)
+    return Seen(FleetPosition(x_m=x, y_m=y, z_m=z, armed=armed), at_s)
 
 
 def test_too_close_within_the_layer_gap_is_a_loss_of_separation() -> None:

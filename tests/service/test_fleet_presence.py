@@ -20,7 +20,8 @@ from planner_service.live.picture import FleetPicture
 from planner_service.operator_view import render
 from planner_service.harness.processes import free_port
 from planner_service.service.fleet.presence import MembershipError, FleetPresence, clock_clashes, layer_clashes
-from protocol import FleetKeys, Keys, ProtocolError, Status, encode
+from protocol import FleetKeys, Keys, ProtocolError, Status, decode, encode
+from protocol.messages import FleetPosition
 from protocol.zenoh_config import session_config
 from tests.support.fleet import member, presence, put_position, verifier, wait_until
 
@@ -186,6 +187,32 @@ def test_separation_is_judged_on_the_members_published_positions(mesh: Callable[
         apart = fly((0.0, 0.0, 100.0), (30.0, 0.0, 104.0))
         wait_until(lambda: apart().conflicts == () and apart().unknown == (), 10.0, "separation back")
         assert "fleet: separation back for uav1-uav2" in caplog.text
+
+
+def test_every_member_reads_a_compact_position_and_only_the_map_the_whole_status(mesh: Callable[[], Any]) -> None:
+    """The members' positions are what each member reads of every other at the status rate
+    (at 20 UAVs over radios the downlink broke first: the whole signed status, 650 bytes, was
+    three quarters of it). A member puts a signed ``fleet_position`` (armed, x, y, z: what
+    separation is judged on) of at most 360 bytes on its position key, and its whole status,
+    signed, on its own key, where the operator's live map reads it."""
+    a = presence(KEYS, member("uav1", 100.0))
+    a.join(mesh(), DISCOVERY_S)
+    heard: dict[str, list[bytes]] = {"positions": [], "statuses": []}
+    watcher = mesh()
+    for kind, key in (("positions", KEYS.positions), ("statuses", KEYS.signed_statuses)):
+        watcher.declare_subscriber(key, lambda sample, kind=kind: heard[kind].append(sample.payload.to_bytes()))
+    time.sleep(DISCOVERY_S)
+    status = Status(vehicle="uav1", time_s=time.time(), phase="flying", armed=True, x_m=123.456789,
+                    y_m=-45.678912, z_m=100.012345, battery_fraction=0.875, mission_seq=3, mission_total=9,
+                    authority="operator", authority_detail="granted by the operator", battery_source="autopilot")
+    wait_until(lambda: (a.publish_position(status), heard["positions"] and heard["statuses"])[1], 5.0,
+               "the position and the status heard")
+    v = verifier()
+    position, _ = v.open(KEYS.position("uav1"), "uav1", heard["positions"][-1], time.time(), 10.0)
+    assert decode(position, FleetPosition) == FleetPosition(x_m=123.46, y_m=-45.68, z_m=100.01, armed=True)
+    assert len(heard["positions"][-1]) <= 360, len(heard["positions"][-1])  # 650 as the whole status
+    whole, _ = v.open(KEYS.signed_status("uav1"), "uav1", heard["statuses"][-1], time.time(), 10.0)
+    assert decode(whole, Status) == status
 
 
 def test_a_member_gone_with_its_vehicle_armed_is_not_forgotten(mesh: Callable[[], Any],

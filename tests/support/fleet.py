@@ -12,7 +12,7 @@ import time
 from pathlib import Path
 from typing import Any, Callable, Iterable
 
-from planner_service.service.fleet.presence import FleetPresence
+from planner_service.service.fleet.presence import FleetPresence, compact_position
 from protocol import FleetKeys, Status, encode
 from protocol.fleet_signing import FleetSigner, FleetVerifier, load_private_key, make_vehicle_key, read_roster
 from protocol.messages import FleetMember
@@ -66,9 +66,9 @@ def presence(keys: FleetKeys, own: FleetMember, **kw: Any) -> FleetPresence:
 
 
 def put_position(session: Any, keys: FleetKeys, status: Status) -> None:
-    """``status`` put as its vehicle's signed position (as its service does with each status)."""
+    """``status``'s position put as its vehicle's, signed (as its service does with each status)."""
     key = keys.position(status.vehicle)
-    session.put(key, signer(status.vehicle).seal(key, encode(status), time.time()))
+    session.put(key, signer(status.vehicle).seal(key, encode(compact_position(status)), time.time()))
 
 
 def wait_until(check: Callable[[], bool], timeout_s: float, what: str | Callable[[], str]) -> None:

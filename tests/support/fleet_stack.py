@@ -20,7 +20,7 @@ from planner_service.model.fleet.claims import Claim
 from planner_service.service.fleet.ledger import claims_of
 from protocol import Event, FleetKeys, GeoOrigin, ProtocolError, Status, local_to_global
 from protocol.fleet_signing import FleetVerifier, Unverified, make_vehicle_key, read_roster
-from protocol.messages import FleetIntentions, decode
+from protocol.messages import FleetIntentions, FleetPosition, decode
 from protocol.zenoh_config import session_config
 
 
@@ -93,7 +93,7 @@ class Intentions:
 
 
 class Positions:
-    """Every member's vehicle positions as its autopilot reported them (the signed statuses on
+    """Every member's vehicle positions as its autopilot reported them (the signed positions on
     ``{prefix}/fleet/positions/*``, in the fleet's one local frame), with when each arrived
     (this process's monotonic clock): the vehicles side by side in one time."""
 
@@ -107,14 +107,14 @@ class Positions:
 
     def _on(self, sample: Any) -> None:
         key = str(sample.key_expr)
+        vehicle = FleetKeys().vehicle_of(key) or ""
         try:
-            body, _ = self._verifier.open(key, FleetKeys().vehicle_of(key) or "", sample.payload.to_bytes(),
-                                          time.time(), 60.0)
-            s = decode(body, Status)
+            body, _ = self._verifier.open(key, vehicle, sample.payload.to_bytes(), time.time(), 60.0)
+            p = decode(body, FleetPosition)
         except (Unverified, ProtocolError):
             return
         with self._lock:
-            self.seen.append((time.monotonic(), s.vehicle, s.x_m, s.y_m, s.z_m, s.armed))
+            self.seen.append((time.monotonic(), vehicle, p.x_m, p.y_m, p.z_m, p.armed))
 
     def pairs(self, within_s: float = 0.3) -> list[tuple[float, str, str, float, float]]:
         """Each armed pair's positions reported within ``within_s`` of each other, in arrival

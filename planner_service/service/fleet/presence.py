@@ -45,7 +45,7 @@ import zenoh.ext as zext
 
 from protocol import FleetKeys, Status
 from protocol.fleet_signing import FleetSigner, FleetVerifier
-from protocol.messages import FleetMember, encode
+from protocol.messages import FleetMember, FleetPosition, encode
 from protocol.text import printable
 
 from .ledger import FleetLedger
@@ -73,6 +73,18 @@ clock offset measured on it does not show."""
 
 class MembershipError(ServiceError):
     """The service may not join the fleet (its vehicle id or its layer clashes)."""
+
+
+POSITION_DECIMALS = 2
+"""A member's position is told to the centimetre: finer digits are bytes on every member's
+downlink and below any autopilot's accuracy."""
+
+
+def compact_position(status: Status) -> FleetPosition:
+    """What the other members judge separation on, of ``status``."""
+    d = POSITION_DECIMALS
+    return FleetPosition(x_m=round(status.x_m, d), y_m=round(status.y_m, d), z_m=round(status.z_m, d),
+                         armed=status.armed)
 
 
 def layer_clashes(own: FleetMember, others: Mapping[str, FleetMember | None]) -> list[str]:
@@ -138,6 +150,7 @@ class FleetPresence:
         """A member now (``join`` went through, ``leave`` not called)."""
         self._publisher: Any = None
         self._position_pub: Any = None
+        self._status_pub: Any = None
         self._token: Any = None
         self._stop = threading.Event()
         self._announcer: threading.Thread | None = None
@@ -160,6 +173,7 @@ class FleetPresence:
         self._announcer = threading.Thread(target=self._announce_again, name="fleet-announce", daemon=True)
         self._announcer.start()
         self._position_pub = session.declare_publisher(self.keys.position(v))
+        self._status_pub = session.declare_publisher(self.keys.signed_status(v))
         self._token = session.liveliness().declare_token(self.keys.member(v))
         time.sleep(discovery_s)
         self.roster.settle(max(discovery_s, ANNOUNCE_WAIT_S))
@@ -190,10 +204,14 @@ class FleetPresence:
             self._announce()
 
     def publish_position(self, status: Status) -> None:
-        """This vehicle's position, signed, for the others' separation watch (with each status)."""
-        if self._position_pub is not None and self.joined:
-            key = self.keys.position(self.own.vehicle)
-            self._position_pub.put(self.signer.seal(key, encode(status), self._wall()))
+        """With each status: this vehicle's position, signed, for the others' separation watch
+        (``fleet_position``: every member reads it), and the whole status, signed, for the
+        operator's live map (only the map subscribes to it)."""
+        if self._position_pub is None or self._status_pub is None or not self.joined:
+            return
+        v, now = self.own.vehicle, self._wall()
+        self._position_pub.put(self.signer.seal(self.keys.position(v), encode(compact_position(status)), now))
+        self._status_pub.put(self.signer.seal(self.keys.signed_status(v), encode(status), now))
 
     def _log_ignored(self) -> None:
         """Say how many fleet messages were ignored since the last line, with the latest reason."""
@@ -268,11 +286,11 @@ class FleetPresence:
             self._announcer.join(timeout=2 * ANNOUNCE_EVERY_S)
             self._announcer = None
         self.ledger.close()
-        for thing in (self._token, self._publisher, self._position_pub):
+        for thing in (self._token, self._publisher, self._position_pub, self._status_pub):
             if thing is not None:
                 try:
                     thing.undeclare()
                 except zenoh.ZError:
                     pass
-        self._token = self._publisher = self._position_pub = None
+        self._token = self._publisher = self._position_pub = self._status_pub = None
         self.roster.close()

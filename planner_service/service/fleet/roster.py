@@ -9,8 +9,8 @@ protocol written here:
 - an advanced subscriber (``zenoh.ext``) with history, late-publisher detection and recovery:
   each member's announcement is kept in its advanced publisher's cache, so a member who joins
   later, or whose router restarted, still reads it;
-- a subscriber to every member's signed position (``{prefix}/fleet/positions/{vehicle}``: its
-  status, in a fleet envelope), on which the fleet's separation is judged
+- a subscriber to every member's signed position (``{prefix}/fleet/positions/{vehicle}``: a
+  ``fleet_position``, in a fleet envelope), on which the fleet's separation is judged
   (``fleet.separation``). A member that leaves with its vehicle last seen armed stays in that
   judgement, unknown, until its service is back or ``lost_s`` has passed (its battery's
   flight: it has landed by then).
@@ -37,9 +37,9 @@ from typing import Any, Callable
 import zenoh
 import zenoh.ext as zext
 
-from protocol import FleetKeys, ProtocolError, Status
+from protocol import FleetKeys, ProtocolError
 from protocol.fleet_signing import FUTURE_S, FleetVerifier, Unverified
-from protocol.messages import FleetMember, decode
+from protocol.messages import FleetMember, FleetPosition, decode
 
 from .airspace import MIN_HORIZONTAL_M, VERTICAL_SEPARATION_M
 from .separation import STALE_S, Judgement, Seen, judge
@@ -100,9 +100,9 @@ class FleetRoster:
         self.ignored_tokens = 0
         """Tokens of vehicles not enrolled (counted, never members)."""
         self._seen: dict[str, Seen] = {}
-        """Each member's last status (its vehicle's own position)."""
+        """Each member's last signed position (its vehicle's own)."""
         self._lost: dict[str, Seen] = {}
-        """The last status of each member gone with its vehicle armed, until it is back."""
+        """The last position of each member gone with its vehicle armed, until it is back."""
         self._publishers: dict[str, set[str]] = {}
         """The announcement publishers alive for each vehicle (zenoh.ext's publisher
         detection: one per service): two for one vehicle are two services claiming it."""
@@ -174,15 +174,15 @@ class FleetRoster:
 
     def separation(self, min_horizontal_m: float = MIN_HORIZONTAL_M, stale_s: float = STALE_S,
                    vertical_separation_m: float = VERTICAL_SEPARATION_M) -> Judgement:
-        """The fleet's separation now, on the members' last statuses (``fleet.separation``)."""
+        """The fleet's separation now, on the members' last positions (``fleet.separation``)."""
         with self._lock:
             seen = dict(self._seen)
         return judge(self.members(), seen, time.monotonic(), min_horizontal_m, stale_s, self._gone_now(),
                      vertical_separation_m, self._silent_now())
 
     def positions(self) -> dict[str, Seen]:
-        """Each live member's last signed status (its vehicle's own position) and when it
-        arrived (the monotonic clock)."""
+        """Each live member's last signed position (its vehicle's own) and when it arrived
+        (the monotonic clock)."""
         with self._lock:
             return dict(self._seen)
 
@@ -215,7 +215,7 @@ class FleetRoster:
         with self._lock:
             return {v: self._seen[v] for v in self._alive
                     if v in self._said_at and now - self._said_at[v] > ANNOUNCE_STALE_S
-                    and v in self._seen and self._seen[v].status.armed and now - self._seen[v].at_s <= self.lost_s}
+                    and v in self._seen and self._seen[v].position.armed and now - self._seen[v].at_s <= self.lost_s}
 
     def _open(self, sample: Any, vehicle: str, max_age_s: float) -> bytes | None:
         """The signed message in ``sample`` from enrolled ``vehicle``, or None (refused, counted)."""
@@ -238,12 +238,12 @@ class FleetRoster:
         if body is None:
             return
         try:
-            status = decode(body, Status)
+            position = decode(body, FleetPosition)
         except ProtocolError as err:
             self._refuse(f"{sample.key_expr}: {err}")
             return
         with self._lock:
-            self._seen[vehicle] = Seen(status, time.monotonic())
+            self._seen[vehicle] = Seen(position, time.monotonic())
 
     def publishers(self, vehicle: str) -> int:
         """How many services announce themselves as ``vehicle`` (1 for a member, as it should be)."""
@@ -288,7 +288,7 @@ class FleetRoster:
             else:
                 self._alive.discard(vehicle)
                 last = self._seen.pop(vehicle, None)
-                armed = last is not None and last.status.armed
+                armed = last is not None and last.position.armed
                 if armed and len(self._lost) < MAX_VEHICLES_KEPT:
                     self._lost[vehicle] = last
         self._tell(Change(vehicle, "joined" if joined else "left", armed=armed))

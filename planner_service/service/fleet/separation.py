@@ -1,6 +1,6 @@
 """The fleet's separation, judged on the vehicles' own positions (pure).
 
-Each member publishes its vehicle's position as its autopilot reports it (``status``: metres
+Each member publishes its vehicle's position as its autopilot reports it (``fleet_position``: metres
 east, north and up of its own origin, which its announcement names); here they are put in
 one frame and every pair of armed vehicles is judged by the fleet's one rule
 (``airspace.separation_lost``: closer than ``min_horizontal_m`` horizontally while closer than
@@ -19,20 +19,20 @@ from dataclasses import dataclass
 from itertools import combinations
 from typing import Mapping
 
-from protocol import GeoOrigin, Status, global_to_local, local_to_global
-from protocol.messages import FleetMember
+from protocol import GeoOrigin, global_to_local, local_to_global
+from protocol.messages import FleetMember, FleetPosition
 
 from .airspace import MIN_HORIZONTAL_M, VERTICAL_SEPARATION_M, separation_lost
 STALE_S = 3.0
-"""A position older than this (seconds since its status arrived) is not known
-(``fleet.position_stale_s``): the status comes at 2 Hz or more."""
+"""A position older than this (seconds since it arrived) is not known
+(``fleet.position_stale_s``): it comes with each status, at 2 Hz or more."""
 
 
 @dataclass(frozen=True)
 class Seen:
-    """A member's last status and when it arrived (the watcher's monotonic clock)."""
+    """A member's last position and when it arrived (the watcher's monotonic clock)."""
 
-    status: Status
+    position: FleetPosition
     at_s: float
 
 
@@ -52,8 +52,8 @@ def judge(members: Mapping[str, FleetMember | None], seen: Mapping[str, Seen], n
           min_horizontal_m: float = MIN_HORIZONTAL_M, stale_s: float = STALE_S,
           lost: Mapping[str, Seen] | None = None,
           vertical_separation_m: float = VERTICAL_SEPARATION_M, silent: Mapping[str, Seen] | None = None) -> Judgement:
-    """The separation of ``members`` (alive, with their announcements) from the statuses
-    ``seen`` of each, at ``now_s``; ``lost``: the last statuses, armed, of members whose
+    """The separation of ``members`` (alive, with their announcements) from the positions
+    ``seen`` of each, at ``now_s``; ``lost``: the last positions, armed, of members whose
     service is gone; ``silent``: of those whose announcements stopped, their tokens alive."""
     unknown = [f"{vehicle}: its service is gone; its vehicle was armed when last seen "
                f"{now_s - last.at_s:.0f} s ago" for vehicle, last in sorted((lost or {}).items())
@@ -72,11 +72,11 @@ def judge(members: Mapping[str, FleetMember | None], seen: Mapping[str, Seen], n
         if age > stale_s:
             unknown.append(f"{vehicle}: position {age:.1f} s old")
             continue
-        if not last.status.armed:
+        if not last.position.armed:
             continue
         origin = GeoOrigin(member.origin_lat_deg, member.origin_lon_deg, member.origin_alt_m)
         frame = frame or origin
-        s = last.status
+        s = last.position
         x, y, z = global_to_local(frame, *local_to_global(origin, s.x_m, s.y_m, s.z_m))
         where[vehicle] = (x, y, z)
     conflicts, closest = [], ""
