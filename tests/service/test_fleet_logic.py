@@ -69,6 +69,24 @@ def test_two_members_that_chose_one_point_at_once_both_give_it_up() -> None:
     assert lost_points({3}, {3, 8}) == {3} and lost_points({3}, {8}) == frozenset()
 
 
+def test_of_two_members_that_chose_one_point_at_once_the_first_id_keeps_it() -> None:
+    """Both giving it up made two members that decide alike (side by side, hearing the same
+    request) give up one point after another together until they arrived at one at once (20
+    UAVs over radios). Now the first id keeps it: it is not blocked to uav1, which plans
+    with it and flies on; uav2 gives it up. Every member computes the same from the same
+    claims; a third claimant sorting first takes it from both."""
+    points = {"uav1": [3], "uav2": [3, 8]}
+    alive = {"uav1", "uav2"}
+    assert others_points("uav1", points, alive) == {8}
+    assert others_points("uav2", points, alive) == {3}
+    assert lost_points({3}, others_points("uav1", points, alive)) == frozenset()
+    assert lost_points({3, 8}, others_points("uav2", points, alive)) == {3}
+    assert others_points("uav1", {**points, "uav0": [3]}, alive | {"uav0"}) == {3, 8}
+    assert others_points("uav1", {**points, "uav0": [3]}, alive) == {8}  # uav0 is not alive
+    # ids are compared as the fleet spells them: "uav10" sorts before "uav2"
+    assert others_points("uav10", {"uav10": [5], "uav2": [5]}, {"uav10", "uav2"}) == frozenset()
+
+
 def test_a_user_another_member_owns_is_neither_planned_bound_nor_recorded_here() -> None:
     world = FakeWorld()
     run, _ = fly_to_first_point(world)

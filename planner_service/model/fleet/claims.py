@@ -5,8 +5,13 @@ several members claim.
 - **Points.** A member claims the hovering point it holds and the point it flies to next,
   from the moment its mission there is uploaded until it leaves the point. Every member plans
   without the points the others claim (``others_points``), and a member whose next point
-  another claims plans again (``lost_points``): two that claimed one point in the same moment
-  both give it up, so nobody holds at a point another member has claimed.
+  another claims plans again (``lost_points``). Of members that claimed one point in the same
+  moment (before any heard the others) the one whose id sorts first keeps it and the others
+  give it up, so nobody holds at a point another member keeps. Decision: both giving it up,
+  as this rule first said, made two members that decide alike (idle side by side, on the
+  way home, hearing the same request) give up one point, choose the next one together, give
+  that up too, and so on until one was near enough to arrive before hearing the other (20
+  UAVs over radios: the holds of two at one point, every one of them).
 - **Users.** A member claims the user its hold serves (``BOUND``, from the moment the hold is
   bound) and the user of its next point (``PLANNED``, with when its service should begin).
   A user several members claim belongs to one (``owner``): a bound claim before a planned one,
@@ -52,12 +57,16 @@ def owned_by_others(own: Member, claims: Mapping[Member, Mapping[Thing, Claim]],
 
 def others_points(own: Member, points: Mapping[Member, Iterable[int]], alive: Iterable[Member]) -> frozenset[int]:
     """The hovering points the live members other than ``own`` claim (each the point it holds
-    and the point it flies to next): ``own`` plans without them."""
+    and the point it flies to next): ``own`` plans without them, but for a point it claims
+    too while every other member claiming it has an id that sorts after its own (it keeps
+    that one; they give it up)."""
     members = set(alive)
-    return frozenset(int(k) for m, ks in points.items() if m != own and m in members for k in ks)
+    mine = {int(k) for k in points.get(own, ())}
+    return frozenset(int(k) for m, ks in points.items() if m != own and m in members for k in ks
+                     if not (int(k) in mine and own < m))  # type: ignore[operator]
 
 
 def lost_points(own_points: Iterable[int], blocked: Iterable[int]) -> frozenset[int]:
-    """The points ``own`` claims that another member claims too: ``own`` gives them up (plans
-    again without them); the other does the same, and neither holds there."""
+    """The points ``own`` claims that are blocked to it (``others_points``: another member
+    claims them and keeps them): ``own`` gives them up (plans again without them)."""
     return frozenset(own_points) & frozenset(blocked)
