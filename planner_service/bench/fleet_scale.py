@@ -20,6 +20,8 @@ from datetime import datetime
 from pathlib import Path
 from typing import Any, Callable
 
+import numpy as np
+
 from ..harness.demo import DemoError
 from ..harness.fleet_demo import BASE_STEP_M, LAYER_M, run_fleet_demo
 from ..harness.placement import SitePlacement
@@ -177,15 +179,13 @@ def row(folder: Path, vehicles: list[str], summary: dict[str, Any], cut: CutOnce
 
 
 def fit_line(points: list[tuple[float, float]]) -> tuple[float, float]:
-    """Least squares ``y = a + b * x``: (a, b)."""
-    n = len(points)
-    if n < 2:
-        return (points[0][1], 0.0) if points else (0.0, 0.0)
-    mx = sum(x for x, _ in points) / n
-    my = sum(y for _, y in points) / n
-    sxx = sum((x - mx) ** 2 for x, _ in points)
-    b = sum((x - mx) * (y - my) for x, y in points) / sxx if sxx else 0.0
-    return my - b * mx, b
+    """Least squares ``y = a + b * x`` (numpy's ``polyfit``): (a, b); with one x only, the
+    mean of its ys and no slope."""
+    xs, ys = np.array([x for x, _ in points], dtype=float), np.array([y for _, y in points], dtype=float)
+    if len(set(xs.tolist())) < 2:
+        return (float(ys.mean()) if len(ys) else 0.0), 0.0
+    b, a = np.polyfit(xs, ys, 1)
+    return float(a), float(b)
 
 
 def traffic_model(rows: list[dict[str, Any]], project_to: list[int]) -> dict[str, Any]:

@@ -180,17 +180,27 @@ def uav_counts(text: str) -> list[int] | None:
         return None
 
 
+def fleet_sizes(text: str | None, default: str, most: int, users: int, users_flag: str,
+                speedup: float) -> list[int] | None:
+    """The fleet sizes ``--uavs`` asks for (``default`` without it), or None once the error
+    is said: each 1 to ``most``, the users (``users_flag``) and the speed-up positive."""
+    counts = uav_counts(text or default)
+    if counts is None:
+        return None
+    if not counts or any(not 1 <= n <= most for n in counts) or users < 1 or not speedup > 0:
+        print(f"error: --uavs 1 to {most} each, {users_flag} and --speedup positive", file=sys.stderr)
+        return None
+    return counts
+
+
 def _run_fleet_scale(args: argparse.Namespace) -> int:
     from ..bench.fleet_scale import format_fleet_scale, run_fleet_scale
     from ..harness.demo import DemoError
     from ..harness.sites import Radio, SitesError, can_make_sites
     from ..model import ScenarioError
 
-    counts = uav_counts(args.uavs or "5,10,20")
+    counts = fleet_sizes(args.uavs, "5,10,20", 40, args.users_per_uav, "--users-per-uav", args.speedup)
     if counts is None:
-        return 2
-    if not counts or any(not 1 <= n <= 40 for n in counts) or args.users_per_uav < 1 or not args.speedup > 0:
-        print("error: --uavs 1 to 40 each, --users-per-uav and --speedup positive", file=sys.stderr)
         return 2
     if args.delay_ms < 0 or args.jitter_ms < 0 or not 0 <= args.loss < 1 or args.cut_at_s < 0 or args.cut_for_s < 0:
         print("error: --delay-ms, --jitter-ms, --cut-at-s and --cut-for-s must not be negative, --loss in [0, 1)",
@@ -216,11 +226,8 @@ def _run_fleet_flight(args: argparse.Namespace) -> int:
     from ..bench.fleet_flight import format_fleet_flight, run_fleet_flight
 
     seeds = args.seeds
-    counts = uav_counts(args.uavs or "1,2,3")
+    counts = fleet_sizes(args.uavs, "1,2,3", 8, args.users, "--users", args.speedup)
     if counts is None:
-        return 2
-    if not counts or any(not 1 <= n <= 8 for n in counts) or args.users < 1 or not args.speedup > 0:
-        print("error: --uavs 1 to 8 each, --users and --speedup positive", file=sys.stderr)
         return 2
     from ..harness.demo import DemoError
 

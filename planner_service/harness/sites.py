@@ -89,13 +89,10 @@ def remove_orphans() -> list[str]:
     return gone
 
 
-def _setns(path: str) -> None:
-    fd = os.open(path, os.O_RDONLY)
-    try:
-        if ctypes.CDLL(None, use_errno=True).setns(fd, CLONE_NEWNET) != 0:
-            raise SitesError(f"setns {path}: {os.strerror(ctypes.get_errno())}")
-    finally:
-        os.close(fd)
+def _setns(fd: int, what: str) -> None:
+    """Move this thread into the network namespace open as ``fd`` (``what`` names it)."""
+    if ctypes.CDLL(None, use_errno=True).setns(fd, CLONE_NEWNET) != 0:
+        raise SitesError(f"setns {what}: {os.strerror(ctypes.get_errno())}")
 
 
 @dataclass
@@ -208,12 +205,16 @@ class Sites:
         ``site``'s namespace; ``leave`` comes back."""
         if self._home is None:
             self._home = os.open("/proc/self/ns/net", os.O_RDONLY)
-        _setns(f"/run/netns/{self.netns(site)}")
+        path = f"/run/netns/{self.netns(site)}"
+        fd = os.open(path, os.O_RDONLY)
+        try:
+            _setns(fd, path)
+        finally:
+            os.close(fd)
 
     def leave(self) -> None:
         if self._home is not None:
-            if ctypes.CDLL(None, use_errno=True).setns(self._home, CLONE_NEWNET) != 0:
-                raise SitesError(f"setns home: {os.strerror(ctypes.get_errno())}")
+            _setns(self._home, "home")
             os.close(self._home)
             self._home = None
 
