@@ -11,7 +11,7 @@ several members claim.
   as this rule first said, made two members that decide alike (idle side by side, on the
   way home, hearing the same request) give up one point, choose the next one together, give
   that up too, and so on until one was near enough to arrive before hearing the other (20
-  UAVs over radios: the holds of two at one point, every one of them).
+  UAVs over radios: each hold of two at one point that was traced began so).
 - **Users.** A member claims the user its hold serves (``BOUND``, from the moment the hold is
   bound) and the user of its next point (``PLANNED``, with when its service should begin).
   A user several members claim belongs to one (``owner``): a bound claim before a planned one,
