@@ -67,7 +67,8 @@ class LiveFeed:
         self._thread: threading.Thread | None = None
         self.roster: FleetRoster | None = None
         self.ledger: FleetLedger | None = None
-        self.verifier: FleetVerifier | None = None
+        self.verifier = FleetVerifier(self.fleet_keys)
+        """Reads the members' signed messages (it only reads: it signs nothing)."""
 
     def start(self) -> None:
         s = self.session
@@ -79,11 +80,11 @@ class LiveFeed:
             s.liveliness().declare_subscriber(f"{self.prefix}/*/alive", self._on_alive, history=True),
         ]
         keys = FleetKeys(self.prefix)
-        verifier = self.verifier = FleetVerifier(self.fleet_keys)  # it only reads: it signs nothing
         self._subs.append(s.declare_subscriber(keys.signed_statuses, self._on_signed_status))
-        self.roster = FleetRoster(keys, verifier)
+        self.roster = FleetRoster(keys, self.verifier)
         self.roster.follow(s, timeout_s=0.5)
-        self.ledger = FleetLedger(keys, "", lambda: self.roster.members().keys(), self.roster.lost, None, verifier)
+        self.ledger = FleetLedger(keys, "", lambda: self.roster.members().keys(), self.roster.lost, None,
+                                  self.verifier)
         self.ledger.follow(s)
         self._thread = threading.Thread(target=self._poll, name="live-feed", daemon=True)
         self._thread.start()
