@@ -51,7 +51,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--speedup", type=float, default=None,
                         help="the stubs' speed-up with --flight (default 25) or --scale (default 5: the radios' "
                              "delays are wall time, so a faster flight meets them as longer; at x10 twenty "
-                             "services flew 0.57-0.88 of the offline plan, at x5 0.96-0.98)")
+                             "services flew 0.57-0.88 of the offline plan, at x5 0.93-0.98)")
     parser.add_argument("--budget-ms", type=float, default=150.0, help="planner budget with --flight (default 150)")
     parser.add_argument("--fleet", action="store_true",
                         help="instead: every fleet planner's decision time per UAV (median, p95) and message size "

@@ -773,14 +773,21 @@ def test_the_user_served_is_the_models_choice_at_arrival() -> None:
     assert (b.user_id, b.request_id, b.tasks, b.planned) == ("c", 6, 9, False)
 
 
-def test_a_user_done_early_ends_the_hold_but_not_the_physics() -> None:
-    world = FakeWorld()
+def holding_at_the_first_point(world: FakeWorld) -> tuple[Run, float]:
+    """Arrived at the first point, the decision made there on board, a quarter of the hold
+    the bound request needs flown: the run and that need (s)."""
     run, _ = fly_to_first_point(world)
     (plan,) = only(run.tick(seq=2, xyz=(120.0, 200.0, 100.0), boot_s=20.0), fx.MakePlan)
     (up,) = only(run.feed(ins.Planned(plan.basis, path(point(9, 400.0, 300.0, "b", 2)))), fx.Upload)
     run.feed(ins.Uploaded(up))
     needed = run.s.holds.binding.needed_s
-    run.tick(seq=2, boot_s=20.0 + needed / 4)
+    assert not only(run.tick(seq=2, boot_s=20.0 + needed / 4), fx.Command)
+    return run, needed
+
+
+def test_a_user_done_early_ends_the_hold_but_not_the_physics() -> None:
+    world = FakeWorld()
+    run, needed = holding_at_the_first_point(world)
     out = run.feed(ins.RequestIn("a", 0))  # "nothing more to offload"
     out += run.tick(seq=2, boot_s=21.0 + needed / 4)
     assert [(c.kind, c.seq) for c in only(out, fx.Command)] == [("set_current", 3)]
@@ -1073,14 +1080,8 @@ def test_of_two_members_holding_one_point_the_one_whose_id_sorts_after_ends_its_
     one point. Heard during the hold, the member the other keeps the point for ends its own,
     as a hold whose user is done ends, and records what it carried."""
     world = FakeWorld()
-    run, _ = fly_to_first_point(world)
-    (plan,) = only(run.tick(seq=2, xyz=(120.0, 200.0, 100.0), boot_s=20.0), fx.MakePlan)
-    (up,) = only(run.feed(ins.Planned(plan.basis, path(point(9, 400.0, 300.0, "b", 2)))), fx.Upload)
-    run.feed(ins.Uploaded(up))
-    needed = run.s.holds.binding.needed_s
+    run, needed = holding_at_the_first_point(world)
     assert run.s.claims.holding is not None
-    out = run.tick(seq=2, boot_s=20.0 + needed / 4)
-    assert not only(out, fx.Command)
     out = run.feed(ins.FleetHeard(FleetView(yield_to={run.s.claims.holding: "uav3"})))
     out += run.tick(seq=2, boot_s=21.0 + needed / 4)
     (cmd,) = only(out, fx.Command)
