@@ -12,7 +12,7 @@ from planner_service.model.fleet.claims import BOUND, PLANNED, lost_points, othe
 from planner_service.service.sortie import effects as fx
 from planner_service.service.sortie import inputs as ins
 from planner_service.service.sortie.fleet import Claims, FleetView
-from tests.service.test_sortie_logic import FakeWorld, fly_to_first_point, only, path, point
+from tests.service.test_sortie_logic import FakeWorld, bound_to_a_user_uav2_owns, fly_to_first_point, only, path, point
 
 
 def intents(effects: list[fx.Effect]) -> list[Claims]:
@@ -101,12 +101,7 @@ def test_a_user_another_member_owns_is_neither_planned_bound_nor_recorded_here()
 def test_a_hold_of_a_user_another_member_bound_first_records_nothing() -> None:
     """Two members bound one user at once (each before the other's claim reached it): the one
     whose claim wins keeps it; this one hears it and records nothing."""
-    world = FakeWorld()
-    run, _ = fly_to_first_point(world)
-    run.tick(seq=2, xyz=(120.0, 200.0, 100.0), boot_s=20.0)
-    b = run.s.holds.binding
-    assert b is not None and b.request_id is not None
-    run.feed(ins.FleetHeard(FleetView(owners={b.user_id: "uav2"})))
+    run, b = bound_to_a_user_uav2_owns(FakeWorld())
     run.tick(seq=2, xyz=(120.0, 200.0, 100.0), boot_s=20.0 + b.needed_s + 1.0)
     out = run.tick(seq=3, xyz=(200.0, 300.0, 100.0), boot_s=22.0 + b.needed_s)
     assert not only(out, fx.RecordService)

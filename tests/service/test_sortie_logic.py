@@ -20,6 +20,7 @@ from planner_service.service.sortie import effects as fx
 from planner_service.service.sortie import inputs as ins
 from planner_service.service.sortie.fleet import FleetView
 from planner_service.service.sortie.authority import Authority, next_sortie
+from planner_service.service.sortie.holds import Binding
 from planner_service.service.sortie.machine import RETURN_ITEM_S
 from protocol import Area, GeoOrigin
 from protocol.errors import MissionError
@@ -198,16 +199,22 @@ def test_a_hold_of_a_user_another_member_bound_first_records_nothing() -> None:
     assert any("nothing recorded: uav2 serves" in e.event.detail for e in only(out, fx.Emit))
 
 
-def test_a_hold_whose_user_another_member_bound_first_records_nothing_after_that_members_hold_ended() -> None:
-    """Over a slow radio (100 ms, 5 % loss, N=5: user-12 served by uav2 and uav3) the other
-    member's claim was heard during the hold, then went when its own hold ended, a second
-    before this one's: the user is still the other's."""
-    world = FakeWorld()
+def bound_to_a_user_uav2_owns(world: FakeWorld) -> tuple[Run, Binding]:
+    """Arrived at the first point, its hold bound to a request, then uav2's claim on that user
+    heard (uav2 bound it first): the run and the binding."""
     run, _ = fly_to_first_point(world)
     run.tick(seq=2, xyz=(120.0, 200.0, 100.0), boot_s=20.0)
     b = run.s.holds.binding
     assert b is not None and b.request_id is not None
     run.feed(ins.FleetHeard(FleetView(owners={b.user_id: "uav2"})))
+    return run, b
+
+
+def test_a_hold_whose_user_another_member_bound_first_records_nothing_after_that_members_hold_ended() -> None:
+    """Over a slow radio (100 ms, 5 % loss, N=5: user-12 served by uav2 and uav3) the other
+    member's claim was heard during the hold, then went when its own hold ended, a second
+    before this one's: the user is still the other's."""
+    run, b = bound_to_a_user_uav2_owns(FakeWorld())
     run.feed(ins.FleetHeard(FleetView()))  # uav2 left the point: its claim is gone
     run.tick(seq=2, xyz=(120.0, 200.0, 100.0), boot_s=20.0 + b.needed_s + 1.0)
     out = run.tick(seq=3, xyz=(200.0, 300.0, 100.0), boot_s=22.0 + b.needed_s)
