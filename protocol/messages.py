@@ -396,6 +396,10 @@ class FleetIntentions(_Message, tag="fleet_intentions", kw_only=True):
     that arrived at one point before either heard the other's claim (the claim travels a
     radio) both hold it: the one whose vehicle id sorts first keeps it, the other ends its
     hold (``FleetLedger.yield_points``)."""
+    answering: bool = False
+    """It flies its mission's way home with its sortie on and would turn back for a new
+    request: of such members the nearest to a new request answers it first, the others a
+    step later each (docs/OPERATIONS.md, "A fleet")."""
 
 
 class FleetServed(_Message, tag="fleet_served"):

@@ -60,7 +60,7 @@ from .planning import Planner, VehicleFix, after_hold, assemble, not_served_reas
 from .sortie import HeldMission, Rules, Sortie, SortieLogic, VehicleSnapshot, item_dict, new_sortie
 from .sortie import effects as fx
 from .sortie import inputs as ins
-from .sortie.fleet import Claims, FleetView
+from .sortie.fleet import Claims, FleetView, coarse
 from .supervisor import Supervisor
 from .throttle import RateLimit
 from .vehicle_view import VehicleView
@@ -149,7 +149,9 @@ class Service:
             next_battery_fraction=config.sortie.next_battery_fraction,
             readback_interval_s=config.sortie.readback_interval_s, leg_tolerance_m=config.sortie.leg_tolerance_m,
             max_mission_items=config.mavlink.max_mission_items, max_failures=config.planner.max_failures,
-            hold_margin_s=s.hold_margin_s, energy_margin_j=s.energy_margin_j,
+            hold_margin_s=s.hold_margin_s, energy_margin_j=s.energy_margin_j, vehicle=config.zenoh.vehicle,
+            answer_step_s=config.fleet.answer_step_s, answer_tie_m=config.fleet.answer_tie_m,
+            max_answer_rank=config.fleet.max_answer_rank,
         ), self.world)
         self.state = self._restore()
         self._plan_dues: dict[str, float] = {}
@@ -446,7 +448,8 @@ class Service:
         if self.fleet is None or not isinstance(self.world, FleetWorld):
             return
         ledger = self.fleet.ledger
-        heard = FleetView(ledger.owners(), ledger.blocked_points(), ledger.yield_points())
+        answering = coarse(self.fleet.whereabouts(ledger.answering()))
+        heard = FleetView(ledger.owners(), ledger.blocked_points(), ledger.yield_points(), answering)
         if heard != self.state.fleet:
             self._feed(ins.FleetHeard(heard))
         for done in self.fleet.ledger.take_served():
@@ -651,7 +654,7 @@ class Service:
             self._bound_at = (claims.bound, self.wall())
         users = {claims.next_user} - {None, claims.bound}
         self.fleet.ledger.intend(dict(self._plan_dues), self.wall(), users, claims.points, self._route,
-                                 self._bound_at, claims.holding)
+                                 self._bound_at, claims.holding, claims.answering)
         if log.isEnabledFor(logging.DEBUG):  # the others' owners are worked out for the line alone
             log.debug("fleet: claims %s; others own %s", claims, sorted(self.fleet.ledger.taken()))
 

@@ -375,6 +375,17 @@ class MembershipConfig(Section):
     lost_airspace_s: float = setting(1800.0, gt=0, unit="s")
     """How long a member gone with its vehicle armed keeps its airspace (its route, its
     unknown separation): at most a sortie's flight on one battery."""
+    answer_step_s: float = setting(2.0, ge=0, le=30.0, unit="s")
+    """Of the members on their way home, the one nearest to a new request answers it first;
+    each other waits this long (wall clock) for each member nearer than it, so that their
+    claims are heard before its turn (a planning, an upload and a radio's hearing delay;
+    0: all answer at once)."""
+    answer_tie_m: float = setting(50.0, ge=0, unit="m")
+    """Members whose distances to the pending users differ by at most this (what a position a
+    report late may be off) answer in the order of their vehicle ids."""
+    max_answer_rank: int = setting(3, ge=0, le=20)
+    """At most this many steps are waited, whatever the number of nearer members (one may be
+    unable to answer: its battery, its plan)."""
 
     def check(self) -> None:
         super().check()

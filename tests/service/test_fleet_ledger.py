@@ -110,6 +110,25 @@ def test_of_two_members_holding_one_point_the_one_whose_id_sorts_first_keeps_it(
     assert uav5.yield_points() == {}
 
 
+def test_the_members_that_would_answer_a_new_request_are_those_on_their_way_home_that_say_so() -> None:
+    """Of the members on their way home the nearest answers first (``sortie.fleet.answer_rank``):
+    each says so in its signed intentions; one that claims a point is not answering whatever
+    it says, one gone is not, and this member is not among the others."""
+    alive = {"uav1", "uav2", "uav3", "uav4"}
+    ledger = ledger_of("uav1", alive)
+    ledger.intend({}, T, answering=True)
+    said(ledger, FleetIntentions(vehicle="uav1", time_s=T, answering=True))  # its own, as if heard back
+    said(ledger, FleetIntentions(vehicle="uav2", time_s=T, answering=True))
+    said(ledger, FleetIntentions(vehicle="uav3", time_s=T, points=[5], answering=True))
+    said(ledger, FleetIntentions(vehicle="uav4", time_s=T))
+    assert ledger.answering() == {"uav2"}
+    said(ledger, FleetIntentions(vehicle="uav2", time_s=T + 1, points=[7]))  # it answered
+    said(ledger, FleetIntentions(vehicle="uav4", time_s=T + 1, answering=True))
+    assert ledger.answering() == {"uav4"}
+    alive.discard("uav4")
+    assert ledger.answering() == set()
+
+
 def test_a_member_speaks_for_itself_and_a_service_heard_twice_counts_once() -> None:
     ledger = ledger_of("uav1", {"uav1", "uav2"})
     said(ledger, FleetIntentions(vehicle="uav3", time_s=T, users=[Intention("u", T + 1)], claims=["u"]), "uav2")

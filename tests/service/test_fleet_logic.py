@@ -11,8 +11,10 @@ from dataclasses import replace
 from planner_service.model.fleet.claims import BOUND, PLANNED, lost_points, others_points, owned_by_others, owner
 from planner_service.service.sortie import effects as fx
 from planner_service.service.sortie import inputs as ins
-from planner_service.service.sortie.fleet import Claims, FleetView
-from tests.service.test_sortie_logic import FakeWorld, bound_to_a_user_uav2_owns, fly_to_first_point, only, path, point
+from planner_service.service.sortie import SortieLogic
+from planner_service.service.sortie.fleet import Claims, FleetView, answer_rank
+from tests.service.test_sortie_logic import (FakeWorld, Run, bound_to_a_user_uav2_owns, fly_to_first_point, only, path,
+                                             point)
 
 
 def intents(effects: list[fx.Effect]) -> list[Claims]:
@@ -48,6 +50,91 @@ def test_nothing_is_claimed_on_the_way_home_or_after_the_sortie() -> None:
     run, _ = fly_to_first_point(world)
     run.tick(seq=4, xyz=(60.0, 60.0, 100.0), boot_s=20.0)  # the RTL item: no point after it
     assert run.s.claims.points == frozenset() and run.s.claims.next_user is None
+    assert run.s.claims.answering, "on its way home, it would answer a new request"
+    # the operator took the authority back: the vehicle is the pilot's, it answers nothing
+    run.s, _, ok, _ = run.logic.operator(run.s, ins.OperatorAsked("hold"), run.v, run.now)
+    assert ok
+    run.tick(seq=4, xyz=(50.0, 50.0, 100.0), boot_s=21.0, mode="LOITER")
+    assert not run.s.claims.answering and intents(run.effects)[-1] == Claims()
+
+
+def on_the_way_home(vehicle: str) -> tuple[Run, FakeWorld]:
+    """``vehicle`` flies its mission's way home at (200, 150), nothing pending."""
+    world = FakeWorld()
+    run, up = fly_to_first_point(world)
+    run.logic = SortieLogic(replace(run.logic.rules, vehicle=vehicle), world)
+    world.requests.clear()
+    run.tick(seq=up.items[-1].seq, xyz=(200.0, 150.0, 100.0), boot_s=60.0, battery_fraction=0.6)
+    run.now += 2.0
+    assert not only(run.tick(), fx.MakePlan)
+    return run, world
+
+
+def test_of_members_on_their_way_home_the_nearest_answers_a_new_request_first() -> None:
+    """Finding (20 UAVs over radios): a new request woke every member idle on its way home at
+    once, and three planned the same user, flew to it and served it at once, each before the
+    others' claims came over the radio. Now the nearest answers first; the others wait a step
+    for each member nearer, and find its claim when their turn comes."""
+    step = 2.0
+    run, world = on_the_way_home("uav2")
+    # uav1 is nearer to the new user: uav2 waits one step
+    run.feed(ins.FleetHeard(FleetView(answering={"uav1": (280.0, 280.0)})))
+    world.ask("c", 300.0, 300.0, 10, 9)
+    assert not only(run.feed(ins.RequestIn("c", 10)) + run.tick(), fx.MakePlan)
+    run.now += step - 0.5
+    assert not only(run.tick(), fx.MakePlan)
+    run.now += 0.5
+    (plan,) = only(run.tick(), fx.MakePlan)
+    assert plan.basis.reason == "new requests on the way home"
+
+    # uav1 answered within the step: its claim is heard, c is not uav2's to plan
+    run, world = on_the_way_home("uav2")
+    run.feed(ins.FleetHeard(FleetView(answering={"uav1": (280.0, 280.0)})))
+    world.ask("c", 300.0, 300.0, 10, 9)
+    run.feed(ins.RequestIn("c", 10))
+    run.feed(ins.FleetHeard(FleetView(owners={"c": "uav1"})))
+    run.now += step
+    assert not only(run.tick(), fx.MakePlan)
+
+    # uav2 is the nearest (uav3 farther by more than the tie): it answers at once
+    run, world = on_the_way_home("uav2")
+    run.feed(ins.FleetHeard(FleetView(answering={"uav3": (0.0, 0.0)})))
+    world.ask("c", 300.0, 300.0, 10, 9)
+    (plan,) = only(run.feed(ins.RequestIn("c", 10)), fx.MakePlan)
+
+    # side by side (within the tie): the id sorting first answers first, the other waits
+    run, world = on_the_way_home("uav2")
+    run.feed(ins.FleetHeard(FleetView(answering={"uav1": (190.0, 150.0), "uav3": (210.0, 150.0)})))
+    world.ask("c", 300.0, 300.0, 10, 9)
+    assert not only(run.feed(ins.RequestIn("c", 10)), fx.MakePlan)
+    run.now += step
+    (plan,) = only(run.tick(), fx.MakePlan)
+
+
+def test_a_member_waits_at_most_its_rank_bound_for_the_nearer_ones() -> None:
+    run, world = on_the_way_home("uav9")
+    near = {f"uav{k}": (300.0, 290.0 - k) for k in range(1, 9)}  # eight nearer members
+    run.feed(ins.FleetHeard(FleetView(answering=near)))
+    world.ask("c", 300.0, 300.0, 10, 9)
+    run.feed(ins.RequestIn("c", 10))
+    bound = run.logic.rules.max_answer_rank * run.logic.rules.answer_step_s
+    run.now += bound - 0.2
+    assert not only(run.tick(), fx.MakePlan)
+    run.now += 0.2
+    assert only(run.tick(), fx.MakePlan), "the nearer ones may be unable to answer"
+
+
+def test_the_answer_rank() -> None:
+    users = [(300.0, 300.0), (0.0, 500.0)]
+    assert answer_rank("uav2", (200.0, 200.0), {}, users, 50.0) == 0
+    assert answer_rank("uav2", (200.0, 200.0), {"uav1": (0.0, 0.0)}, [], 50.0) == 0  # nothing to answer
+    assert answer_rank("uav2", (200.0, 200.0), {"uav1": (10.0, 480.0)}, users, 50.0) == 1  # nearer another user
+    assert answer_rank("uav2", (200.0, 200.0), {"uav3": (210.0, 200.0)}, users, 50.0) == 0  # a tie, uav2 first
+    assert answer_rank("uav2", (200.0, 200.0), {"uav1": (190.0, 200.0)}, users, 50.0) == 1  # a tie, uav1 first
+    assert answer_rank("uav2", (200.0, 200.0), {"uav1": (150.0, 150.0)}, users, 50.0) == 0  # farther, beyond the tie
+    assert answer_rank("uav2", (200.0, 200.0), {"uav2": (300.0, 300.0)}, users, 50.0) == 0  # itself is no other
+    # ids compare as the fleet spells them: "uav10" sorts before "uav2"
+    assert answer_rank("uav2", (200.0, 200.0), {"uav10": (200.0, 205.0)}, users, 50.0) == 1
 
 
 def test_two_members_that_chose_one_point_at_once_both_give_it_up() -> None:

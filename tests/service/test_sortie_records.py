@@ -42,10 +42,13 @@ def test_failures_wait_twice_as_long_each_time_up_to_the_cap_and_are_given_up_af
 
 
 def test_a_request_revives_plans_given_up_on_and_only_those() -> None:
-    given_up = Schedule(failures=3, retry_at=math.inf, dirty=False).request_in(BACKOFF)
+    given_up = Schedule(failures=3, retry_at=math.inf, dirty=False).request_in(BACKOFF, 10.0)
     assert (given_up.failures, given_up.retry_at, given_up.dirty) == (0, 0.0, True)
-    waiting = Schedule(failures=2, retry_at=50.0, dirty=False).request_in(BACKOFF)
+    waiting = Schedule(failures=2, retry_at=50.0, dirty=False).request_in(BACKOFF, 10.0)
     assert (waiting.failures, waiting.retry_at, waiting.dirty) == (2, 50.0, True)
+    # requests since the last plan count from the first (the way home's turns: fleet.answer_rank)
+    assert (waiting.dirty_at, waiting.request_in(BACKOFF, 12.0).dirty_at) == (10.0, 10.0)
+    assert waiting.planning().request_in(BACKOFF, 12.0).dirty_at == 12.0
 
 
 def test_a_refused_command_waits_as_a_failed_plan_does() -> None:

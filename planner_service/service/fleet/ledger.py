@@ -139,6 +139,8 @@ class FleetLedger:
         self._routes: dict[str, set[int]] = {}
         self._holding: dict[str, int | None] = {}
         """The point each member holds now (its last intentions'), if any."""
+        self._answering: set[str] = set()
+        """The members whose last intentions say they would answer a new request."""
         self._served: deque[FleetServed] = deque(maxlen=MAX_SERVED_QUEUED)
         self._seen: set[tuple[str, str, float]] = set()
         self.refused: deque[str] = deque(maxlen=16)
@@ -182,18 +184,20 @@ class FleetLedger:
     # --- this member's side ------------------------------------------------------------------
     def intend(self, due: Mapping[str, float], now_s: float, claims: Iterable[str] = (),
                points: Iterable[int] = (), route: Iterable[int] = (), bound: tuple[str, float] | None = None,
-               holding: int | None = None) -> None:
+               holding: int | None = None, answering: bool = False) -> None:
         """Say which users this member's plan means to serve and when (wall clock), which of
         them it claims (``claims``: the next point's user), the user its hold serves and when
-        it was bound (``bound``), and the hovering points it claims (``points``: its next
-        point, its hold's, ``holding``)."""
+        it was bound (``bound``), the hovering points it claims (``points``: its next point,
+        its hold's, ``holding``), and whether it would answer a new request (``answering``:
+        on its way home)."""
         users = sorted(due.items(), key=lambda kv: kv[1])[:MAX_INTENTIONS]
         claimed = sorted(set(claims) & set(due))[:MAX_CLAIMS - (bound is not None)]
         held = sorted(set(int(k) for k in points))[:MAX_CLAIMS]
         message = FleetIntentions(
             vehicle=self.vehicle, time_s=now_s, users=[Intention(u, d) for u, d in users], claims=claimed,
             points=held, route=first_route(route), bound=None if bound is None else bound[0],
-            bound_at_s=None if bound is None else bound[1], holding=holding if holding in held else None)
+            bound_at_s=None if bound is None else bound[1], holding=holding if holding in held else None,
+            answering=answering and not held)
         with self._lock:
             self._holding[self.vehicle] = message.holding
             self._intentions[self.vehicle] = dict(users)
@@ -238,6 +242,13 @@ class FleetLedger:
                 return {}
             first = sorted(v for v, k in self._holding.items() if k == own and v in alive and v != self.vehicle)
         return {own: first[0]} if first and first[0] < self.vehicle else {}
+
+    def answering(self) -> set[str]:
+        """The live members other than this one that would answer a new request now (on
+        their way home, by their last intentions)."""
+        alive = set(self._alive()) - {self.vehicle}
+        with self._lock:
+            return self._answering & alive
 
     def claims(self) -> dict[str, dict[str, Claim]]:
         """Every member's last claims (vehicle -> user -> claim), live or not."""
@@ -300,6 +311,10 @@ class FleetLedger:
             self._claims[message.vehicle] = claims
             self._points[message.vehicle] = set(message.points)
             self._holding[message.vehicle] = message.holding if message.holding in message.points else None
+            if message.answering and not message.points:
+                self._answering.add(message.vehicle)
+            else:
+                self._answering.discard(message.vehicle)
             self._routes[message.vehicle] = set(first_route(message.route))
             claimed = self._claimed.setdefault(message.vehicle, {})
             for user in claims:

@@ -38,7 +38,7 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from typing import Any, Callable, Mapping
+from typing import Any, Callable, Iterable, Mapping
 
 import zenoh
 import zenoh.ext as zext
@@ -51,7 +51,7 @@ from protocol.text import printable
 from .ledger import FleetLedger
 from .airspace import MIN_HORIZONTAL_M, VERTICAL_SEPARATION_M
 from .roster import ANNOUNCE_EVERY_S, LOST_S, MAX_LAYER_GAP_M, Change, FleetRoster
-from .separation import STALE_S, Judgement
+from .separation import STALE_S, Judgement, origin_of, whereabouts
 from ..errors import ServiceError
 
 log = logging.getLogger("planner_service.fleet")
@@ -257,6 +257,12 @@ class FleetPresence:
 
     def members(self) -> dict[str, FleetMember | None]:
         return self.roster.members()
+
+    def whereabouts(self, vehicles: Iterable[str]) -> dict[str, tuple[float, float]]:
+        """Where each of ``vehicles`` is (metres east and north of this member's origin), of
+        those whose position is fresh and armed."""
+        return whereabouts(origin_of(self.own), vehicles, self.roster.members(), self.roster.positions(),
+                           time.monotonic(), self.stale_s)
 
     def check_separation(self) -> Judgement:
         """Judge the fleet's separation now and log what changed: a pair that lost it (an

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from itertools import combinations
-from typing import Mapping
+from typing import Iterable, Mapping
 
 from protocol import GeoOrigin, global_to_local, local_to_global
 from protocol.messages import FleetMember, FleetPosition
@@ -48,6 +48,30 @@ class Judgement:
     """The closest armed pair's distance, for the operator ("" with fewer than two)."""
 
 
+def origin_of(member: FleetMember) -> GeoOrigin:
+    """The origin ``member``'s positions are measured from (its announcement's)."""
+    return GeoOrigin(member.origin_lat_deg, member.origin_lon_deg, member.origin_alt_m)
+
+
+def in_frame(frame: GeoOrigin, member: FleetMember, position: FleetPosition) -> tuple[float, float, float]:
+    """``member``'s ``position`` (of its own origin) in metres east, north and up of ``frame``."""
+    return global_to_local(frame, *local_to_global(origin_of(member), position.x_m, position.y_m, position.z_m))
+
+
+def whereabouts(frame: GeoOrigin, vehicles: Iterable[str], members: Mapping[str, FleetMember | None],
+                seen: Mapping[str, Seen], now_s: float, stale_s: float = STALE_S) -> dict[str, tuple[float, float]]:
+    """Where each of ``vehicles`` is (east, north of ``frame``) by its last position, if it
+    is armed, fresh (``stale_s``) and its member announced: the others are left out."""
+    out = {}
+    for vehicle in vehicles:
+        member, last = members.get(vehicle), seen.get(vehicle)
+        if member is None or last is None or now_s - last.at_s > stale_s or not last.position.armed:
+            continue
+        x, y, _ = in_frame(frame, member, last.position)
+        out[vehicle] = (x, y)
+    return out
+
+
 def judge(members: Mapping[str, FleetMember | None], seen: Mapping[str, Seen], now_s: float,
           min_horizontal_m: float = MIN_HORIZONTAL_M, stale_s: float = STALE_S,
           lost: Mapping[str, Seen] | None = None,
@@ -74,11 +98,8 @@ def judge(members: Mapping[str, FleetMember | None], seen: Mapping[str, Seen], n
             continue
         if not last.position.armed:
             continue
-        origin = GeoOrigin(member.origin_lat_deg, member.origin_lon_deg, member.origin_alt_m)
-        frame = frame or origin
-        s = last.position
-        x, y, z = global_to_local(frame, *local_to_global(origin, s.x_m, s.y_m, s.z_m))
-        where[vehicle] = (x, y, z)
+        frame = frame or origin_of(member)
+        where[vehicle] = in_frame(frame, member, last.position)
     conflicts, closest = [], ""
     best = float("inf")
     for (a, pa), (b, pb) in combinations(sorted(where.items()), 2):

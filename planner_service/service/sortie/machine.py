@@ -51,7 +51,7 @@ from . import effects as fx
 from . import inputs as ins
 from .authority import Authority, next_sortie
 from .evidence import Evidence, Settled, judge
-from .fleet import Claims, FleetView, claims_now
+from .fleet import Claims, FleetView, answer_rank, claims_now
 from .hold import HoldWatch, Sample
 from .holds import Binding, Holds
 from .life import Life
@@ -100,6 +100,16 @@ class Rules:
     leg_tolerance_m: float = 30.0
     """How far (horizontally) the vehicle may be off the leg it flies to a point of ours
     before the mission is read back (``evidence.judge``); 0: not checked."""
+    vehicle: str = ""
+    """This fleet member's vehicle id (ties in ``fleet.answer_rank`` go to the id sorting first)."""
+    answer_step_s: float = 2.0
+    """Wall seconds a member on its way home waits, after new requests came in, for each
+    member on its way home that answers them first (``fleet.answer_rank``)."""
+    answer_tie_m: float = 50.0
+    """Members whose distances to the pending users differ by at most this answer in the
+    order of their ids."""
+    max_answer_rank: int = 3
+    """At most this many steps are waited (the nearer members may be unable to answer)."""
     autopilot: Autopilot = field(init=False, repr=False, compare=False)
     """The configured autopilot's profile (``protocol.autopilot``), derived from ``flavour``
     once, when the rules are made (read at every step; not a constructor argument): an
@@ -215,7 +225,7 @@ class SortieLogic:
             case ins.CommandNotDone(command=cmd, error=error):
                 s = self._command_failed(replace(s, schedule=s.schedule.command_answered()), cmd, error, now, out)
             case ins.RequestIn(user_id=user, tasks=tasks):
-                s = self._request(s, user, tasks, out)
+                s = self._request(s, user, tasks, now, out)
             case ins.OperatorAsked():
                 raise TypeError("operator commands go through SortieLogic.operator")
             case ins.SortieBegun(number=number):
@@ -234,7 +244,7 @@ class SortieLogic:
             case ins.StatusText() | ins.TelemetryMissing():
                 return s, out  # the link logs them; what they change shows in its telemetry
             case ins.FleetHeard(view=view):
-                s = self._heard(s, view)
+                s = self._heard(s, view, now)
             case _:
                 assert_never(event)
         if not isinstance(event, ins.Tick):
@@ -242,7 +252,7 @@ class SortieLogic:
         return self._intend(s, v, out), out
 
     # --- the fleet ------------------------------------------------------------------------------
-    def _heard(self, s: Sortie, view: FleetView) -> Sortie:
+    def _heard(self, s: Sortie, view: FleetView, now: float) -> Sortie:
         """The other members' claims changed: users another member no longer owns are this
         member's to plan again (a member gone, a plan changed), a point this member flies to
         that another now claims is given up at the next decision (``_plan_wanted``), and a
@@ -254,7 +264,7 @@ class SortieLogic:
         if b is not None and b.request_id is not None and b.lost_to is None and view.owner(b.user_id) is not None:
             s = replace(s, holds=replace(s.holds, binding=replace(b, lost_to=view.owner(b.user_id))))
         if freed:
-            s = replace(s, schedule=s.schedule.request_in(self.rules.backoff))
+            s = replace(s, schedule=s.schedule.request_in(self.rules.backoff, now))
         return s
 
     def _intend(self, s: Sortie, v: ins.VehicleSnapshot, out: list[fx.Effect]) -> Sortie:
@@ -262,6 +272,8 @@ class SortieLogic:
         the point it flies to from the moment its mission is on board, the point it holds."""
         held = s.onboard.held if s.onboard.known else None
         claims = claims_now(held, s.holds, v.seq, s.life.homing or s.life.over is not None)
+        if self._answers(s, v):
+            claims = replace(claims, answering=True)
         if claims == s.claims:
             return s
         out.append(fx.Intend(claims))
@@ -578,12 +590,30 @@ class SortieLogic:
         if lost and not holding and v.seq > r.autopilot.first_item:
             # flying to a point another member claims now (both claimed it at once): given up
             return fx.PlanBasis(f"point {min(lost)} claimed by another member", s.schedule.version, v.seq - 1)
-        if (s.schedule.dirty and v.seq == s.onboard.held.rtl_seq and r.autopilot.return_item_mode is None
-                and now - s.schedule.last_plan_at >= r.replan_min_interval_s
+        if (s.schedule.dirty and self._answers(s, v) and now - s.schedule.last_plan_at >= r.replan_min_interval_s
                 and self._pending_count(s) > 0 and v.xyz[2] >= r.area.min_flight_altitude_m
-                and self._could_turn_back(s, v)):
+                and now >= self._answer_at(s, v) and self._could_turn_back(s, v)):
             return fx.PlanBasis("new requests on the way home", s.schedule.version, s.onboard.held.rtl_seq - 1)
         return None
+
+    def _answers(self, s: Sortie, v: ins.VehicleSnapshot) -> bool:
+        """Whether new requests are decided on now, on the way home: the vehicle flies the
+        return item of a mission of ours in a mission mode, the sortie on (on PX4 the return
+        item is flown in AUTO.RTL, where a new mission would not be flown)."""
+        held = s.onboard.held
+        return (held is not None and s.life.over is None and v.airborne
+                and v.mode in MISSION_MODES and v.seq == held.rtl_seq and self.rules.autopilot.return_item_mode is None)
+
+    def _answer_at(self, s: Sortie, v: ins.VehicleSnapshot) -> float:
+        """When this member, on its way home, may answer the requests that came in (``fleet.
+        answer_rank``): a step after them for each member on its way home that answers first,
+        up to ``max_answer_rank`` steps (it may be unable to: its battery, its plan)."""
+        if not s.fleet.answering:
+            return s.schedule.dirty_at
+        users = [(r.x_m, r.y_m) for r in self._pending(s)]
+        rank = answer_rank(self.rules.vehicle, (v.xyz[0], v.xyz[1]), s.fleet.answering, users,
+                           self.rules.answer_tie_m)
+        return s.schedule.dirty_at + min(rank, self.rules.max_answer_rank) * self.rules.answer_step_s
 
     def _could_turn_back(self, s: Sortie, v: ins.VehicleSnapshot) -> bool:
         """Whether a decision on the way home could find a point to fly to: the model's first
@@ -1000,8 +1030,9 @@ class SortieLogic:
         return self._command(s, fx.Command("return", why=f"battery at {f:.0%}"), out)
 
     # --- requests and the operator --------------------------------------------------------------
-    def _request(self, s: Sortie, user: str, tasks: int, out: list[fx.Effect]) -> Sortie:
-        return replace(s, holds=s.holds.user_said_done(user, tasks), schedule=s.schedule.request_in(self.rules.backoff))
+    def _request(self, s: Sortie, user: str, tasks: int, now: float, out: list[fx.Effect]) -> Sortie:
+        return replace(s, holds=s.holds.user_said_done(user, tasks),
+                       schedule=s.schedule.request_in(self.rules.backoff, now))
 
     def operator(self, s: Sortie, cmd: ins.OperatorAsked, v: ins.VehicleSnapshot,
                  now: float) -> tuple[Sortie, list[fx.Effect], bool, str]:

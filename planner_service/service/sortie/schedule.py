@@ -50,6 +50,9 @@ class Schedule:
     waits."""
     dirty: bool = True
     """Requests came in since the last plan."""
+    dirty_at: float = -math.inf
+    """When the first of them came in (a fleet member on its way home answers in its turn
+    from then: ``fleet.answer_rank``)."""
     last_plan_at: float = -math.inf
     decided_at: int | None = None
     """The seq from whose hold the last decision was made (one decision per interval)."""
@@ -119,10 +122,10 @@ class Schedule:
         """A new link is a change: the failures in a row are forgiven."""
         return replace(self, retry_at=min(self.retry_at, now), failures=0)
 
-    def request_in(self, backoff: Backoff) -> Schedule:
+    def request_in(self, backoff: Backoff, now: float) -> Schedule:
         """A request is a change: plans given up on are tried again."""
         s = replace(self, failures=0, retry_at=0.0) if self.failures >= backoff.max_failures else self
-        return replace(s, dirty=True)
+        return replace(s, dirty=True, dirty_at=self.dirty_at if self.dirty else now)
 
     def granted(self) -> Schedule:
         """The operator gave the authority: whatever waited goes now."""
