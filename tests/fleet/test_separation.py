@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from protocol import GeoOrigin, global_to_local, local_to_global
 from protocol.messages import FleetMember, FleetPosition
-from planner_service.service.fleet.separation import Seen, judge
+from planner_service.service.fleet.separation import Seen, in_frame, judge, whereabouts
 
 HOME = GeoOrigin()
 
@@ -61,6 +61,21 @@ def test_positions_are_put_in_one_frame_from_each_members_origin() -> None:
     assert j.conflicts == ("uav1-uav2: 5 m apart horizontally, 0 m vertically",)
     assert abs(global_to_local(HOME, east.lat_deg, east.lon_deg, east.alt_m)[0] - 100.0) < 0.01
     assert judge(members, {"uav1": seen("uav1", 0, 0, 100), "uav2": seen("uav2", 0, 0, 100)}, 100.5).conflicts == ()
+
+
+def test_whereabouts_are_the_fresh_armed_positions_in_this_members_frame() -> None:
+    """Where the members on their way home are, to rank who answers a new request first:
+    put in this member's frame (as they are when the origins are one), and only the fresh,
+    armed and announced."""
+    east = GeoOrigin(*local_to_global(HOME, 100.0, 0.0, 0.0))
+    members = {"uav1": member("uav1"), "uav2": member("uav2", east), "uav3": member("uav3"), "uav4": None,
+               "uav5": member("uav5")}
+    last = {"uav1": seen("uav1", 10, 20, 100), "uav2": seen("uav2", -95, 0, 100), "uav3": seen("uav3", 0, 0, 100,
+            at_s=90.0), "uav4": seen("uav4", 0, 0, 100), "uav5": seen("uav5", 0, 0, 0, armed=False)}
+    where = whereabouts(HOME, ["uav1", "uav2", "uav3", "uav4", "uav5", "uav6"], members, last, 100.5)
+    assert where.keys() == {"uav1", "uav2"} and where["uav1"] == (10, 20)
+    assert abs(where["uav2"][0] - 5.0) < 0.01 and abs(where["uav2"][1]) < 0.01
+    assert in_frame(HOME, members["uav1"], last["uav1"].position) == (10, 20, 100)
 
 
 def test_a_member_gone_with_its_vehicle_armed_stays_unknown() -> None:

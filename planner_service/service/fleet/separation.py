@@ -54,8 +54,14 @@ def origin_of(member: FleetMember) -> GeoOrigin:
 
 
 def in_frame(frame: GeoOrigin, member: FleetMember, position: FleetPosition) -> tuple[float, float, float]:
-    """``member``'s ``position`` (of its own origin) in metres east, north and up of ``frame``."""
-    return global_to_local(frame, *local_to_global(origin_of(member), position.x_m, position.y_m, position.z_m))
+    """``member``'s ``position`` (of its own origin) in metres east, north and up of ``frame``:
+    as it is when the origins are one (the fleet's usual case: one area; ``global_to_local``
+    is the exact inverse of ``local_to_global``, and the two cost 4 geodetic conversions, the
+    largest share of a member's CPU at 20 UAVs)."""
+    origin = origin_of(member)
+    if origin == frame:
+        return position.x_m, position.y_m, position.z_m
+    return global_to_local(frame, *local_to_global(origin, position.x_m, position.y_m, position.z_m))
 
 
 def whereabouts(frame: GeoOrigin, vehicles: Iterable[str], members: Mapping[str, FleetMember | None],
