@@ -34,6 +34,8 @@ IFF_TUN = 0x0001
 IFF_NO_PI = 0x1000
 CLONE_NEWNET = 0x40000000
 MAX_PACKET = 65535
+LATE_MS = 20.0
+"""A packet delivered later than its delay by more than this is counted ``late``."""
 MAX_IN_FLIGHT = 4096
 """Packets waiting for their delay on one direction of a link; beyond this they are dropped
 (a radio's queue is finite too; counted as ``overflow``)."""
@@ -68,9 +70,13 @@ class Direction:
     dropped: int = 0
     cut: int = 0
     overflow: int = 0
+    late: int = 0
+    """Packets delivered more than ``LATE_MS`` after their delay was up (this process was
+    not given the CPU in time: the radio was slower than the one asked for)."""
+    late_ms_max: float = 0.0
     in_flight: int = field(default=0, repr=False)
 
-    def figures(self) -> dict[str, int]:
+    def figures(self) -> dict[str, float]:
         return {k: v for k, v in vars(self).items() if k != "in_flight"}
 
 
@@ -167,11 +173,15 @@ class WireLink:
         spread = self.impairment.spread_s
         delay_s = max(0.0, self.impairment.delay_ms / 1000.0 + self.rng.uniform(-spread, spread))
         d.in_flight += 1
-        loop.call_later(delay_s, self._deliver, dst, packet, d)
+        loop.call_later(delay_s, self._deliver, loop, dst, packet, d, loop.time() + delay_s)
 
     @staticmethod
-    def _deliver(dst: int, packet: bytes, d: Direction) -> None:
+    def _deliver(loop: asyncio.AbstractEventLoop, dst: int, packet: bytes, d: Direction, due: float) -> None:
         d.in_flight -= 1
+        late_ms = (loop.time() - due) * 1000.0
+        if late_ms > LATE_MS:
+            d.late += 1
+            d.late_ms_max = max(d.late_ms_max, round(late_ms, 1))
         try:
             os.write(dst, packet)
         except OSError:  # the device went down: the packet is lost, as on a radio

@@ -99,6 +99,17 @@ class CutOnce:
             self.restored_wall = time.time()
 
 
+def radio_lateness(links: dict[str, Any]) -> dict[str, float]:
+    """Of the packets the wire delivered on every link, the share it delivered late (more than
+    ``sim_bridge.wire.LATE_MS`` after their delay: it was not given the CPU in time) and the
+    latest: how far the radios were what was asked of them."""
+    ways = [d for link in links.values() for k, d in link.items() if k in ("a>b", "b>a")]
+    carried = sum(d["packets"] - d["dropped"] - d["cut"] - d["overflow"] for d in ways)
+    late = sum(d.get("late", 0) for d in ways)
+    return {"radio_late_share": late / carried if carried else 0.0,
+            "radio_late_ms_max": max((d.get("late_ms_max", 0.0) for d in ways), default=0.0)}
+
+
 def read_stats(sites: Sites) -> dict[str, Any]:
     """The wire's last figures (``{"at": monotonic s, "links": ...}``), or {} before its first."""
     try:
@@ -159,6 +170,7 @@ def row(folder: Path, vehicles: list[str], summary: dict[str, Any], cut: CutOnce
         "fleet_keys_by_kind_bytes_per_s": summary["fleet_keys_by_kind_bytes_per_s"],
         "radio_up_bytes_per_s": statistics.median(up) if up else None,
         "radio_down_bytes_per_s": statistics.median(down) if down else None,
+        **radio_lateness(last.get("links", {})),
         "heard_p50_ms": statistics.median(m["p50_ms"] for m in members) if members else None,
         "heard_p99_ms": max(m["p99_ms"] for m in members) if members else None,
         "users_served_by_two": len(summary["fleet"]["users_served_by_two_uavs"]),
@@ -248,7 +260,9 @@ def format_fleet_scale(results: dict[str, Any]) -> str:
                      f"{r['service_cpu_percent']:>8.1f} {r['service_rss_mb']:>6.0f} {r['router_cpu_percent']:>8.1f}")
     for r in results["rows"]:
         kinds = ", ".join(f"{k} {v:.0f}" for k, v in r["fleet_keys_by_kind_bytes_per_s"].items())
-        lines.append(f"N={r['uavs']}: the fleet's keys per member, B/s: {kinds}; served at once: "
+        lines.append(f"N={r['uavs']}: radio packets delivered late {100 * r.get('radio_late_share', 0.0):.2f} % "
+                     f"(latest {r.get('radio_late_ms_max', 0.0):.0f} ms); the fleet's keys per member, B/s: {kinds}; "
+                     f"served at once: "
                      f"{', '.join(r['users_served_at_once']) or 'none'}; holds of two: "
                      f"{', '.join(r['stacked_holds']) or 'none'}")
     lines.append("traffic per UAV, bytes/s = a + b N (fitted on the rows above; worst fit error; projected):")

@@ -2,8 +2,9 @@
 netem). Each ``--link`` joins two TUN devices made beforehand, carrying every IP packet after
 its delay +- jitter and dropping it with its loss; lines on stdin cut and restore a link
 while it runs (``cut NAME``, ``restore NAME``). Needs root (entering the namespaces). Runs
-until SIGINT or SIGTERM; its figures (packets, bytes, drops per link and direction) go to
-``--stats-file`` every second and at the end (``at``: the machine's monotonic clock)."""
+until SIGINT or SIGTERM; its figures (packets, bytes, drops, packets delivered late per link
+and direction) go to ``--stats-file`` every second and at the end (``at``: the machine's
+monotonic clock)."""
 
 from __future__ import annotations
 
@@ -28,6 +29,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
                              "probability LOSS (repeatable)")
     parser.add_argument("--seed", type=int, default=0, help="seed of every random draw (default 0)")
     parser.add_argument("--stats-file", default=None, metavar="PATH", help="JSON figures per link, every second")
+    parser.add_argument("--nice", type=int, default=0, metavar="N",
+                        help="run at this niceness (negative: ahead of the processes it carries for, as a "
+                             "radio does not wait for their CPU; needs root; default 0)")
     parser.add_argument("--log-level", default="INFO", choices=("DEBUG", "INFO", "WARNING", "ERROR"))
 
 
@@ -35,6 +39,12 @@ def run(args: argparse.Namespace) -> int:
     logging.basicConfig(stream=sys.stderr, level=args.log_level, format="%(asctime)s wire %(levelname)s: %(message)s")
     from sim_bridge.wire import WireError, WireLink, attach_tun, parse_link
 
+    if args.nice:
+        try:
+            os.setpriority(os.PRIO_PROCESS, 0, args.nice)
+        except OSError as err:
+            print(f"wire: --nice {args.nice}: {err}", file=sys.stderr)
+            return 2
     rng = random.Random(args.seed)
     try:
         specs = [parse_link(text) for text in args.link]

@@ -92,6 +92,35 @@ def test_a_packet_waits_the_delay_before_it_is_written() -> None:
     assert 0.075 <= waited < 1.0, waited
 
 
+def test_a_packet_the_wire_could_not_deliver_in_time_is_counted_late() -> None:
+    """The radios share the machine's CPU with what they carry: a packet written after its
+    delay was up (the loop busy, here for 150 ms) is counted, so the bench can say how far
+    the radios were the ones asked for."""
+    a_in, a_out = packet_pipe()
+    b_in, b_out = packet_pipe()
+    link = WireLink(LinkSpec("l", End(None, "a"), End(None, "b"), Impairment(delay_ms=20.0, jitter_ms=0.0)), a_in,
+                    b_out, random.Random(1))
+    d = link.directions["a>b"]
+
+    async def run() -> None:
+        loop = asyncio.get_running_loop()
+        loop.add_reader(a_in, link._carry, loop, a_in, b_out, d)
+        os.write(a_out, b"x" * 20)
+        await asyncio.sleep(0.1)  # delivered in time
+        assert d.packets == 1 and d.late == 0, d
+        os.write(a_out, b"x" * 20)
+        await asyncio.sleep(0.005)  # taken in
+        time.sleep(0.15)  # the loop is not given the CPU
+        await asyncio.sleep(0.05)
+
+    try:
+        asyncio.run(run())
+    finally:
+        close(a_in, a_out, b_in, b_out)
+    assert d.packets == 2 and d.late == 1 and 100.0 <= d.late_ms_max < 1000.0, d
+    assert "late" in d.figures() and "in_flight" not in d.figures()
+
+
 def test_a_cut_link_carries_nothing() -> None:
     received, link = carry(Impairment(delay_ms=5.0, jitter_ms=0.0), 30, cut=True)
     assert received == 0 and link.directions["a>b"].cut == 30
