@@ -394,8 +394,12 @@ class FleetIntentions(_Message, tag="fleet_intentions", kw_only=True):
     holding: Annotated[int, msgspec.Meta(ge=0, le=100_000)] | None = None
     """The hovering point of its hold (arrived, not yet left), one of ``points``. Two members
     that arrived at one point before either heard the other's claim (the claim travels a
-    radio) both hold it: the one whose vehicle id sorts first keeps it, the other ends its
-    hold (``FleetLedger.yield_points``)."""
+    radio) both hold it: the one that claimed it first keeps it (``points_at_s``; at one
+    time, the vehicle id that sorts first), the other ends its hold (``FleetLedger.yield_points``)."""
+    points_at_s: Annotated[list[float], msgspec.Meta(max_length=8)] = []
+    """When it claimed each of ``points``, in their order (wall clock, its own): of members
+    that claimed one point before hearing each other, the first to claim keeps it. A point
+    without one counts as claimed at ``time_s``."""
     answering: bool = False
     """It flies its mission's way home with its sortie on and would turn back for a new
     request: of such members the nearest to a new request answers it first, the others a

@@ -158,6 +158,9 @@ class Service:
         """When this UAV's last plan means to serve each of its users (wall clock)."""
         self._bound_at: tuple[str, float] | None = None
         """The user a hold of this UAV is bound to, and since when (wall clock)."""
+        self._points_at: dict[int, float] = {}
+        """The hovering points this UAV claims, each since when (wall clock): of members that
+        claimed one point before hearing each other, the first keeps it."""
         self._route: tuple[int, ...] = ()
         """The hovering points of the mission on board still to fly (its airspace if this
         service is lost while the vehicle flies)."""
@@ -644,8 +647,8 @@ class Service:
 
     def _tell_claims(self, claims: Claims) -> None:
         """Put what the sortie logic claims (``fx.Intend``) in this member's signed intentions,
-        with the plan's dues and route; the moment a hold was bound is this computer's clock
-        when it was first told (docs/OPERATIONS.md, "A fleet")."""
+        with the plan's dues and route; the moment a hold was bound, and a point claimed, is
+        this computer's clock when it was first told (docs/OPERATIONS.md, "A fleet")."""
         if self.fleet is None or not self.fleet.joined:
             return
         if claims.bound is None:
@@ -653,8 +656,10 @@ class Service:
         elif self._bound_at is None or self._bound_at[0] != claims.bound:
             self._bound_at = (claims.bound, self.wall())
         users = {claims.next_user} - {None, claims.bound}
-        self.fleet.ledger.intend(dict(self._plan_dues), self.wall(), users, claims.points, self._route,
-                                 self._bound_at, claims.holding, claims.answering)
+        now = self.wall()
+        self._points_at = {k: self._points_at.get(k, now) for k in claims.points}
+        self.fleet.ledger.intend(dict(self._plan_dues), now, users, claims.points, self._route,
+                                 self._bound_at, claims.holding, claims.answering, self._points_at)
         if log.isEnabledFor(logging.DEBUG):  # the others' owners are worked out for the line alone
             log.debug("fleet: claims %s; others own %s", claims, sorted(self.fleet.ledger.taken()))
 

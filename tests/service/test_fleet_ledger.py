@@ -110,6 +110,33 @@ def test_of_two_members_holding_one_point_the_one_whose_id_sorts_first_keeps_it(
     assert uav5.yield_points() == {}
 
 
+def test_of_members_that_claimed_one_point_the_first_to_claim_it_keeps_it_whatever_its_id() -> None:
+    """Finding (20 UAVs over radios): uav6 claimed point 10, uav18 and uav13 claimed it 1.3
+    and 1.9 s later (neither had heard uav6): the first id, uav13, kept it, and uav6 and uav18,
+    arrived first, held it with it until they heard uav13's hold. Now the first to claim keeps
+    it, by the claimants' own times carried in their claims; at the same time, the first id.
+    Here uav2 claims first and uav1, whose id sorts first, 1.9 s later."""
+    alive = {"uav2", "uav1", "uav3"}
+    early, late = ledger_of("uav2", alive), ledger_of("uav1", alive)
+    early.intend({}, T + 2, points=[10], points_at={10: T})
+    late.intend({}, T + 2, points=[10], points_at={10: T + 1.9})
+    said(early, FleetIntentions(vehicle="uav1", time_s=T + 2, points=[10], points_at_s=[T + 1.9]))
+    said(late, FleetIntentions(vehicle="uav2", time_s=T + 2, points=[10], points_at_s=[T]))
+    said(late, FleetIntentions(vehicle="uav3", time_s=T + 2, points=[10, 4], points_at_s=[T + 1.3, T + 1.3]))
+    assert 10 not in early.blocked_points() and 10 in late.blocked_points()
+    # both arrived before hearing the other: the later claimant ends its hold
+    early.intend({}, T + 3, points=[10], holding=10, points_at={10: T})
+    late.intend({}, T + 3, points=[10], holding=10, points_at={10: T + 1.9})
+    said(early, FleetIntentions(vehicle="uav1", time_s=T + 3, points=[10], holding=10, points_at_s=[T + 1.9]))
+    said(late, FleetIntentions(vehicle="uav2", time_s=T + 3, points=[10], holding=10, points_at_s=[T]))
+    assert early.yield_points() == {} and late.yield_points() == {10: "uav2"}
+    # a point's claim time is bounded as a flight's, and one per point at most
+    said(late, FleetIntentions(vehicle="uav3", time_s=T + 4, points=[10], points_at_s=[T - 1e6]))
+    assert late.refused[-1].endswith("from its signed time (not a flight's)"), late.refused[-1]
+    said(late, FleetIntentions(vehicle="uav3", time_s=T + 4, points=[10], points_at_s=[T, T]))
+    assert late.refused[-1].endswith("2 claim times for 1 points"), late.refused[-1]
+
+
 def test_the_members_that_would_answer_a_new_request_are_those_on_their_way_home_that_say_so() -> None:
     """Of the members on their way home the nearest answers first (``sortie.fleet.answer_rank``):
     each says so in its signed intentions; one that claims a point is not answering whatever

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from dataclasses import replace
 
-from planner_service.model.fleet.claims import BOUND, PLANNED, lost_points, others_points, owned_by_others, owner
+from planner_service.model.fleet.claims import BOUND, PLANNED, keeper, lost_points, others_points, owned_by_others, owner
 from planner_service.service.sortie import effects as fx
 from planner_service.service.sortie import inputs as ins
 from planner_service.service.sortie import SortieLogic
@@ -172,6 +172,12 @@ def test_of_two_members_that_chose_one_point_at_once_the_first_id_keeps_it() -> 
     assert others_points("uav1", {**points, "uav0": [3]}, alive) == {8}  # uav0 is not alive
     # ids are compared as the fleet spells them: "uav10" sorts before "uav2"
     assert others_points("uav10", {"uav10": [5], "uav2": [5]}, {"uav10", "uav2"}) == frozenset()
+    # claimed at different moments (each before hearing the other): the first to claim keeps it
+    since = {"uav1": {3: 100.4}, "uav2": {3: 100.0, 8: 100.0}}
+    assert others_points("uav1", points, alive, since) == {3, 8}
+    assert others_points("uav2", points, alive, since) == frozenset()
+    assert keeper(3, points, alive, since) == "uav2" and keeper(3, points, alive) == "uav1"
+    assert keeper(3, points, {"uav1"}, since) == "uav1" and keeper(9, points, alive, since) is None
 
 
 def test_a_user_another_member_owns_is_neither_planned_bound_nor_recorded_here() -> None:

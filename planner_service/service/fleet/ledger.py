@@ -45,7 +45,7 @@ from protocol import FleetKeys, ProtocolError
 from protocol.fleet_signing import FUTURE_S, FleetSigner, FleetVerifier, Unverified
 from protocol.messages import FleetIntentions, FleetServed, Intention, decode, encode
 
-from ...model.fleet.claims import BOUND, PLANNED, Claim, others_points, owned_by_others
+from ...model.fleet.claims import BOUND, PLANNED, Claim, keeper, others_points, owned_by_others
 
 log = logging.getLogger(__name__)
 
@@ -89,7 +89,18 @@ def claims_refused(message: FleetIntentions, signed_at_s: float) -> str | None:
         return "bound without bound_at_s, or bound_at_s without bound"
     if message.bound_at_s is not None and not signed_at_s - MAX_HOLD_S <= message.bound_at_s <= signed_at_s + FUTURE_S:
         return f"bound {message.bound_at_s - signed_at_s:+.0f} s from its signed time (not a hold's)"
+    if len(message.points_at_s) > len(message.points):
+        return f"{len(message.points_at_s)} claim times for {len(message.points)} points"
+    for at in message.points_at_s:
+        if not signed_at_s - DUE_AHEAD_S <= at <= signed_at_s + FUTURE_S:
+            return f"claims a point {at - signed_at_s:+.0f} s from its signed time (not a flight's)"
     return None
+
+
+def points_of(message: FleetIntentions) -> dict[int, float]:
+    """The points a message claims, each with when it was claimed (``time_s`` if not said)."""
+    at = list(message.points_at_s) + [message.time_s] * (len(message.points) - len(message.points_at_s))
+    return {int(k): t for k, t in zip(message.points, at)}
 
 
 def claims_of(message: FleetIntentions) -> dict[str, Claim]:
@@ -135,7 +146,8 @@ class FleetLedger:
         self._claimed: dict[str, dict[str, float]] = {}
         """vehicle -> user -> when (monotonic) it last claimed the user: its services count
         for these only."""
-        self._points: dict[str, set[int]] = {}
+        self._points: dict[str, dict[int, float]] = {}
+        """vehicle -> the points it claims -> when it claimed each (its clock)."""
         self._routes: dict[str, set[int]] = {}
         self._holding: dict[str, int | None] = {}
         """The point each member holds now (its last intentions'), if any."""
@@ -184,25 +196,26 @@ class FleetLedger:
     # --- this member's side ------------------------------------------------------------------
     def intend(self, due: Mapping[str, float], now_s: float, claims: Iterable[str] = (),
                points: Iterable[int] = (), route: Iterable[int] = (), bound: tuple[str, float] | None = None,
-               holding: int | None = None, answering: bool = False) -> None:
+               holding: int | None = None, answering: bool = False, points_at: Mapping[int, float] | None = None) -> None:
         """Say which users this member's plan means to serve and when (wall clock), which of
         them it claims (``claims``: the next point's user), the user its hold serves and when
         it was bound (``bound``), the hovering points it claims (``points``: its next point,
-        its hold's, ``holding``), and whether it would answer a new request (``answering``:
-        on its way home)."""
+        its hold's, ``holding``; ``points_at``: when it claimed each, ``now_s`` if not said),
+        and whether it would answer a new request (``answering``: on its way home)."""
         users = sorted(due.items(), key=lambda kv: kv[1])[:MAX_INTENTIONS]
         claimed = sorted(set(claims) & set(due))[:MAX_CLAIMS - (bound is not None)]
         held = sorted(set(int(k) for k in points))[:MAX_CLAIMS]
+        held_at = [(points_at or {}).get(k, now_s) for k in held]
         message = FleetIntentions(
             vehicle=self.vehicle, time_s=now_s, users=[Intention(u, d) for u, d in users], claims=claimed,
             points=held, route=first_route(route), bound=None if bound is None else bound[0],
             bound_at_s=None if bound is None else bound[1], holding=holding if holding in held else None,
-            answering=answering and not held)
+            answering=answering and not held, points_at_s=held_at)
         with self._lock:
             self._holding[self.vehicle] = message.holding
             self._intentions[self.vehicle] = dict(users)
             self._claims[self.vehicle] = claims_of(message)
-            self._points[self.vehicle] = set(held)
+            self._points[self.vehicle] = points_of(message)
         if self._intent_pub is not None and self._signer is not None:
             key = self.keys.intentions(self.vehicle)
             self._intent_pub.put(self._signer.seal(key, encode(message), self._wall()))
@@ -228,20 +241,21 @@ class FleetLedger:
         flies its mission home: it keeps that airspace until its service is back)."""
         lost = set(self._lost()) - {self.vehicle}
         with self._lock:
-            claimed = others_points(self.vehicle, self._points, self._alive())
+            claimed = others_points(self.vehicle, self._points, self._alive(), self._points)
             return claimed | {k for v in lost for k in self._routes.get(v, ())}
 
     def yield_points(self) -> dict[int, str]:
-        """The point this member holds that another live member holds too and keeps (its
-        vehicle id sorts first: every member judges the same), with that member: two that
-        arrived before either heard the other; this one ends its hold."""
-        alive = set(self._alive())
+        """The point this member holds that another live member holds too and keeps (it
+        claimed it first, ``claims.keeper``: every member judges the same), with that member:
+        two that arrived before either heard the other; this one ends its hold."""
+        alive = set(self._alive()) | {self.vehicle}
         with self._lock:
             own = self._holding.get(self.vehicle)
             if own is None:
                 return {}
-            first = sorted(v for v, k in self._holding.items() if k == own and v in alive and v != self.vehicle)
-        return {own: first[0]} if first and first[0] < self.vehicle else {}
+            holders = {v: self._points.get(v, {}) for v, k in self._holding.items() if k == own and v in alive}
+        first = keeper(own, holders, holders, holders)
+        return {own: first} if first is not None and first != self.vehicle else {}
 
     def answering(self) -> set[str]:
         """The live members other than this one that would answer a new request now (on
@@ -309,7 +323,7 @@ class FleetLedger:
                 return
             self._intentions[message.vehicle] = {i.user_id: i.due_s for i in message.users}
             self._claims[message.vehicle] = claims
-            self._points[message.vehicle] = set(message.points)
+            self._points[message.vehicle] = points_of(message)
             self._holding[message.vehicle] = message.holding if message.holding in message.points else None
             if message.answering and not message.points:
                 self._answering.add(message.vehicle)
