@@ -395,7 +395,8 @@ class FleetIntentions(_Message, tag="fleet_intentions", kw_only=True):
     """The hovering point of its hold (arrived, not yet left), one of ``points``. Two members
     that arrived at one point before either heard the other's claim (the claim travels a
     radio) both hold it: the one that claimed it first keeps it (``points_at_s``; at one
-    time, the vehicle id that sorts first), the other ends its hold (``FleetLedger.yield_points``)."""
+    time, the vehicle id that sorts first), the other ends its hold, as does one holding a
+    point another flies to and claimed first (``FleetLedger.yield_points``)."""
     points_at_s: Annotated[list[float], msgspec.Meta(max_length=8)] = []
     """When it claimed each of ``points``, in their order (wall clock, its own): of members
     that claimed one point before hearing each other, the first to claim keeps it. A point

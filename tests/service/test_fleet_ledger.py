@@ -90,10 +90,11 @@ def test_points_claimed_by_live_members_and_a_lost_members_route_are_planned_wit
     assert ledger.blocked_points() == frozenset()
 
 
-def test_of_two_members_holding_one_point_the_one_whose_id_sorts_first_keeps_it() -> None:
+def test_of_two_members_holding_one_point_claimed_at_once_the_one_whose_id_sorts_first_keeps_it() -> None:
     """Each judges the same from the other's intentions: uav5 yields point 6 to uav3, uav3 to
-    nobody; a point only flown to (not held) by another, or held by a member gone, asks
-    nothing; a holding that is not one of the points claimed is not believed."""
+    nobody; a point flown to by another that claimed it later, or held by a member gone, asks
+    nothing, one flown to by a member that claimed it first ends the hold (before it arrives);
+    a holding that is not one of the points claimed is not believed."""
     alive = {"uav3", "uav5", "uav7"}
     uav3, uav5 = ledger_of("uav3", alive), ledger_of("uav5", alive)
     uav3.intend({}, T, points=[6], holding=6)
@@ -103,6 +104,9 @@ def test_of_two_members_holding_one_point_the_one_whose_id_sorts_first_keeps_it(
     assert uav5.yield_points() == {6: "uav3"} and uav3.yield_points() == {}
     said(uav5, FleetIntentions(vehicle="uav3", time_s=T + 1, points=[6], holding=None))  # flying to it
     assert uav5.yield_points() == {}
+    said(uav5, FleetIntentions(vehicle="uav7", time_s=T + 1, points=[6], points_at_s=[T - 1]))  # claimed first
+    assert uav5.yield_points() == {6: "uav7"}
+    said(uav5, FleetIntentions(vehicle="uav7", time_s=T + 2, points=[4]))
     said(uav5, FleetIntentions(vehicle="uav3", time_s=T + 2, points=[2], holding=6))  # 6 not among its points
     assert uav5.yield_points() == {}
     said(uav5, FleetIntentions(vehicle="uav3", time_s=T + 3, points=[6], holding=6))

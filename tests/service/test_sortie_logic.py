@@ -1092,6 +1092,6 @@ def test_of_two_members_holding_one_point_the_one_whose_id_sorts_after_ends_its_
     out = run.feed(ins.FleetHeard(FleetView(yield_to={run.s.claims.holding: "uav3"})))
     out += run.tick(seq=2, boot_s=21.0 + needed / 4)
     (cmd,) = only(out, fx.Command)
-    assert (cmd.kind, cmd.seq) == ("set_current", 3) and "uav3 holds point" in cmd.why
+    assert (cmd.kind, cmd.seq) == ("set_current", 3) and "uav3 claims point" in cmd.why
     (svc,) = only(run.tick(seq=3, xyz=(150.0, 200.0, 100.0), boot_s=22.0 + needed / 4), fx.RecordService)
     assert 0 < svc.tasks < 10

@@ -245,16 +245,17 @@ class FleetLedger:
             return claimed | {k for v in lost for k in self._routes.get(v, ())}
 
     def yield_points(self) -> dict[int, str]:
-        """The point this member holds that another live member holds too and keeps (it
+        """The point this member holds that another live member claims too and keeps (it
         claimed it first, ``claims.keeper``: every member judges the same), with that member:
-        two that arrived before either heard the other; this one ends its hold."""
+        this one arrived before it heard the other's claim, and ends its hold (before the
+        other arrives, if it hears in time)."""
         alive = set(self._alive()) | {self.vehicle}
         with self._lock:
             own = self._holding.get(self.vehicle)
             if own is None:
                 return {}
-            holders = {v: self._points.get(v, {}) for v, k in self._holding.items() if k == own and v in alive}
-        first = keeper(own, holders, holders, holders)
+            claimants = {v: dict(p) for v, p in self._points.items() if own in p and v in alive}
+        first = keeper(own, claimants, claimants, claimants)
         return {own: first} if first is not None and first != self.vehicle else {}
 
     def answering(self) -> set[str]:

@@ -45,8 +45,9 @@ class FleetView:
     """The hovering points this member plans without: those another live member claims, and
     the rest of the route of a member gone with its vehicle armed."""
     yield_to: Mapping[int, str] = field(default_factory=dict)
-    """The point this member holds that another member holds too and keeps (it claimed it
-    first: ``model.fleet.claims.keeper``), with that member: this member ends its hold there."""
+    """The point this member holds that another member claims too (holds or flies to) and
+    keeps (it claimed it first: ``model.fleet.claims.keeper``), with that member: this member
+    ends its hold there."""
 
     answering: Mapping[str, tuple[float, float]] = field(default_factory=dict)
     """The other members that would answer a new request (on their way home), each where it

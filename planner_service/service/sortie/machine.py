@@ -486,13 +486,13 @@ class SortieLogic:
 
     @staticmethod
     def _yield_why(s: Sortie) -> str | None:
-        """Why the hold watched ends now for another member's (it holds the point too and
-        keeps it: it claimed it first, ``claims.keeper``), or None."""
+        """Why the hold watched ends now for another member's (it claims the point too, holds
+        it or flies to it, and keeps it: it claimed it first, ``claims.keeper``), or None."""
         w, k = s.holds.watch, s.claims.holding
         if w is None or w.phase != "holding" or s.holds.early_end == w.seq or k is None:
             return None
         other = s.fleet.yield_to.get(k)
-        return None if other is None else f"{other} holds point {k} too and keeps it (it claimed it first)"
+        return None if other is None else f"{other} claims point {k} too and keeps it (it claimed it first)"
 
     def _abandon(self, s: Sortie, why: str, out: list[fx.Effect]) -> Sortie:
         """The hold watched, if any, ended from outside (``why``) and judged as it stands."""
