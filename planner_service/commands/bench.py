@@ -49,9 +49,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
                              "than one planner's from another's; 3 algorithms take about 16 minutes)")
     parser.add_argument("--algos", default="mcts,greedy,random", help="algorithms with --flight (default mcts,greedy,random)")
     parser.add_argument("--speedup", type=float, default=None,
-                        help="the stubs' speed-up with --flight (default 25) or --scale (default 5: the radios' "
-                             "delays are wall time, so a faster flight meets them as longer; at x10 twenty "
-                             "services flew 0.57-0.88 of the offline plan, at x5 0.93-0.98)")
+                        help="the stubs' speed-up with --flight (default 25) or --scale (default 2.5: the radios' "
+                             "delays are wall time, so a faster flight meets them as longer; twenty services "
+                             "flew 0.57-0.88 of the offline plan at x10, 0.58-0.98 at x5, 0.87-0.94 at x2.5)")
     parser.add_argument("--budget-ms", type=float, default=150.0, help="planner budget with --flight (default 150)")
     parser.add_argument("--fleet", action="store_true",
                         help="instead: every fleet planner's decision time per UAV (median, p95) and message size "
@@ -96,7 +96,7 @@ def seed_range(text: str) -> list[int]:
 
 def run(args: argparse.Namespace) -> int:
     if args.speedup is None:
-        args.speedup = 5.0 if args.scale else 25.0
+        args.speedup = 2.5 if args.scale else 25.0
     if args.web and not args.e2e:
         print("error: --web goes with --e2e (the end-to-end latency without and with the live map open)",
               file=sys.stderr)
