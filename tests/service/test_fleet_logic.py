@@ -178,6 +178,7 @@ def test_of_two_members_that_chose_one_point_at_once_the_first_id_keeps_it() -> 
     assert others_points("uav2", points, alive, since) == frozenset()
     assert keeper(3, points, alive, since) == "uav2" and keeper(3, points, alive) == "uav1"
     assert keeper(3, points, {"uav1"}, since) == "uav1" and keeper(9, points, alive, since) is None
+    assert keeper(3, points, alive, {"uav1": {3: 5.0}}) == "uav1"  # a time not said is no claim to be first
 
 
 def test_a_user_another_member_owns_is_neither_planned_bound_nor_recorded_here() -> None:

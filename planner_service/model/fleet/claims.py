@@ -30,6 +30,7 @@ offline), and nothing here reads a clock.
 
 from __future__ import annotations
 
+import math
 from typing import Hashable, Iterable, Mapping, TypeVar
 
 Member = TypeVar("Member", bound=Hashable)
@@ -76,9 +77,10 @@ def keeper(point: int, points: Mapping[Member, Iterable[int]], alive: Iterable[M
            since: Mapping[Member, Mapping[int, float]] | None = None) -> Member | None:
     """Of the live members claiming ``point``, the one that keeps it: the earliest claim
     (``since``: member -> point -> when it claimed it, by its own clock; none given: all at
-    once), then the id that sorts first."""
+    once; a claim it leaves out, the latest), then the id that sorts first."""
     members = set(alive)
-    ranked = [((since or {}).get(m, {}).get(point, 0.0), m) for m, ks in points.items()
+    unsaid = 0.0 if since is None else math.inf
+    ranked = [((since or {}).get(m, {}).get(point, unsaid), m) for m, ks in points.items()
               if m in members and point in {int(k) for k in ks}]
     return min(ranked)[1] if ranked else None  # type: ignore[type-var]
 
