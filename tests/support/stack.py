@@ -119,14 +119,17 @@ class Stack:
         logs = "\n".join(f"--- {c.name}\n{c.log()[-3000:]}" for c in self.children)
         raise AssertionError(f"no {what} within {timeout_s} s\n{logs}")
 
-    def wait_log(self, child: Child, text: str, timeout_s: float) -> None:
-        """Wait for ``text`` in a child's log (its events can be missed by a subscriber in
-        the first moments after the child started)."""
+    def wait_log(self, child: Child, text: str | tuple[str, ...], timeout_s: float) -> str:
+        """Wait for ``text`` (or the first of several) in a child's log (its events can be
+        missed by a subscriber in the first moments after the child started); the one found."""
+        texts = (text,) if isinstance(text, str) else text
         deadline = time.monotonic() + timeout_s
-        while text not in child.log():
+        while not (found := [t for t in texts if t in child.log()]):
             if time.monotonic() > deadline:
-                raise AssertionError(f"no {text!r} in {child.name}'s log within {timeout_s} s\n{child.log()[-3000:]}")
+                raise AssertionError(f"none of {texts!r} in {child.name}'s log within {timeout_s} s\n"
+                                     f"{child.log()[-3000:]}")
             time.sleep(0.05)
+        return found[0]
 
     def wait_disarmed(self, timeout_s: float) -> None:
         """Wait until the service's status shows the vehicle disarmed (the autopilot's own
