@@ -15,6 +15,7 @@ from protocol.autopilot import ARDUPILOT, PX4
 from protocol.text import printable
 from planner_service.service.link import (ArmedChanged, Connected, OnGround, LinkEvent, ModeChanged, PositionChanged, Restarted,
                                           StatusText, TelemetryMissing)
+from planner_service.service.link.asked import COMMANDED_WINDOW_S
 from planner_service.service.link.state import DERIVED, SILENCE_S, VehicleState
 from planner_service.service.link.streams import (MISSING_AFTER_S, REREQUEST_S, UNAVAILABLE_AFTER_S, Streams,
                                                   stream_plan)
@@ -331,8 +332,9 @@ def test_an_autopilot_heard_after_a_silence_is_asked_for_its_telemetry_at_once()
 def test_commanded_and_foreign_mode_changes_are_told_apart() -> None:
     clock = Clock()
     state, events = vehicle(clock)
-    state.expect_mode("RTL")
+    state.mode_asked.ask("RTL")
     state.on_heartbeat(1, 1, heartbeat(mode=6, armed=True))
+    state.mode_asked.answered(clock.now, refused=False)
     clock.now += 10.0
     state.on_heartbeat(1, 1, heartbeat(mode=9, armed=True))  # LAND by a pilot
     assert [e for e in events if isinstance(e, ModeChanged)] == [ModeChanged("RTL", True), ModeChanged("LAND", False)]
@@ -343,17 +345,54 @@ def test_commanded_and_foreign_armings_are_told_apart() -> None:
     state, events = vehicle(clock)
     state.on_heartbeat(1, 1, heartbeat(mode=4, armed=False))
     del events[:]
-    state.expect_armed(True)
+    asked = state.arming_asked
+    asked.ask(True)
     clock.now += 1.0
+    asked.answered(clock.now, refused=False)
     state.on_heartbeat(1, 1, heartbeat(mode=4, armed=True))  # the service's arming
     clock.now += 1.0
     state.on_heartbeat(1, 1, heartbeat(mode=4, armed=True))  # no change, no event
     state.on_heartbeat(1, 1, heartbeat(mode=4, armed=False))  # a pilot's disarming
-    state.expect_armed(True)
-    clock.now += 6.0  # later than the window: not the arming asked for
+    asked.ask(True)
+    asked.answered(clock.now, refused=False)
+    clock.now += COMMANDED_WINDOW_S + 1.0  # later than the window after the answer: not the arming asked for
     state.on_heartbeat(1, 1, heartbeat(mode=4, armed=True))
     assert [e for e in events if isinstance(e, ArmedChanged)] == [
         ArmedChanged(True, True), ArmedChanged(False, False), ArmedChanged(True, False)]
+
+
+def test_an_arming_shown_while_its_command_is_in_flight_is_the_services() -> None:
+    # The clean clone of 2026-12-07: on a loaded machine MAVSDK sent the service's arming
+    # (through its executor) more than 5 s after it was asked for; the heartbeat showing it
+    # came later than a window counted from the asking, and the service took its own arming
+    # for somebody else's (the authority revoked at its own start).
+    clock = Clock()
+    state, events = vehicle(clock)
+    state.on_heartbeat(1, 1, heartbeat(mode=4, armed=False))
+    del events[:]
+    state.arming_asked.ask(True)
+    clock.now += COMMANDED_WINDOW_S + 3.0  # the command still in flight
+    state.on_heartbeat(1, 1, heartbeat(mode=4, armed=True))
+    clock.now += 1.0
+    state.arming_asked.answered(clock.now, refused=False)
+    assert [e for e in events if isinstance(e, ArmedChanged)] == [ArmedChanged(True, True)]
+
+
+def test_a_change_after_a_refusal_is_somebody_elses_and_after_no_answer_may_be_ours() -> None:
+    clock = Clock()
+    state, events = vehicle(clock)
+    state.on_heartbeat(1, 1, heartbeat(mode=4, armed=False))
+    del events[:]
+    state.arming_asked.ask(True)
+    state.arming_asked.answered(clock.now, refused=True)  # the autopilot refused to arm
+    clock.now += 0.5
+    state.on_heartbeat(1, 1, heartbeat(mode=4, armed=True))  # a pilot armed it
+    state.mode_asked.ask("RTL")
+    state.mode_asked.answered(clock.now, refused=False)  # no answer: it may have been done
+    clock.now += 1.0
+    state.on_heartbeat(1, 1, heartbeat(mode=6, armed=True))
+    assert [e for e in events if isinstance(e, (ArmedChanged, ModeChanged))] == [
+        ArmedChanged(True, False), ModeChanged("RTL", True)]
 
 
 def test_landed_state_is_derived_and_said_so_where_the_autopilot_gives_none() -> None:

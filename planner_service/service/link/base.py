@@ -17,7 +17,7 @@ import asyncio
 import logging
 import time
 from dataclasses import dataclass, field
-from typing import Callable, Sequence
+from typing import Callable, Sequence, TypeVar
 
 from pymavlink.dialects.v20 import ardupilotmega as M
 
@@ -26,6 +26,7 @@ from protocol.autopilot import autopilot_for
 from protocol.mission import Flavour
 
 from ..errors import LinkError
+from .asked import Asked
 from .events import LinkEvent
 from .modes import HOLDING_MODES, MISSION_MODES, RETURNING_MODES, mode_name, mode_number
 from .state import VehicleState
@@ -35,6 +36,7 @@ __all__ = ["ClockRate", "HOLDING_MODES", "LinkSettings", "MISSION_MODES", "RETUR
            "VehicleLink", "mode_name"]
 
 log = logging.getLogger(__name__)
+T = TypeVar("T")
 CURRENT_WAIT_S = 2.0
 """Wall seconds to wait for a MISSION_CURRENT after an upload or a set_current (the link
 asks for it at 2 Hz of vehicle time) before asking again."""
@@ -206,16 +208,29 @@ class VehicleLink(abc.ABC):
     def _check_link(self, operation: str) -> None:
         """``LinkError`` naming ``operation`` unless the autopilot is connected."""
 
+    async def _asked(self, asked: Asked[T], value: T, command: int, *params: float, what: str) -> None:
+        """A command whose effect the heartbeat shows (a mode, an arming): a change to
+        ``value`` shown while it is in flight, or soon after its answer, was commanded
+        (``ModeChanged``, ``ArmedChanged``). A refusal ends that at once; no answer does
+        not (the autopilot may have done it)."""
+        asked.ask(value)
+        refused = False
+        try:
+            await self.command(command, *params, what=what)
+        except LinkError as err:
+            refused = not err.result.startswith("NO_ANSWER")
+            raise
+        finally:
+            asked.answered(self.state.clock(), refused=refused)
+
     async def _set_mode(self, name: str) -> None:
         main, sub = mode_number(self.profile, name)
-        self.state.expect_mode(name)
-        await self.command(M.MAV_CMD_DO_SET_MODE, M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, main, sub,
-                           what=f"set_mode({name})")
+        await self._asked(self.state.mode_asked, name, M.MAV_CMD_DO_SET_MODE, M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
+                          main, sub, what=f"set_mode({name})")
 
     async def _arm(self, armed: bool) -> None:
-        """Arm or disarm: when the heartbeat shows it, it was commanded (``ArmedChanged``)."""
-        self.state.expect_armed(armed)
-        await self.command(M.MAV_CMD_COMPONENT_ARM_DISARM, 1 if armed else 0, what="arm()" if armed else "disarm()")
+        await self._asked(self.state.arming_asked, armed, M.MAV_CMD_COMPONENT_ARM_DISARM, 1 if armed else 0,
+                          what="arm()" if armed else "disarm()")
 
     async def resume(self, proceed: Proceed = _always) -> None:
         """Fly the mission held from its current item again, already armed and airborne
@@ -238,8 +253,8 @@ class VehicleLink(abc.ABC):
 
     async def return_to_launch(self) -> None:
         """Command return to launch now."""
-        self.state.expect_mode(self.profile.return_mode)
-        await self.command(M.MAV_CMD_NAV_RETURN_TO_LAUNCH, what="return_to_launch()")
+        await self._asked(self.state.mode_asked, self.profile.return_mode, M.MAV_CMD_NAV_RETURN_TO_LAUNCH,
+                          what="return_to_launch()")
 
     async def hold(self) -> None:
         """Hold position where the vehicle is (LOITER, PX4's AUTO.LOITER): the operator's hold."""

@@ -28,6 +28,7 @@ from .events import (MAX_TEXT, ArmedChanged, Connected, OnGround, LinkEvent, Los
                      Restarted, Restored, StatusText, TelemetryMissing)
 from protocol.autopilot import Autopilot, autopilot_for, autopilot_name
 
+from .asked import Asked
 from .modes import mode_name
 from .progress import CurrentWatch
 from .statustext import StatusTexts
@@ -41,9 +42,6 @@ AUTOPILOT_COMPONENT = M.MAV_COMP_ID_AUTOPILOT1
 AIRBORNE_STATES = frozenset({M.MAV_LANDED_STATE_IN_AIR, M.MAV_LANDED_STATE_TAKEOFF, M.MAV_LANDED_STATE_LANDING})
 NOT_AUTOPILOTS = frozenset({M.MAV_TYPE_GCS, M.MAV_TYPE_ONBOARD_CONTROLLER, M.MAV_TYPE_GIMBAL, M.MAV_TYPE_CAMERA,
                             M.MAV_TYPE_ADSB, M.MAV_TYPE_ANTENNA_TRACKER})
-COMMANDED_WINDOW_S = 5.0
-"""A mode (an arming, a disarming) reported within this many wall seconds of our asking for
-it was commanded by us."""
 SILENCE_S = 1.3
 """Seconds without any message from the autopilot after which the next one is taken as
 possibly from a new boot, and its telemetry is asked for again (an autopilot sends a
@@ -83,8 +81,9 @@ class VehicleState:
         self._clock_rate = ClockRate()
         self._pos = PositionInputs(estimator_name=self.estimator,
                                    estimator_unaided_flags=self.profile.estimator_unaided_flags)
-        self._expected_mode: tuple[str, float] | None = None
-        self._expected_armed: tuple[bool, float] | None = None
+        self.mode_asked: Asked[str] = Asked()
+        self.arming_asked: Asked[bool] = Asked()
+        """What the link asked for: a heartbeat showing it was commanded (``asked``)."""
         self._last_heard = 0.0
         self._lost = False
         self._missing_said: tuple[str, ...] = ()
@@ -208,26 +207,16 @@ class VehicleState:
         else:
             self.heard()
         if old_mode and mode != old_mode:
-            expected = self._expected_mode
-            commanded = expected is not None and expected[0] == mode and self.clock() <= expected[1]
+            commanded = self.mode_asked.shows(mode, self.clock())
             log.info("vehicle: mode %s (was %s; %s)", mode, old_mode, _by(commanded))
             self.emit(ModeChanged(mode, commanded))
         if not first and armed != was_armed:
-            expected = self._expected_armed
-            commanded = expected is not None and expected[0] == armed and self.clock() <= expected[1]
+            commanded = self.arming_asked.shows(armed, self.clock())
             log.info("vehicle: %s (%s)", "armed" if armed else "disarmed", _by(commanded))
             self.disarms += not armed
             self.emit(ArmedChanged(armed, commanded))
         self._derive_landed()
         return True
-
-    def expect_mode(self, mode: str) -> None:
-        """The link asked for ``mode``: when the heartbeat shows it, it was commanded."""
-        self._expected_mode = (mode, self.clock() + COMMANDED_WINDOW_S)
-
-    def expect_armed(self, armed: bool) -> None:
-        """The link asked to arm (disarm): when the heartbeat shows it, it was commanded."""
-        self._expected_armed = (armed, self.clock() + COMMANDED_WINDOW_S)
 
     def on_message(self, name: str, msg_id: int, system: int, component: int, msg: Any) -> bool:
         """A telemetry message (not HEARTBEAT, not mission protocol); False when dropped."""
