@@ -16,7 +16,7 @@ from typing import Any, Callable
 
 import zenoh
 
-from protocol import Event, FleetKeys, GeoOrigin, Keys, Status, decode, local_to_global
+from protocol import Event, FleetKeys, GeoOrigin, Keys, Status, decode, encode, local_to_global
 from protocol.fleet_signing import make_vehicle_key
 from protocol.zenoh_config import session_config
 
@@ -268,6 +268,8 @@ def run_fleet_demo(out: Path, *, uavs: int = 3, users: int = 12, speedup: float 
         raise DemoError(f"children exited badly: {bad}")
     summary = fleet_summary(out, vehicles, scenarios, base, watch, flown_s)
     summary["processes"] = usage
+    with (out / "statuses.jsonl").open("wb") as f:  # for tracing what the summary counts
+        f.writelines(encode(s) + b"\n" for v in vehicles for s in watch.statuses[v])
     summary["fleet"]["stacked_holds"] = stacked_holds(
         [s for v in vehicles for s in watch.statuses[v]], 2 * defaults.safety.hold_radius_m)
     summary["fleet"]["users_served_at_once"] = served_at_once(watch.events, speedup)
