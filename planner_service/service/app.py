@@ -42,6 +42,7 @@ from protocol.operator_proof import ProofCheck, load_or_create_key
 from protocol.text import printable
 
 from ..mcts import MctsConfig
+from ..model import hover_points
 from .allocator import ARENAS, cap_arenas
 from .config import ServiceConfig
 from .errors import ConfigError, JournalError, LinkError, PlanningError
@@ -114,6 +115,7 @@ class Service:
         self.parts = parts
         self.wall, self.mono = parts.wall, parts.mono
         self.scenario = config.scenario()
+        self._hover_xy = [(float(x), float(y)) for x, y, *_ in hover_points(self.scenario)]
         self.area = config.area()
         self.origin = config.origin_point()
         self.keys = config.keys()
@@ -452,7 +454,8 @@ class Service:
             return
         ledger = self.fleet.ledger
         answering = coarse(self.fleet.whereabouts(ledger.answering()))
-        heard = FleetView(ledger.owners(), ledger.blocked_points(), ledger.yield_points(), answering)
+        heard = FleetView(ledger.owners(), ledger.blocked_points() | self._others_over(), ledger.yield_points(),
+                          answering)
         if heard != self.state.fleet:
             self._feed(ins.FleetHeard(heard))
         for done in self.fleet.ledger.take_served():
@@ -460,6 +463,19 @@ class Service:
             log.info("fleet: %s served %s %d tasks%s", done.vehicle, done.user_id, done.tasks,
                      "" if held else " (no request of that user in force here)")
             self._event(ev.UserServed(f"by {done.vehicle}: {done.tasks} tasks", user_id=done.user_id))
+
+    def _others_over(self) -> frozenset[int]:
+        """The hovering points another member's vehicle is over now (``fleet.occupied_m``),
+        but those this member claims: planned without, whatever was heard of the others'
+        claims. Over the radios a claim came 13-20 s late now and then (a dropped sample
+        recovered by the advanced subscriber) while the positions kept coming: a member on
+        its way home planned a point another had held for 11 s, and held it beside it. A
+        point this member claims stays the claim rule's (the later claimant yields: were
+        both to leave on seeing the other, neither would serve it)."""
+        radius = self.cfg.fleet.occupied_m
+        if self.fleet is None or radius <= 0:
+            return frozenset()
+        return self.fleet.others_over(self._hover_xy, radius) - self.state.claims.points
 
     # --- the vehicle as the logic sees it ----------------------------------------------------------
     def _vehicle(self) -> VehicleSnapshot:

@@ -383,6 +383,10 @@ class MembershipConfig(Section):
     answer_tie_m: float = setting(50.0, ge=0, unit="m")
     """Members whose distances to the pending users differ by at most this (what a position a
     report late may be off) answer in the order of their vehicle ids."""
+    occupied_m: float = setting(10.0, ge=0, le=100.0, unit="m")
+    """A hovering point another member's vehicle is within this of horizontally (by its signed
+    position, whatever its layer) is planned without, whatever was heard of that member's
+    claims (a claim may come seconds late; its positions come twice a second). 0: off."""
     max_answer_rank: int = setting(3, ge=0, le=20)
     """At most this many steps are waited, whatever the number of nearer members (one may be
     unable to answer: its battery, its plan)."""

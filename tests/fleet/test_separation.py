@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from protocol import GeoOrigin, global_to_local, local_to_global
 from protocol.messages import FleetMember, FleetPosition
-from planner_service.service.fleet.separation import Seen, in_frame, judge, whereabouts
+from planner_service.service.fleet.separation import Seen, in_frame, judge, occupied, whereabouts
 
 HOME = GeoOrigin()
 
@@ -77,6 +77,15 @@ def test_whereabouts_are_the_fresh_armed_positions_in_this_members_frame() -> No
     assert abs(where["uav2"][0] - 5.0) < 0.01 and abs(where["uav2"][1]) < 0.01
     assert in_frame(HOME, members["uav1"], last["uav1"].position) == (10, 20, 100)
 
+
+
+def test_the_points_another_vehicle_is_over() -> None:
+    """A hovering point within the radius of a vehicle, horizontally, is occupied (a member
+    plans without it, whatever it heard of that member's claims); one further is not."""
+    points = [(0.0, 0.0), (50.0, 0.0), (100.0, 50.0)]
+    assert occupied({"uav2": (3.0, 4.0), "uav3": (100.0, 61.0)}, points, 10.0) == {0}
+    assert occupied({"uav2": (44.0, 8.0)}, points, 10.0) == {1}
+    assert occupied({}, points, 10.0) == frozenset()
 
 def test_a_member_gone_with_its_vehicle_armed_stays_unknown() -> None:
     """Its service's token went while its last status showed the vehicle armed: it may still

@@ -189,6 +189,30 @@ def test_separation_is_judged_on_the_members_published_positions(mesh: Callable[
         assert "fleet: separation back for uav1-uav2" in caplog.text
 
 
+
+def test_a_member_reads_which_points_the_others_vehicles_are_over(mesh: Callable[[], Any]) -> None:
+    """From the others' signed positions alone (no claim of theirs heard): the points another
+    member's armed vehicle is over; not its own vehicle's, not a disarmed one's, not a
+    stranger's. Over the radios a claim came 13-20 s late while the positions kept coming,
+    and a member planned a point another had held for 11 s."""
+    a_session, b_session, c_session, stranger = mesh(), mesh(), mesh(), mesh()
+    a = presence(KEYS, member("uav1", 100.0))
+    a.join(a_session, DISCOVERY_S)
+    b = presence(KEYS, member("uav2", 120.0))
+    b.join(b_session, DISCOVERY_S)
+    c = presence(KEYS, member("uav3", 140.0))
+    c.join(c_session, DISCOVERY_S)
+    points = [(0.0, 0.0), (50.0, 0.0), (100.0, 0.0), (150.0, 0.0)]
+
+    def over() -> frozenset[int]:
+        put_position(a_session, KEYS, Status(vehicle="uav1", armed=True, x_m=0.0, z_m=100.0))
+        put_position(b_session, KEYS, Status(vehicle="uav2", armed=True, x_m=53.0, y_m=4.0, z_m=120.0))
+        put_position(c_session, KEYS, Status(vehicle="uav3", armed=False, x_m=100.0, z_m=0.0))
+        put_position(stranger, KEYS, Status(vehicle="uav7", armed=True, x_m=150.0, z_m=160.0))
+        time.sleep(0.3)
+        return a.others_over(points, 10.0)
+    wait_until(lambda: over() == {1}, 10.0, "uav2 seen over point 1, and only it")
+
 def test_every_member_reads_a_compact_position_and_only_the_map_the_whole_status(mesh: Callable[[], Any]) -> None:
     """The members' positions are what each member reads of every other at the status rate
     (at 20 UAVs over radios the downlink broke first: the whole signed status, 650 bytes, was

@@ -38,7 +38,7 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from typing import Any, Callable, Iterable, Mapping
+from typing import Any, Callable, Iterable, Mapping, Sequence
 
 import zenoh
 import zenoh.ext as zext
@@ -51,7 +51,7 @@ from protocol.text import printable
 from .ledger import FleetLedger
 from .airspace import MIN_HORIZONTAL_M, VERTICAL_SEPARATION_M
 from .roster import ANNOUNCE_EVERY_S, LOST_S, MAX_LAYER_GAP_M, Change, FleetRoster
-from .separation import STALE_S, Judgement, origin_of, whereabouts
+from .separation import STALE_S, Judgement, occupied, origin_of, whereabouts
 from ..errors import ServiceError
 
 log = logging.getLogger("planner_service.fleet")
@@ -61,6 +61,8 @@ that a subscriber that missed it (a router lost meanwhile) asks its cache again 
 subscribers' recovery)."""
 ANNOUNCE_WAIT_S = 5.0
 """Seconds a joining service waits at least for the announcements of the members it saw."""
+OVER_EVERY_S = 0.25
+"""How often the points the others' vehicles are over are found again (``others_over``)."""
 IGNORED_LOG_EVERY_S = 10.0
 """The count of fleet messages ignored is logged at most this often (a flood is one line)."""
 MAX_CLOCK_OFFSET_S = 2.0
@@ -142,6 +144,8 @@ class FleetPresence:
         self._conflicts: set[str] = set()
         self._unknown: set[str] = set()
         self._ignored_logged = (0.0, 0)
+        self._over: frozenset[int] = frozenset()
+        self._over_at = -OVER_EVERY_S
         self.roster = FleetRoster(keys, verifier, self._on_change, max_gap_m, lost_s, wall)
         self.ledger = FleetLedger(keys, own.vehicle, lambda: self.roster.members().keys(), self.roster.lost,
                                   signer, verifier, wall)
@@ -263,6 +267,17 @@ class FleetPresence:
         those whose position is fresh and armed."""
         return whereabouts(origin_of(self.own), vehicles, self.roster.members(), self.roster.positions(),
                            time.monotonic(), self.stale_s)
+
+    def others_over(self, points: Sequence[tuple[float, float]], radius_m: float) -> frozenset[int]:
+        """The hovering points another live member's vehicle is over now (within ``radius_m``
+        horizontally of ``points``, this member's frame, by its signed position: fresh and
+        armed). Found again at most every ``OVER_EVERY_S`` (the positions come at 2 Hz, the
+        service asks at its tick)."""
+        now = time.monotonic()
+        if now - self._over_at >= OVER_EVERY_S:
+            others = [v for v in self.roster.members() if v != self.own.vehicle]
+            self._over, self._over_at = occupied(self.whereabouts(others), points, radius_m), now
+        return self._over
 
     def check_separation(self) -> Judgement:
         """Judge the fleet's separation now and log what changed: a pair that lost it (an

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from itertools import combinations
-from typing import Iterable, Mapping
+from typing import Iterable, Mapping, Sequence
 
 from protocol import GeoOrigin, global_to_local, local_to_global
 from protocol.messages import FleetMember, FleetPosition
@@ -77,6 +77,15 @@ def whereabouts(frame: GeoOrigin, vehicles: Iterable[str], members: Mapping[str,
         out[vehicle] = (x, y)
     return out
 
+
+
+def occupied(where: Mapping[str, tuple[float, float]], points: Sequence[tuple[float, float]],
+             radius_m: float) -> frozenset[int]:
+    """The hovering points (indices into ``points``) within ``radius_m`` horizontally of a
+    vehicle in ``where`` (another member's, from its signed positions: ``whereabouts``)."""
+    r2 = radius_m * radius_m
+    return frozenset(k for k, (px, py) in enumerate(points)
+                     if any((x - px) ** 2 + (y - py) ** 2 <= r2 for x, y in where.values()))
 
 def judge(members: Mapping[str, FleetMember | None], seen: Mapping[str, Seen], now_s: float,
           min_horizontal_m: float = MIN_HORIZONTAL_M, stale_s: float = STALE_S,

@@ -42,8 +42,9 @@ class FleetView:
     """The users another live member owns, each with that member: not planned, bound nor
     recorded here."""
     blocked: frozenset[int] = frozenset()
-    """The hovering points this member plans without: those another live member claims, and
-    the rest of the route of a member gone with its vehicle armed."""
+    """The hovering points this member plans without: those another live member claims, the
+    rest of the route of a member gone with its vehicle armed, and those another member's
+    vehicle is over (``fleet.occupied_m``, but for the points this member claims)."""
     yield_to: Mapping[int, str] = field(default_factory=dict)
     """The point this member holds that another member claims too (holds or flies to) and
     keeps (it claimed it first: ``model.fleet.claims.keeper``), with that member: this member
