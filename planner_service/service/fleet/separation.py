@@ -78,7 +78,6 @@ def whereabouts(frame: GeoOrigin, vehicles: Iterable[str], members: Mapping[str,
     return out
 
 
-
 def occupied(where: Mapping[str, tuple[float, float]], points: Sequence[tuple[float, float]],
              radius_m: float) -> frozenset[int]:
     """The hovering points (indices into ``points``) within ``radius_m`` horizontally of a
@@ -86,6 +85,7 @@ def occupied(where: Mapping[str, tuple[float, float]], points: Sequence[tuple[fl
     r2 = radius_m * radius_m
     return frozenset(k for k, (px, py) in enumerate(points)
                      if any((x - px) ** 2 + (y - py) ** 2 <= r2 for x, y in where.values()))
+
 
 def judge(members: Mapping[str, FleetMember | None], seen: Mapping[str, Seen], now_s: float,
           min_horizontal_m: float = MIN_HORIZONTAL_M, stale_s: float = STALE_S,

@@ -21,6 +21,9 @@ T = TypeVar("T")
 
 
 class Asked(Generic[T]):
+    """One kind of change asked for (a mode, an arming): the value last asked and until when
+    a change to it counts as ours."""
+
     def __init__(self) -> None:
         self._value: T | None = None
         self._until = -math.inf
