@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import os
 import sys
 from pathlib import Path
@@ -71,14 +72,18 @@ def sitl_ready(sitl: Sitl) -> Sitl:
 def make_px4(tmp_path: Path) -> Iterator[Callable[..., Px4]]:
     """A factory of PX4 SITLs (tests/support/px4.py; keyword arguments go to ``Px4``, e.g.
     ``params``; ``start=False``: not started yet, for a test that listens before PX4's
-    first second), each in its own folder and instance and stopped at the end; skipped
-    where PX4 SITL is missing."""
+    first second), each in its own folder and instance and stopped at the end, one test
+    process's PX4s at a time on the machine (``px4_support.one_at_a_time``); skipped where
+    PX4 SITL is missing."""
     root = px4_support.px4_root()
     if root is None:
         pytest.skip(px4_support.skip_reason())
     started: list[Px4] = []
+    turn = contextlib.ExitStack()
 
     def make(**options: Any) -> Px4:
+        if not started:
+            turn.enter_context(px4_support.one_at_a_time())
         folder = tmp_path / f"px4-{len(started)}"
         folder.mkdir()
         start = options.pop("start", True)
@@ -93,6 +98,7 @@ def make_px4(tmp_path: Path) -> Iterator[Callable[..., Px4]]:
     finally:
         for p in started:
             p.stop()
+        turn.close()
 
 
 @pytest.fixture
