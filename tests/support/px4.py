@@ -53,12 +53,12 @@ from tests.support.sitl import end_group, port_is_free, reserve  # noqa: E402
 REPO = Path(__file__).resolve().parents[2]
 ENV = "PX4_SITL"
 INSTANCES = range(1, 10)
-TURN_FILE = Path(tempfile.gettempdir()) / "uav-planner-px4-turn.lock"
-TURN_WAIT_S = 900.0
-"""How long a test waits for its turn with PX4 (the longest PX4 test takes about 80 s; a
-file holds one or two minutes of them)."""
 """PX4 instance numbers for the tests (0 is left to people; above 9 the onboard links of all
 instances share one remote port)."""
+TURN_FILE = Path(tempfile.gettempdir()) / "uav-planner-px4-turn.lock"
+TURN_WAIT_S = 900.0
+"""How long a test waits for its turn with PX4 (a test holds it for its own length, the
+longest about 80 s on a loaded machine)."""
 SPEED = 5
 """PX4_SIM_SPEED_FACTOR: simulated seconds per wall second (4 measured 3.7x on 2 busy cores)."""
 M = mavutil.mavlink
@@ -97,7 +97,6 @@ def px4_root() -> Path | None:
         if binary is not None and binary.is_file() and os.access(binary, os.X_OK):
             return Path(candidate)
     return None
-
 
 
 @contextlib.contextmanager
