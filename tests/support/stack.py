@@ -124,12 +124,14 @@ class Stack:
         missed by a subscriber in the first moments after the child started); the one found."""
         texts = (text,) if isinstance(text, str) else text
         deadline = time.monotonic() + timeout_s
-        while not (found := [t for t in texts if t in child.log()]):
+        while True:
+            log = child.log()  # once a round, whatever the number of texts
+            if found := [t for t in texts if t in log]:
+                return found[0]
             if time.monotonic() > deadline:
                 raise AssertionError(f"none of {texts!r} in {child.name}'s log within {timeout_s} s\n"
-                                     f"{child.log()[-3000:]}")
+                                     f"{log[-3000:]}")
             time.sleep(0.05)
-        return found[0]
 
     def wait_disarmed(self, timeout_s: float) -> None:
         """Wait until the service's status shows the vehicle disarmed (the autopilot's own
