@@ -17,7 +17,7 @@ pilot's takeover is Hold (AUTO.LOITER) and then Land, which a pilot's switch or 
 station gives alike.
 
 The figures (``-s``): services, false services, uploads, decisions per service, tasks per
-interval flown against the offline planner on the same scenario and seed."""
+interval flown against the offline planner on the same scenario (its mean over seeds)."""
 
 from __future__ import annotations
 
@@ -40,7 +40,7 @@ from protocol.mission import max_points
 from sim_bridge.vehicle.mission_id import px4_mission_id
 from tests.support.autopilot_sortie import BUDGET_MS, check_requests_and_missions, decisions, event_at
 from tests.support.autopilot_sortie import fly as fly_with
-from tests.support.autopilot_sortie import logged_at, offline, service_log
+from tests.support.autopilot_sortie import EXPECTED_SEEDS, logged_at, offline, offline_expected, service_log
 from tests.support.gcs import M, GroundStation
 from tests.support.px4 import PARAMS, Px4, free_instance, read_params
 from tests.support.stack import Stack
@@ -116,7 +116,8 @@ def test_whole_sortie(quad: Px4, stack: Stack, backend: str) -> None:
     accepted mission the one PX4 names (MISSION_CURRENT's mission_id is the CRC32 of an upload
     of ours); the landing ends the sortie with no authority ended (PX4's mission RTL hands it
     to AUTO.RTL, and back to an earlier mode after the landing's disarming); at least 80 % of
-    the offline planner's tasks per interval on the same seed. How many services the pack
+    the offline planner's tasks per interval on the same scenario (its mean over seeds:
+    ``offline_expected``; one seed's figure is one draw of the users' world). How many services the pack
     holds depends on the wall clock: at x10 every tenth of a second the service and the
     planner take (100 ms a decision) is a second of PX4's hover, so on a quiet machine it
     serves 6 (the issue's demo target, measured in the demo) and 5 beside two other test
@@ -152,14 +153,15 @@ def test_whole_sortie(quad: Px4, stack: Stack, backend: str) -> None:
     tasks = [t for (t,) in stack.rows("SELECT tasks FROM services ORDER BY service_id")]
     flown = float(np.mean(tasks))
     same_seed, world = offline(scenario, stack, 1)
-    ratio = flown / same_seed["throughput_tasks_per_interval"]
+    expected = offline_expected(scenario)
+    ratio = flown / expected
     made = decisions(service_log(stack))
     print(f"\n{backend} on PX4 SITL x{SPEED}: {services} services, 0 false, {len(ours)} missions "
           f"({len(in_flight)} uploaded in flight), {made} decisions ({made / services:.2f} per service); "
-          f"{flown:.2f} tasks/interval flown {tasks}; offline mcts {same_seed['throughput_tasks_per_interval']:.2f} "
-          f"on the same seed (flown {ratio:.0%}), {world['throughput_tasks_per_interval']:.2f} on the same first "
-          f"world; {wall_s:.0f} s wall")
-    assert ratio >= 0.8, f"flown {flown:.2f} tasks/interval, {ratio:.0%} of the offline planner's"
+          f"{flown:.2f} tasks/interval flown {tasks}; offline mcts {expected:.2f} over seeds 1-{EXPECTED_SEEDS} "
+          f"(flown {ratio:.0%}), {same_seed['throughput_tasks_per_interval']:.2f} on seed 1, "
+          f"{world['throughput_tasks_per_interval']:.2f} on the same first world; {wall_s:.0f} s wall")
+    assert ratio >= 0.8, f"flown {flown:.2f} tasks/interval, {ratio:.0%} of the offline planner's {expected:.2f}"
 
 
 def test_px4_killed_and_restarted_mid_flight(quad: Px4, stack: Stack) -> None:
