@@ -154,6 +154,7 @@ class Service:
             hold_margin_s=s.hold_margin_s, energy_margin_j=s.energy_margin_j, vehicle=config.zenoh.vehicle,
             answer_step_s=config.fleet.answer_step_s, answer_tie_m=config.fleet.answer_tie_m,
             max_answer_rank=config.fleet.max_answer_rank,
+            settle_max_s=config.fleet.settle_max_s if self.fleet is not None else 0.0,
         ), self.world)
         self.state = self._restore()
         self._plan_dues: dict[str, float] = {}
@@ -453,9 +454,12 @@ class Service:
         if self.fleet is None or not isinstance(self.world, FleetWorld):
             return
         ledger = self.fleet.ledger
+        if not ledger.told:  # the others settle their claims on this member's intentions: said from the start
+            self._tell_claims(self.state.claims)
+        ledger.beat(self.cfg.fleet.intentions_every_s)
         answering = coarse(self.fleet.whereabouts(ledger.answering()))
         heard = FleetView(ledger.owners(), ledger.blocked_points() | self._others_over(), ledger.yield_points(),
-                          answering)
+                          answering, self._settled(ledger.heard_since()))
         if heard != self.state.fleet:
             self._feed(ins.FleetHeard(heard))
         for done in self.fleet.ledger.take_served():
@@ -463,6 +467,13 @@ class Service:
             log.info("fleet: %s served %s %d tasks%s", done.vehicle, done.user_id, done.tasks,
                      "" if held else " (no request of that user in force here)")
             self._event(ev.UserServed(f"by {done.vehicle}: {done.tasks} tasks", user_id=done.user_id))
+
+    def _settled(self, heard_since: float) -> frozenset[int]:
+        """The points this member claims whose claims have settled: every other live member's
+        intentions signed ``fleet.settle_margin_s`` or more after the claim were heard here
+        (``FleetLedger.heard_since``), so every claim made before it is known."""
+        known = heard_since - self.cfg.fleet.settle_margin_s
+        return frozenset(k for k, at in self._points_at.items() if at <= known)
 
     def _others_over(self) -> frozenset[int]:
         """The hovering points another member's vehicle is over now (``fleet.occupied_m``),

@@ -390,6 +390,20 @@ class MembershipConfig(Section):
     max_answer_rank: int = setting(3, ge=0, le=20)
     """At most this many steps are waited, whatever the number of nearer members (one may be
     unable to answer: its battery, its plan)."""
+    settle_max_s: float = setting(10.0, ge=0, le=60.0, unit="s")
+    """A decision's first point is flown to once its claim has settled: every other member's
+    intentions signed after it (``settle_margin_s`` later) were heard, so that the claim rule
+    has judged every claim made before it (of two members that chose one point within a
+    radio's hearing delay, the first to claim flies, the other decides again). Waited at most
+    this long (wall clock: a member heard late, or one whose key was stolen and that says
+    nothing, delays each decision by this at most); then flown as decided, and logged. 0: off."""
+    settle_margin_s: float = setting(0.1, ge=0, le=4.0, unit="s")
+    """How far apart the members' clocks may read for the settling above to hold (it compares
+    their signed times with this computer's): GPS or NTP time on the field."""
+    intentions_every_s: float = setting(1.0, gt=0, le=10.0, unit="s")
+    """A member signs and puts its intentions again at least this often, unchanged or not:
+    what the others settle their claims on (each member's traffic grows by one message this
+    often, each member's downlink by one per other member)."""
 
     def check(self) -> None:
         super().check()

@@ -13,6 +13,7 @@ from planner_service.service.sortie import effects as fx
 from planner_service.service.sortie import inputs as ins
 from planner_service.service.sortie import SortieLogic
 from planner_service.service.sortie.fleet import Claims, FleetView, answer_rank
+from planner_service.service.sortie.machine import first_point
 from tests.service.test_sortie_logic import (FakeWorld, Run, bound_to_a_user_uav2_owns, fly_to_first_point, only, path,
                                              point)
 
@@ -239,3 +240,111 @@ def test_every_member_computes_one_owner_whatever_its_own_clock() -> None:
     assert seen_by_uav1 == {} and seen_by_uav2 == {"u": "uav1"}  # both say uav1
     tie = {"uav1": {"u": (PLANNED, 5.0)}, "uav2": {"u": (PLANNED, 5.0)}}
     assert owner("u", tie) == "uav1"  # ties to the smaller id, on every member
+
+
+SETTLE_S = 10.0
+
+
+def settling(run: Run, world: FakeWorld) -> Run:
+    """``run``'s member with the fleet's settling on (``fleet.settle_max_s``)."""
+    run.logic = SortieLogic(replace(run.logic.rules, settle_max_s=SETTLE_S), world)
+    return run
+
+
+def decided_on_the_way_home(vehicle: str, k: int) -> tuple[Run, fx.Upload | None, list[fx.Effect]]:
+    """``vehicle`` on its way home, alone in its view (no member heard answering), hears a new
+    request and decides point ``k``: its upload if sent at once, and the decision's effects."""
+    run, world = on_the_way_home(vehicle)
+    settling(run, world)
+    world.ask("c", 300.0, 300.0, 10, 9)
+    (plan,) = only(run.feed(ins.RequestIn("c", 10)), fx.MakePlan)
+    assert plan.basis.reason == "new requests on the way home"
+    out = run.feed(ins.Planned(plan.basis, path(point(k, 300.0, 290.0, "c", 9))))
+    ups = only(out, fx.Upload)
+    return run, ups[0] if ups else None, out
+
+
+def test_of_two_members_that_chose_one_point_within_a_hearing_delay_only_the_first_to_claim_flies_there() -> None:
+    """Finding (20 UAVs over radios, 2026-12-07): three members became idle on their way home
+    within 1.4 s, and a new request found each alone in its view (their ``answering`` heard 2
+    s later); all three decided for point 9 within 1 s, flew there and held it together
+    before any heard another's claim. Now a decision made away from a hold claims its first
+    point and flies there once the claim has settled: every other member's intentions
+    signed after it were heard, so the claim rule has judged every claim made before it.
+    uav1 claimed first and flies; uav2, hearing uav1's claim by then, decides again."""
+    first, up1, out1 = decided_on_the_way_home("uav1", 9)
+    second, up2, out2 = decided_on_the_way_home("uav2", 9)
+    assert up1 is None and up2 is None, "neither flies a point before its claim has settled"
+    assert intents(out1)[-1].flying_to == 9 and intents(out2)[-1].flying_to == 9, "both claim it meanwhile"
+    assert first.s.claims.next_user == "c" and first.s.schedule.busy == "settle"
+    assert not only(first.tick(), fx.Upload), "nothing heard yet"
+    # each hears the other's intentions signed after its own claim: uav1's was first
+    (up,) = only(first.feed(ins.FleetHeard(FleetView(settled=frozenset({9})))), fx.Upload)
+    assert first_point_of(up) == 9 and first.s.schedule.busy == "upload"
+    out = second.feed(ins.FleetHeard(FleetView(blocked=frozenset({9}))))
+    assert not only(out, fx.Upload) and second.s.schedule.busy == ""
+    assert "point 9 was claimed first by another member" in " ".join(e.text for e in only(out, fx.Log))
+    assert second.s.claims.flying_to is None, "it gives the point up at once"
+    second.now += 1.0
+    (plan,) = only(second.tick(), fx.MakePlan)
+    assert plan.basis.reason == "new requests on the way home", "it decides again (without 9: the planner's)"
+
+
+def test_a_claim_that_does_not_settle_is_flown_after_the_bound() -> None:
+    """A member never heard (late, or one whose key was stolen and that says nothing) delays a
+    decision by ``fleet.settle_max_s`` at most; then it flies as decided, and says so."""
+    run, up, _ = decided_on_the_way_home("uav2", 9)
+    assert up is None
+    run.now += SETTLE_S - 0.5
+    assert not only(run.tick(), fx.Upload)
+    run.now += 0.5
+    out = run.tick()
+    (up,) = only(out, fx.Upload)
+    assert first_point_of(up) == 9
+    assert "has not settled in 10 s" in " ".join(e.text for e in only(out, fx.Log) if e.level == "warning")
+
+
+def test_a_lone_uav_flies_a_decision_at_once() -> None:
+    run, world = on_the_way_home("uav2")  # settle_max_s 0: no fleet
+    world.ask("c", 300.0, 300.0, 10, 9)
+    (plan,) = only(run.feed(ins.RequestIn("c", 10)), fx.MakePlan)
+    assert only(run.feed(ins.Planned(plan.basis, path(point(9, 300.0, 290.0, "c", 9)))), fx.Upload)
+
+
+def first_point_of(up: fx.Upload) -> int | None:
+    first = first_point(up)
+    return None if first is None else first.hover_index
+
+
+def test_a_hold_ends_once_the_next_points_claim_has_settled_and_a_next_point_lost_is_decided_again() -> None:
+    """At a hold the decision's upload goes at once (it restarts the autopilot's hold timer)
+    and the vehicle stays on the point it holds until the next point's claim has settled;
+    another member claiming it first makes it decide again, still holding. Yielding the point
+    held to another member does not wait."""
+    world = FakeWorld()
+    run, _ = fly_to_first_point(world)
+    settling(run, world)
+    run.feed(ins.FleetHeard(FleetView(settled=frozenset({3}))))
+    out = run.tick(seq=2, xyz=(119.0, 200.5, 100.0), boot_s=12.0)  # arrived at 3, bound to a
+    (plan,) = only(out, fx.MakePlan)
+    (up,) = only(run.feed(ins.Planned(plan.basis, path(point(9, 400.0, 300.0, "b", 2)))), fx.Upload)
+    run.feed(ins.Uploaded(up))
+    assert run.s.claims.flying_to == 9
+    end = 12 + int(run.s.holds.binding.needed_s) + 2
+    for t in range(13, end):
+        run.tick(seq=2, xyz=(120.5, 199.5, 100.0), boot_s=float(t))
+    assert run.s.holds.served_why() is not None, "the request is served"
+    assert not only(run.effects, fx.Command)[1:], "the hold goes on: 9's claim has not settled"
+    # another member claimed 9 first: decided again from the point held
+    out = run.feed(ins.FleetHeard(FleetView(settled=frozenset({3}), blocked=frozenset({9}))))
+    (plan,) = only(out, fx.MakePlan)
+    assert plan.basis.reason == "point 9 claimed by another member, holding point 3"
+    assert plan.basis.keep_through == 2 and plan.basis.at_point is not None
+    (up,) = only(run.feed(ins.Planned(plan.basis, path(point(8, 300.0, 100.0, "b", 2)))), fx.Upload)
+    run.feed(ins.Uploaded(up))
+    assert run.s.claims.flying_to == 8
+    assert not only(run.tick(seq=2, xyz=(120.5, 199.5, 100.0), boot_s=float(end)), fx.Command)
+    out = run.feed(ins.FleetHeard(FleetView(settled=frozenset({3, 8}), blocked=frozenset({9}))))
+    out += run.tick(seq=2, xyz=(120.5, 199.5, 100.0), boot_s=end + 1.0)
+    (cmd,) = only(out, fx.Command)
+    assert cmd.kind == "set_current" and cmd.seq == 3, cmd

@@ -7,6 +7,7 @@ members' published positions."""
 from __future__ import annotations
 
 import logging
+import math
 import re
 import threading
 import time
@@ -391,3 +392,31 @@ def test_a_clock_is_judged_surely_off_only() -> None:
     said = clock_clashes({"uav1": 2.5, "uav2": -4.0, "uav3": -5.5, "uav4": None, "uav5": 1.9}, 2.0)
     assert [s.split("'", 1)[0] for s in said] == ["uav1", "uav3"], said
     assert "uav3's clock reads 3.0 s behind" in said[1]
+
+
+def test_a_members_intentions_are_put_again_unchanged_and_the_others_know_them_as_of_then(
+        mesh: Callable[[], Any]) -> None:
+    """A member puts its intentions on every plan, and again every ``fleet.intentions_every_s``
+    whatever changed: the others know its claims as they stand at the signed time, which is
+    what a claim settles on (``FleetLedger.heard_since``). Put once only, a member that
+    claimed nothing new for a minute said nothing a claim made meanwhile could settle on."""
+    a_session, b_session = mesh(), mesh()
+    a = presence(KEYS, member("uav1", 100.0))
+    a.join(a_session, DISCOVERY_S)
+    b = presence(KEYS, member("uav2", 120.0))
+    b.join(b_session, DISCOVERY_S)
+    assert b.ledger.heard_since() == -math.inf, "uav1 not heard yet: nothing it claimed is known"
+    assert not a.ledger.told
+    told_at = time.time()
+    a.ledger.intend({"u": told_at + 30.0}, told_at, claims=["u"], points=[4])
+    assert a.ledger.told
+    wait_until(lambda: b.ledger.heard_since() >= told_at, 10.0, "uav1's intentions heard")
+    first = b.ledger.heard_since()
+    a.ledger.beat(60.0)  # put 0 s ago: not again
+    time.sleep(1.0)
+    assert b.ledger.heard_since() == first
+    later = time.time()
+    a.ledger.beat(0.5)
+    wait_until(lambda: b.ledger.heard_since() >= later, 10.0, "uav1's intentions put again and heard")
+    assert b.ledger.blocked_points() == {4} and b.ledger.owners() == {"u": "uav1"}, "the same claims"
+    assert a.ledger.heard_since() == -math.inf, "uav2 has said nothing: none of its claims is known"

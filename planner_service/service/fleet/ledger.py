@@ -32,12 +32,14 @@ own threads).
 from __future__ import annotations
 
 import logging
+import math
 import statistics
 import threading
 import time
 from collections import deque
 from typing import Any, Callable, Iterable, Mapping
 
+import msgspec
 import zenoh
 import zenoh.ext as zext
 
@@ -153,6 +155,13 @@ class FleetLedger:
         """The point each member holds now (its last intentions'), if any."""
         self._answering: set[str] = set()
         """The members whose last intentions say they would answer a new request."""
+        self._signed_at: dict[str, float] = {}
+        """vehicle -> the signed time (its clock) of its latest intentions heard: its claims
+        are known as they stood then (``heard_since``)."""
+        self._told: FleetIntentions | None = None
+        """This member's intentions as last told (``intend``), put again by ``beat``."""
+        self._put_at = -math.inf
+        """When (monotonic) they were last put."""
         self._served: deque[FleetServed] = deque(maxlen=MAX_SERVED_QUEUED)
         self._seen: set[tuple[str, str, float]] = set()
         self.refused: deque[str] = deque(maxlen=16)
@@ -192,6 +201,7 @@ class FleetLedger:
                 pass
         self._decl.clear()
         self._intent_pub = self._served_pub = None
+        self._told = None
 
     # --- this member's side ------------------------------------------------------------------
     def intend(self, due: Mapping[str, float], now_s: float, claims: Iterable[str] = (),
@@ -216,9 +226,32 @@ class FleetLedger:
             self._intentions[self.vehicle] = dict(users)
             self._claims[self.vehicle] = claims_of(message)
             self._points[self.vehicle] = points_of(message)
+        self._told = message
+        self._put(message)
+
+    @property
+    def told(self) -> bool:
+        """Whether this member has told its intentions (``intend``) since it opened."""
+        return self._told is not None
+
+    def beat(self, every_s: float) -> None:
+        """Put this member's intentions again, dated and signed now, if they were last put
+        ``every_s`` ago or more: the others know its claims as they stand at the signed time
+        (``heard_since``), whether they changed or not. Not put when the others would refuse
+        them now (a due left ``DUE_PAST_S`` behind by a long hold): the next plan tells them."""
+        told = self._told
+        if told is None or time.monotonic() - self._put_at < every_s:
+            return
+        now = self._wall()
+        again = msgspec.structs.replace(told, time_s=now)
+        if claims_refused(again, now) is None:
+            self._put(again)
+
+    def _put(self, message: FleetIntentions) -> None:
         if self._intent_pub is not None and self._signer is not None:
             key = self.keys.intentions(self.vehicle)
             self._intent_pub.put(self._signer.seal(key, encode(message), self._wall()))
+            self._put_at = time.monotonic()
 
     def served(self, user_id: str, tasks: int, at_s: float) -> None:
         """Tell the fleet of a service this member flew."""
@@ -264,6 +297,16 @@ class FleetLedger:
         alive = set(self._alive()) - {self.vehicle}
         with self._lock:
             return self._answering & alive
+
+    def heard_since(self) -> float:
+        """The time (wall clock) as of which every other live member's claims are known here:
+        the earliest of their latest intentions' signed times (each member's own clock; -inf
+        while one was never heard, +inf without others). A claim this member made before it
+        was heard by every member with it or after it (the claim rule has judged it: a claim
+        made after it by another loses to it)."""
+        alive = set(self._alive()) - {self.vehicle}
+        with self._lock:
+            return min((self._signed_at.get(v, -math.inf) for v in alive), default=math.inf)
 
     def claims(self) -> dict[str, dict[str, Claim]]:
         """Every member's last claims (vehicle -> user -> claim), live or not."""
@@ -320,6 +363,7 @@ class FleetLedger:
         claims, now = claims_of(message), time.monotonic()
         with self._lock:
             self.heard_ms.append(max(0.0, (self._wall() - signed_at) * 1000.0))
+            self._signed_at[message.vehicle] = max(signed_at, self._signed_at.get(message.vehicle, -math.inf))
             if message.vehicle not in self._intentions and len(self._intentions) >= MAX_MEMBERS:
                 return
             self._intentions[message.vehicle] = {i.user_id: i.due_s for i in message.users}

@@ -53,6 +53,10 @@ class FleetView:
     answering: Mapping[str, tuple[float, float]] = field(default_factory=dict)
     """The other members that would answer a new request (on their way home), each where it
     is: metres east and north in this member's frame (rounded: ``WHEREABOUTS_M``)."""
+    settled: frozenset[int] = frozenset()
+    """The points this member claims whose claims have settled: every other live member's
+    intentions signed after the claim were heard, so every claim made before it is known and
+    judged (``blocked``, ``yield_to``); a decision's first point is flown to once settled."""
 
     def owner(self, user_id: str) -> str | None:
         return self.owners.get(user_id)

@@ -110,6 +110,9 @@ class Rules:
     order of their ids."""
     max_answer_rank: int = 3
     """At most this many steps are waited (the nearer members may be unable to answer)."""
+    settle_max_s: float = 0.0
+    """A fleet member flies to a decision's first point once its claim has settled
+    (``FleetView.settled``), waiting at most this long (wall seconds); 0: at once (a lone UAV)."""
     autopilot: Autopilot = field(init=False, repr=False, compare=False)
     """The configured autopilot's profile (``protocol.autopilot``), derived from ``flavour``
     once, when the rules are made (read at every step; not a constructor argument): an
@@ -133,6 +136,12 @@ class Rules:
     def mode_names(self) -> dict[str, str]:
         a = self.autopilot
         return {"start": a.mission_mode, "resume": a.mission_mode, "return": a.return_mode, "hold": a.hold_mode}
+
+
+def first_point(up: fx.Upload) -> PlannedPoint | None:
+    """The point ``up``'s mission flies to first (after the items it keeps), or None (home)."""
+    after = up.mission.points_after(-1 if up.keep_through is None else up.keep_through)
+    return after[0][1] if after else None
 
 
 @dataclass(frozen=True)
@@ -249,7 +258,7 @@ class SortieLogic:
                 assert_never(event)
         if not isinstance(event, ins.Tick):
             s = self._next(s, v, now, out)
-        return self._intend(s, v, out), out
+        return self._intend(s, v, now, out), out
 
     # --- the fleet ------------------------------------------------------------------------------
     def _heard(self, s: Sortie, view: FleetView, now: float) -> Sortie:
@@ -267,17 +276,26 @@ class SortieLogic:
             s = replace(s, schedule=s.schedule.request_in(self.rules.backoff, now))
         return s
 
-    def _intend(self, s: Sortie, v: ins.VehicleSnapshot, out: list[fx.Effect]) -> Sortie:
-        """Tell the fleet what this member claims whenever it changes (``fleet.claims_now``):
-        the point it flies to from the moment its mission is on board, the point it holds."""
-        held = s.onboard.held if s.onboard.known else None
-        claims = claims_now(held, s.holds, v.seq, s.life.homing or s.life.over is not None)
-        if self._answers(s, v):
-            claims = replace(claims, answering=True)
+    def _intend(self, s: Sortie, v: ins.VehicleSnapshot, now: float, out: list[fx.Effect]) -> Sortie:
+        """Tell the fleet what this member claims whenever it changes (``_claims``)."""
+        claims = self._claims(s, v)
         if claims == s.claims:
             return s
         out.append(fx.Intend(claims))
+        if claims.flying_to is not None and claims.flying_to != s.claims.flying_to:
+            s = replace(s, schedule=replace(s.schedule, claimed_at=now))
         return replace(s, claims=claims)
+
+    def _claims(self, s: Sortie, v: ins.VehicleSnapshot) -> Claims:
+        """What this member claims now (``fleet.claims_now``): the point it flies to from the
+        moment its mission there is on board, or its plan there settles, the point it holds."""
+        held = s.onboard.held if s.onboard.known else None
+        claims = claims_now(held, s.holds, v.seq, s.life.homing or s.life.over is not None)
+        up = s.schedule.settling
+        first = first_point(up) if up is not None else None
+        if first is not None:
+            claims = replace(claims, flying_to=first.hover_index, next_user=first.user_id)
+        return replace(claims, answering=True) if self._answers(s, v) else claims
 
     def _pending(self, s: Sortie) -> list[RequestRow]:
         """The requests pending here that no other member owns."""
@@ -314,7 +332,7 @@ class SortieLogic:
         life, lapsed = life.start_lapsed(v, now, s.authority.granted)
         s = replace(s, life=life)
         out += begin + lapsed
-        s = self._watch(s, v, out)
+        s = self._watch(s, v, now, out)
         s = self._return_check(s, v, now, out)
         s = self._homing(s, v)
         s = self._disarm_check(s, v, now, out)
@@ -325,6 +343,8 @@ class SortieLogic:
     def _next(self, s: Sortie, v: ins.VehicleSnapshot, now: float, out: list[fx.Effect]) -> Sortie:
         """Start whatever is due and not running: a read-back, a plan, a command (none while a
         switch of mode awaits its judgement: whose it is decides whether the service may)."""
+        if s.schedule.busy == "settle":
+            s = self._settle(s, now, out)
         if s.life.over is not None or s.life.degraded is not None or s.life.return_seen_at is not None:
             return s
         if s.schedule.busy == "" and s.onboard.doubt is not None and v.connected and now >= s.schedule.readback_at:
@@ -340,7 +360,7 @@ class SortieLogic:
         return self._resume_needed(s, v, out)
 
     # --- holds: truth from the vehicle's position ---------------------------------------------
-    def _watch(self, s: Sortie, v: ins.VehicleSnapshot, out: list[fx.Effect]) -> Sortie:
+    def _watch(self, s: Sortie, v: ins.VehicleSnapshot, now: float, out: list[fx.Effect]) -> Sortie:
         if s.onboard.held is None or not (v.connected and v.position_ok) or math.isnan(v.boot_s):
             return s
         sample = Sample(v.boot_s, v.xyz, v.seq)
@@ -349,7 +369,7 @@ class SortieLogic:
             # ACK reaches us: on a lossy link seconds, minutes of flight at x40): kept, and
             # judged once the mission the vehicle flies is known.
             return replace(s, onboard=s.onboard.keep(sample, uploading=s.schedule.busy == "upload"))
-        return self._maybe_end_hold(self._seen(s, sample, v, out), out)
+        return self._maybe_end_hold(self._seen(s, sample, v, out), now, out)
 
     def _seen(self, s: Sortie, sample: Sample, v: ins.VehicleSnapshot, out: list[fx.Effect]) -> Sortie:
         """One report of the vehicle flying ``held``: the watch fed, or begun at its item."""
@@ -372,8 +392,9 @@ class SortieLogic:
         it is known to hold it and nothing the service does now changes it: a disagreement
         reads the mission back."""
         held = s.onboard.held
-        if held is None or not s.onboard.known or s.schedule.busy or s.onboard.doubt is not None or not v.connected:
-            return s
+        if (held is None or not s.onboard.known or s.schedule.busy not in ("", "settle") or s.onboard.doubt is not None
+                or not v.connected):
+            return s  # (a plan settling changes nothing on board)
         settled = Settled(over=s.life.over is not None, commanding=bool(s.schedule.commanding),
                           granted=s.authority.granted)
         evidence, doubt = judge(s.evidence, held, v, now, settled, leg_tolerance_m=self.rules.leg_tolerance_m,
@@ -463,22 +484,28 @@ class SortieLogic:
         i = served_user(self.p, np.array([point.x_m, point.y_m, point.z_m]), users, tasks, served)
         return None if i == NO_USER else rows[i]
 
-    def _maybe_end_hold(self, s: Sortie, out: list[fx.Effect]) -> Sortie:
+    def _maybe_end_hold(self, s: Sortie, now: float, out: list[fx.Effect]) -> Sortie:
         """End the hold once the bound request is served, or once another member holding the
         point too keeps it (``_yield_why``): the replacement uploaded at the
         arrival restarted the autopilot's hold timer (ArduPilot restarts the current item
         when the items after it change; PX4 flies the item marked current), so the service,
         not the timer, ends it, as soon as the next item is the decision made from this
-        point (uploaded) and the reports show the hold the request needs. Only under its
+        point (uploaded) and the reports show the hold the request needs, and the next
+        point's claim has settled (``_settled``: a member that claimed it first would be met
+        there; yielding this point to another member does not wait). Only under its
         authority, not degraded: without, it commands nothing and the timer ends the hold."""
         w, held = s.holds.watch, s.onboard.held
-        why = s.holds.served_why() or self._yield_why(s)
+        yielding = self._yield_why(s)
+        why = s.holds.served_why() or yielding
         if why is None or w is None or held is None:
             return s
         if not s.authority.granted or s.life.degraded is not None:
             return s
-        if s.schedule.decided_at != w.seq or s.schedule.busy == "upload" or s.schedule.commanding:
+        if s.schedule.decided_at != w.seq or s.schedule.busy in ("upload", "settle") or s.schedule.commanding:
             return s
+        k = s.claims.flying_to
+        if yielding is None and k is not None and not self._settled(s, k, s.schedule.claimed_at, now):
+            return s  # the next point's claim has not settled: the vehicle stays on a point it holds
         point = held.point_at(w.seq)
         assert point is not None
         out.append(fx.Command("set_current", w.seq + 1, f"hold at point {point.hover_index} ended: {why}"))
@@ -573,9 +600,14 @@ class SortieLogic:
         if s.onboard.held is None or v.mode not in MISSION_MODES:
             return None  # not flying a mission of ours: the operator has the vehicle
         w = s.holds.watch
-        if w is not None and w.phase == "holding" and s.schedule.decided_at != w.seq and w.approached:
+        claims = self._claims(s, v)  # (as they stand now: an upload answered since the last were told)
+        lost = lost_points(claims.points - {claims.holding}, s.fleet.blocked)
+        holding = w is not None and w.phase == "holding"
+        if w is not None and holding and w.approached and (s.schedule.decided_at != w.seq or lost):
             # (a hold found already under way, its start unseen, is left to the autopilot's
             # own timer: a replacement now would start it again; the next arrival decides)
+            # Decided here already, the next point claimed first by another member (both
+            # claimed it at once): decided again, the vehicle still holding.
             point = s.onboard.held.point_at(w.seq)
             assert point is not None
             b = s.holds.binding
@@ -583,10 +615,9 @@ class SortieLogic:
             # the hold the bound request needs, so that the planner pays for all of it
             bound = replace(point, hold_s=self._bound_hold_s(s, w.seq, point.hold_s, self._margin_s(v)))
             reward = self._service_reward(point, b.tasks) if serving and b else 0.0
-            return fx.PlanBasis(f"arrived at point {point.hover_index}", s.schedule.version, w.seq, at_point=bound,
-                                serving=serving, serving_reward=reward)
-        lost = lost_points(s.claims.points - {s.claims.holding}, s.fleet.blocked)
-        holding = w is not None and w.phase == "holding"
+            why = (f"arrived at point {point.hover_index}" if s.schedule.decided_at != w.seq else
+                   f"point {min(lost)} claimed by another member, holding point {point.hover_index}")
+            return fx.PlanBasis(why, s.schedule.version, w.seq, at_point=bound, serving=serving, serving_reward=reward)
         if lost and not holding and v.seq > r.autopilot.first_item:
             # flying to a point another member claims now (both claimed it at once): given up
             return fx.PlanBasis(f"point {min(lost)} claimed by another member", s.schedule.version, v.seq - 1)
@@ -676,10 +707,46 @@ class SortieLogic:
         except (PlanningError, MissionError) as err:
             return self._failed(replace(s, schedule=replace(s.schedule, plan_id=s.schedule.plan_id + 1)),
                                 f"plan {s.schedule.plan_id + 1} not flown: {err}", now, out)
-        out.append(fx.Upload(plan_id, tuple(items), mission, path, current, basis.keep_through,
-                             restart_current=current is not None and basis.keep_through is not None,
-                             planner_ms=planned.planner_ms, newest_request=planned.newest_request))
+        upload = fx.Upload(plan_id, tuple(items), mission, path, current, basis.keep_through,
+                           restart_current=current is not None and basis.keep_through is not None,
+                           planner_ms=planned.planner_ms, newest_request=planned.newest_request)
+        first = first_point(upload)
+        if basis.at_point is None and first is not None and not self._settled(s, first.hover_index, now, now):
+            # away from a hold nothing keeps the vehicle off the point: the upload waits
+            out.append(fx.Log("info", f"plan {plan_id}: flown once the claim of point {first.hover_index} has "
+                                      f"settled"))
+            return replace(s, schedule=replace(s.schedule.settle(upload), claimed_at=now))
+        out.append(upload)
         return replace(s, schedule=s.schedule.uploading(plan_id))
+
+    # --- settling: a point flown to once every claim made before its own is known ----------------
+    def _settled(self, s: Sortie, point: int, since: float, now: float) -> bool:
+        """Whether this member may fly to ``point``, claimed at ``since``: its claim has settled
+        (``FleetView.settled``), it has waited ``settle_max_s`` for it, or it is no fleet's."""
+        r = self.rules
+        return r.settle_max_s <= 0 or point in s.fleet.settled or now - since >= r.settle_max_s
+
+    def _settle(self, s: Sortie, now: float, out: list[fx.Effect]) -> Sortie:
+        """The plan waiting for its first point's claim to settle: uploaded once it has, given
+        up when another member claimed the point first (plan again), or when the state it was
+        made on is gone."""
+        up = s.schedule.settling
+        assert up is not None
+        point = first_point(up)
+        assert point is not None
+        k = point.hover_index
+        if s.life.over is not None or s.life.degraded is not None or s.life.return_seen_at is not None:
+            return replace(s, schedule=s.schedule.unsettled())
+        if k in s.fleet.blocked:  # another member claimed it first: it keeps it
+            out.append(fx.Log("info", f"plan {up.plan_id} not flown: point {k} was claimed first by another member"))
+            return replace(s, schedule=s.schedule.unsettled())
+        if not self._settled(s, k, s.schedule.claimed_at, now):
+            return s
+        if k not in s.fleet.settled:
+            out.append(fx.Log("warning", f"plan {up.plan_id}: the claim of point {k} has not settled in "
+                                         f"{self.rules.settle_max_s:g} s (a member not heard since): flown as decided"))
+        out.append(up)
+        return replace(s, schedule=s.schedule.uploading(up.plan_id))
 
     def _with_margins(self, path: PlannedPath, margin_s: float) -> PlannedPath:
         """The path as it will be flown: each hold ``margin_s`` longer than its upload needs

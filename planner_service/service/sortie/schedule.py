@@ -15,7 +15,9 @@ from typing import Literal
 from .. import events as ev
 from . import effects as fx
 
-Busy = Literal["", "plan", "upload", "readback"]
+Busy = Literal["", "plan", "settle", "upload", "readback"]
+"""What is in flight: a plan in search, a plan waiting for its first point's claim to settle
+among a fleet's members (``settling``), an upload, a read-back."""
 
 
 @dataclass(frozen=True)
@@ -58,6 +60,12 @@ class Schedule:
     """The seq from whose hold the last decision was made (one decision per interval)."""
     last_hover_index: int = -1
     """The hover point the vehicle last arrived at (where the way home's decisions start)."""
+    settling: fx.Upload | None = None
+    """The upload of a plan made away from a hold (before the takeoff, on the way home),
+    sent once its first point's claim has settled (``busy`` "settle")."""
+    claimed_at: float = -math.inf
+    """When the point this member flies to next was first claimed (a plan's first point,
+    settling or uploaded): its settling is waited for from then."""
 
     # --- what goes out and comes back ---------------------------------------------------------
     def planning(self) -> Schedule:
@@ -69,7 +77,16 @@ class Schedule:
         return replace(self, busy="", last_plan_at=now)
 
     def uploading(self, plan_id: int) -> Schedule:
-        return replace(self, busy="upload", plan_id=plan_id)
+        return replace(self, busy="upload", plan_id=plan_id, settling=None)
+
+    def settle(self, upload: fx.Upload) -> Schedule:
+        """``upload`` waits for its first point's claim to settle."""
+        return replace(self, busy="settle", plan_id=upload.plan_id, settling=upload)
+
+    def unsettled(self) -> Schedule:
+        """The plan waiting to settle is not flown (stale, or its point claimed first by
+        another member): plan again."""
+        return replace(self, busy="", settling=None, dirty=True) if self.busy == "settle" else self
 
     def uploaded(self, plan_id: int) -> Schedule:
         """The vehicle accepted plan ``plan_id``: the failures in a row end."""
@@ -110,13 +127,13 @@ class Schedule:
 
     # --- what changes the schedule from outside -----------------------------------------------
     def stale(self) -> Schedule:
-        """What is being searched now is made on a state that is gone (degraded)."""
-        return replace(self, version=self.version + 1)
+        """What is being searched (or settling) now is made on a state that is gone (degraded)."""
+        return replace(self.unsettled(), version=self.version + 1)
 
     def in_doubt(self) -> Schedule:
         """The vehicle may hold another mission: plans in search are stale, and the read-back
         goes at once, whatever the back-off."""
-        return replace(self, version=self.version + 1, retry_at=0.0, readback_at=0.0)
+        return replace(self.unsettled(), version=self.version + 1, retry_at=0.0, readback_at=0.0)
 
     def link_restored(self, now: float) -> Schedule:
         """A new link is a change: the failures in a row are forgiven."""
@@ -132,9 +149,10 @@ class Schedule:
         return replace(self, failures=0, retry_at=0.0)
 
     def ended(self) -> Schedule:
-        """The sortie is over: a plan in search is stale (an upload or a read-back in flight
-        is still answered)."""
-        return replace(self, version=self.version + 1, busy="" if self.busy == "plan" else self.busy)
+        """The sortie is over: a plan in search or settling is stale (an upload or a read-back
+        in flight is still answered)."""
+        s = self.unsettled()
+        return replace(s, version=s.version + 1, busy="" if s.busy == "plan" else s.busy)
 
     def next_sortie(self) -> Schedule:
         """The schedule a new sortie begins with: plan ids run on, anything in search is stale."""
