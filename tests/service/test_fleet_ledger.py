@@ -197,3 +197,21 @@ def test_a_member_claims_only_what_it_can_fly() -> None:
     assert ledger._routes["uav2"] == set(range(MAX_ROUTE))
     said(ledger, FleetServed(vehicle="uav2", user_id="u", tasks=9, at_s=T))
     assert [d.user_id for d in ledger.take_served()] == ["u"]
+
+
+def test_a_member_gone_armed_keeps_the_point_it_held_as_well_as_its_route() -> None:
+    """Finding (20 UAVs over radios, 2026-12-07): uav15's session lost its router for 3 s and
+    every member left its view; uav12, holding point 1 for 70 s, was lost with its vehicle
+    armed and its route kept, but its route is the plan flown *after* the point held: uav15
+    planned point 1 at once and held it beside uav12 for 6 s. A member gone armed keeps the
+    points it last claimed (its hold's, its next) too."""
+    alive, lost = {"uav1", "uav2"}, set()
+    ledger = ledger_of("uav1", alive, lost)
+    said(ledger, FleetIntentions(vehicle="uav2", time_s=T, users=[Intention("u", T + 10)], claims=["u"],
+                                 points=[1, 5], holding=1, points_at_s=[T - 60, T], route=[5, 7]))
+    assert ledger.blocked_points() == {1, 5}
+    alive.discard("uav2")
+    lost.add("uav2")
+    assert ledger.blocked_points() == {1, 5, 7}
+    lost.discard("uav2")
+    assert ledger.blocked_points() == frozenset()

@@ -270,12 +270,13 @@ class FleetLedger:
 
     def blocked_points(self) -> frozenset[int]:
         """The hovering points this member plans without: those the other live members claim,
-        and every point still to fly of a member gone with its vehicle armed (its vehicle
-        flies its mission home: it keeps that airspace until its service is back)."""
+        and of a member gone with its vehicle armed every point still to fly and the points it
+        last claimed, the one it held among them (its vehicle holds there, then flies its
+        mission home: it keeps that airspace until its service is back)."""
         lost = set(self._lost()) - {self.vehicle}
         with self._lock:
             claimed = others_points(self.vehicle, self._points, self._alive(), self._points)
-            return claimed | {k for v in lost for k in self._routes.get(v, ())}
+            return claimed | {k for v in lost for k in (*self._routes.get(v, ()), *self._points.get(v, {}))}
 
     def yield_points(self) -> dict[int, str]:
         """The point this member holds that another live member claims too and keeps (it
