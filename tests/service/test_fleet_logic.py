@@ -348,3 +348,17 @@ def test_a_hold_ends_once_the_next_points_claim_has_settled_and_a_next_point_los
     out += run.tick(seq=2, xyz=(120.5, 199.5, 100.0), boot_s=end + 1.0)
     (cmd,) = only(out, fx.Command)
     assert cmd.kind == "set_current" and cmd.seq == 3, cmd
+
+
+def test_a_member_flying_to_a_point_lost_flies_its_new_decision_at_once() -> None:
+    """Found at 20 UAVs (the settling's first run): uav13, flying to point 7, heard that uav16
+    had claimed it first and decided point 5, which waited to settle; its vehicle flew on
+    to 7 meanwhile and held it beside uav16. A decision replacing a point lost is uploaded at
+    once: flying on to the lost point is what must end."""
+    world = FakeWorld()
+    run, _ = fly_to_first_point(world)
+    settling(run, world)
+    (plan,) = only(run.feed(ins.FleetHeard(FleetView(blocked=frozenset({3})))), fx.MakePlan)
+    assert plan.basis.reason == "point 3 claimed by another member" and not plan.basis.settles
+    (up,) = only(run.feed(ins.Planned(plan.basis, path(point(9, 400.0, 300.0, "b", 2)))), fx.Upload)
+    assert first_point_of(up) == 9

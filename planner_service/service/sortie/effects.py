@@ -31,6 +31,10 @@ class PlanBasis:
     serving_reward: float = 0.0
     """That service's q as the hold's end will record it (a whole hold): the sortie's
     average reward, which ``mcts`` maximises, counts it with the interval it takes."""
+    settles: bool = False
+    """The plan's first point is flown to once its claim has settled among the fleet's
+    members (the vehicle meanwhile flies on as it was: on the ground, on its way home); not
+    for a vehicle holding (the hold waits instead), nor one flying to a point lost."""
 
 
 @dataclass(frozen=True)

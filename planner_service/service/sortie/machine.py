@@ -592,7 +592,7 @@ class SortieLogic:
             if s.onboard.held is not None and (s.authority.granted or not s.schedule.dirty
                                        or now - s.schedule.last_plan_at < r.replan_min_interval_s):
                 return None  # held and about to be started (a new one now would delay it), or nothing new
-            return fx.PlanBasis("requests before takeoff", s.schedule.version, None)
+            return fx.PlanBasis("requests before takeoff", s.schedule.version, None, settles=True)
         if v.mode in RETURNING_MODES:
             return None  # returning: the safety, the pilot or the mission decided
         if s.onboard.must_upload:
@@ -624,7 +624,8 @@ class SortieLogic:
         if (s.schedule.dirty and self._answers(s, v) and now - s.schedule.last_plan_at >= r.replan_min_interval_s
                 and self._pending_count(s) > 0 and v.xyz[2] >= r.area.min_flight_altitude_m
                 and now >= self._answer_at(s, v) and self._could_turn_back(s, v)):
-            return fx.PlanBasis("new requests on the way home", s.schedule.version, s.onboard.held.rtl_seq - 1)
+            return fx.PlanBasis("new requests on the way home", s.schedule.version, s.onboard.held.rtl_seq - 1,
+                                settles=True)
         return None
 
     def _answers(self, s: Sortie, v: ins.VehicleSnapshot) -> bool:
@@ -711,8 +712,9 @@ class SortieLogic:
                            restart_current=current is not None and basis.keep_through is not None,
                            planner_ms=planned.planner_ms, newest_request=planned.newest_request)
         first = first_point(upload)
-        if basis.at_point is None and first is not None and not self._settled(s, first.hover_index, now, now):
-            # away from a hold nothing keeps the vehicle off the point: the upload waits
+        if basis.settles and first is not None and not self._settled(s, first.hover_index, now, now):
+            # away from a hold nothing keeps the vehicle off the point: the upload waits (not
+            # for a vehicle flying to a point lost: flying on to it is what must end)
             out.append(fx.Log("info", f"plan {plan_id}: flown once the claim of point {first.hover_index} has "
                                       f"settled"))
             return replace(s, schedule=replace(s.schedule.settle(upload), claimed_at=now))
