@@ -176,6 +176,7 @@ def row(folder: Path, vehicles: list[str], summary: dict[str, Any], cut: CutOnce
         "users_served_by_two": len(summary["fleet"]["users_served_by_two_uavs"]),
         "users_served_at_once": summary["fleet"]["users_served_at_once"],
         "stacked_holds": summary["fleet"]["stacked_holds"],
+        "holds_of_two": summary["fleet"]["holds_of_two"],
         "agreed_after_s": (rejoined_after(folder, CUT_UAV, cut.restored_wall)
                            if cut.restored_wall is not None else None),
         "decision_ms_median": statistics.median(every_ms) if every_ms else None,
@@ -230,7 +231,7 @@ def run_fleet_scale(uav_counts: list[int], radio: Radio, users_per_uav: int, spe
             progress(f"  N={n}: flown/offline {r['flown_to_offline'] or 0:.2f}, fleet keys "
                      f"{r['fleet_keys_bytes_per_s']:.0f} B/s, radio down {r['radio_down_bytes_per_s'] or 0:.0f} B/s "
                      f"per UAV, served by two {r['users_served_by_two']} (at once {len(r['users_served_at_once'])}), "
-                     f"stacked {len(r['stacked_holds'])}")
+                     f"stacked {len(r['stacked_holds'])} (both hovering {len(r['holds_of_two'])})")
     return {"radio": vars(radio), "zenoh_mode": zenoh_mode, "users_per_uav": users_per_uav, "speedup": speedup,
             "budget_ms": budget_ms, "seed": seed, "cut": {"vehicle": CUT_UAV, "at_s": cut_at_s, "for_s": cut_for_s}, "rows": rows,
             "model": traffic_model(rows, [20, 50, 100])}
@@ -244,7 +245,7 @@ def format_fleet_scale(results: dict[str, Any]) -> str:
              f"per decision; {results['cut']['vehicle']}'s radio cut at {results['cut']['at_s']:g} s for "
              f"{results['cut']['for_s']:g} s)",
              f"{'N':>3} {'flown/off':>9} {'keys B/s':>8} {'status':>7} {'up B/s':>7} {'down B/s':>8} "
-             f"{'heard p50':>9} {'p99 ms':>7} {'by two':>6} {'at once':>7} {'stacked':>7} {'agreed s':>8} {'dec ms':>6} "
+             f"{'heard p50':>9} {'p99 ms':>7} {'by two':>6} {'at once':>7} {'stacked':>7} {'hovering':>8} {'agreed s':>8} {'dec ms':>6} "
              f"{'svc CPU%':>8} {'svc MB':>6} {'rtr CPU%':>8}"]
 
     def f(value: Any, spec: str) -> str:
@@ -255,7 +256,7 @@ def format_fleet_scale(results: dict[str, Any]) -> str:
                      f"{r['status_bytes_per_s']:>7.0f} {f(r['radio_up_bytes_per_s'], '.0f'):>7} "
                      f"{f(r['radio_down_bytes_per_s'], '.0f'):>8} {f(r['heard_p50_ms'], '.0f'):>9} "
                      f"{f(r['heard_p99_ms'], '.0f'):>7} {r['users_served_by_two']:>6} "
-                     f"{len(r['users_served_at_once']):>7} {len(r['stacked_holds']):>7} "
+                     f"{len(r['users_served_at_once']):>7} {len(r['stacked_holds']):>7} {len(r['holds_of_two']):>8} "
                      f"{f(r['agreed_after_s'], '.1f'):>8} {f(r['decision_ms_median'], '.0f'):>6} "
                      f"{r['service_cpu_percent']:>8.1f} {r['service_rss_mb']:>6.0f} {r['router_cpu_percent']:>8.1f}")
     for r in results["rows"]:
@@ -263,8 +264,9 @@ def format_fleet_scale(results: dict[str, Any]) -> str:
         lines.append(f"N={r['uavs']}: radio packets delivered late {100 * r.get('radio_late_share', 0.0):.2f} % "
                      f"(latest {r.get('radio_late_ms_max', 0.0):.0f} ms); the fleet's keys per member, B/s: {kinds}; "
                      f"served at once: "
-                     f"{', '.join(r['users_served_at_once']) or 'none'}; holds of two: "
-                     f"{', '.join(r['stacked_holds']) or 'none'}")
+                     f"{', '.join(r['users_served_at_once']) or 'none'}; stacked: "
+                     f"{', '.join(r['stacked_holds']) or 'none'}; holds of two (both hovering): "
+                     f"{', '.join(r['holds_of_two']) or 'none'}")
     lines.append("traffic per UAV, bytes/s = a + b N (fitted on the rows above; worst fit error; projected):")
     for name, m in results["model"].items():
         projected = ", ".join(f"N={n}: {v:.0f}" for n, v in m["projected"].items())

@@ -32,7 +32,7 @@ from ..service.journal import Journal
 from .demo import DemoError, area_axes
 from .live_map import LiveMap
 from .processes import Child, cpu_seconds, peak_rss_mb
-from .doubles import served_at_once, stacked_holds
+from .doubles import HOVER_MPS, served_at_once, stacked_holds
 from .report import sortie_summary
 
 LAYER_M = 20.0
@@ -270,8 +270,10 @@ def run_fleet_demo(out: Path, *, uavs: int = 3, users: int = 12, speedup: float 
     summary["processes"] = usage
     with (out / "statuses.jsonl").open("wb") as f:  # for tracing what the summary counts
         f.writelines(encode(s) + b"\n" for v in vehicles for s in watch.statuses[v])
-    summary["fleet"]["stacked_holds"] = stacked_holds(
-        [s for v in vehicles for s in watch.statuses[v]], 2 * defaults.safety.hold_radius_m)
+    every = [s for v in vehicles for s in watch.statuses[v]]
+    summary["fleet"]["stacked_holds"] = stacked_holds(every, 2 * defaults.safety.hold_radius_m)
+    summary["fleet"]["holds_of_two"] = stacked_holds(every, 2 * defaults.safety.hold_radius_m,
+                                                     hovering_mps=HOVER_MPS, speedup=speedup)
     summary["fleet"]["users_served_at_once"] = served_at_once(watch.events, speedup)
     summary.update(uavs=uavs, users=users, speedup=speedup, budget_ms=budget_ms, seed=seed, layer_m=LAYER_M,
                    base_step_m=home_step_m, wall_s=time.monotonic() - start)

@@ -22,6 +22,18 @@ def test_two_holding_over_one_point_for_a_second_are_stacked_and_a_crossing_is_n
                                                                         for t in range(6)], 10.0) == []
 
 
+def test_a_leg_flown_slowly_over_a_hold_is_near_it_but_no_hold_of_two() -> None:
+    """Found at 20 UAVs (x2.5): a vehicle flying a leg over another's hold, on its own layer,
+    slowing down for its own point near by, was within 10 m of it for 1-2 s and counted as a
+    hold of two. Both hovering is a hold of two; one flying past is only near it."""
+    # uav2 flies over uav1's point at 4 m/s of its own time (x2.5: 10 m a wall second)
+    passing = [s for t in range(12) for s in (at("uav1", t / 2, 100.0), at("uav2", t / 2 + 0.1, 70.0 + 5.0 * t))]
+    assert stacked_holds(passing, 10.0) == ["uav1-uav2 6 rounds"]
+    assert stacked_holds(passing, 10.0, hovering_mps=2.0, speedup=2.5) == []
+    over_one = [at(v, t / 2, 100.0 + (0.5 if v == "uav2" else 0.0)) for t in range(6) for v in ("uav1", "uav2")]
+    assert stacked_holds(over_one, 10.0, hovering_mps=2.0, speedup=2.5) == ["uav1-uav2 9 rounds"]
+
+
 def served(vehicle: str, user: str, end_s: float, held_s: float) -> tuple[str, Event]:
     return vehicle, Event(event="user_served", time_s=end_s, user_id=user,
                           detail=f"10 tasks at point 3; held {held_s:.1f} s")
