@@ -15,9 +15,10 @@ import pytest
 
 from planner_service.model.fleet.claims import BOUND, PLANNED, owned_by_others, owner
 from planner_service.service.fleet.ledger import FleetLedger
+from planner_service.service.fleet.roster import ANNOUNCE_STALE_S, FleetRoster
 from protocol import FleetKeys
-from protocol.messages import FleetIntentions, FleetServed, Intention, encode
-from tests.support.fleet import signer, verifier
+from protocol.messages import FleetIntentions, FleetMember, FleetPosition, FleetServed, Intention, encode
+from tests.support.fleet import member, signer, verifier
 
 KEYS = FleetKeys("ledgertest")
 
@@ -215,3 +216,33 @@ def test_a_member_gone_armed_keeps_the_point_it_held_as_well_as_its_route() -> N
     assert ledger.blocked_points() == {1, 5, 7}
     lost.discard("uav2")
     assert ledger.blocked_points() == frozenset()
+
+
+def test_a_member_gone_armed_stays_lost_until_it_has_announced_itself_again() -> None:
+    """Found at 20 UAVs (x2.5, the machine saturated): uav19's token went with its vehicle
+    armed and came back 6 s later; from its token's return until its announcement was heard
+    again it was neither a member (its last announcement older than 10 s) nor lost (the
+    token's return ended that), and uav9 planned the point uav19 was holding 53 ms after the
+    token came back."""
+    roster = FleetRoster(KEYS, verifier())
+
+    def token(kind: zenoh.SampleKind) -> None:
+        roster._on_token(Sample(KEYS.member("uav2"), Payload(b""), kind))
+
+    def signed(key: str, message: FleetMember | FleetPosition) -> Sample:
+        return Sample(key, Payload(signer("uav2").seal(key, encode(message), time.time())))
+
+    def announce() -> None:
+        roster._on_announce(signed(KEYS.announce("uav2"), member("uav2", 120.0)))
+    token(zenoh.SampleKind.PUT)
+    announce()
+    roster._on_position(signed(KEYS.position("uav2"), FleetPosition(x_m=0.0, y_m=0.0, z_m=120.0, armed=True)))
+    assert list(roster.members()) == ["uav2"] and roster.lost() == []
+    token(zenoh.SampleKind.DELETE)
+    assert roster.lost() == ["uav2"]
+    roster._said_at["uav2"] -= ANNOUNCE_STALE_S  # its announcements stopped long before its token went
+    token(zenoh.SampleKind.PUT)  # its session back: the token first
+    assert roster.lost() == ["uav2"] and list(roster.members()) == [], "not announced since: still lost"
+    time.sleep(0.01)  # (a later signed time: the replay rule takes the newest only)
+    announce()
+    assert list(roster.members()) == ["uav2"] and roster.lost() == []

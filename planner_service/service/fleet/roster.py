@@ -28,6 +28,7 @@ calls back on its own threads).
 
 from __future__ import annotations
 
+import math
 import threading
 import time
 from collections import deque
@@ -284,7 +285,10 @@ class FleetRoster:
                 return
             if joined:
                 self._alive.add(vehicle)
-                self._lost.pop(vehicle, None)  # judged as a member again
+                if self._said_at.get(vehicle, -math.inf) >= time.monotonic() - ANNOUNCE_STALE_S:
+                    self._lost.pop(vehicle, None)  # a member again at once, judged as one
+                # else still lost until it announces itself again (``_on_announce``): a token
+                # back alone made it neither a member nor lost, its points free to plan
             else:
                 self._alive.discard(vehicle)
                 last = self._seen.pop(vehicle, None)
@@ -315,6 +319,8 @@ class FleetRoster:
             return
         with self._lock:
             self._said_at[vehicle] = time.monotonic()
+            if vehicle in self._alive:
+                self._lost.pop(vehicle, None)  # a member again, judged as one
             if self._said.get(vehicle) == member:
                 return
             self._said[vehicle] = member
