@@ -5,13 +5,12 @@ exchange through real routers is tests/service/test_fleet_flight.py's and test_f
 
 from __future__ import annotations
 
+import math
+import time
 from dataclasses import dataclass, field
 
-import zenoh
-
-import time
-
 import pytest
+import zenoh
 
 from planner_service.model.fleet.claims import BOUND, PLANNED, owned_by_others, owner
 from planner_service.service.fleet.ledger import FleetLedger
@@ -246,3 +245,23 @@ def test_a_member_gone_armed_stays_lost_until_it_has_announced_itself_again() ->
     time.sleep(0.01)  # (a later signed time: the replay rule takes the newest only)
     announce()
     assert list(roster.members()) == ["uav2"] and roster.lost() == []
+
+
+def test_a_claim_settles_on_every_vehicle_that_may_be_a_member() -> None:
+    """Found at 20 UAVs (x2.5): uav17's session stalled; the others' announcements went stale,
+    so it had no members, and its claim on point 19 settled in 0.36 s: it flew to the point
+    uav10 had claimed 8 s before (unheard by it). A claim settles on every enrolled token
+    alive (silent ones too) and on every vehicle whose token went a moment ago."""
+    roster = FleetRoster(KEYS, verifier())
+    for v in ("uav2", "uav3"):
+        roster._on_token(Sample(KEYS.member(v), Payload(b""), zenoh.SampleKind.PUT))
+    assert roster.unsure(10.0) == {"uav2", "uav3"}, "no announcement heard: members or not, they may claim"
+    roster._on_token(Sample(KEYS.member("uav3"), Payload(b""), zenoh.SampleKind.DELETE))
+    assert roster.unsure(10.0) == {"uav2", "uav3"}, "uav3's token went a moment ago"
+    roster._left_at["uav3"] -= 11.0
+    assert roster.unsure(10.0) == {"uav2"}
+    ledger = ledger_of("uav1", set())
+    assert ledger.heard_since() == math.inf, "no member: nothing to wait for"
+    assert ledger.heard_since(roster.unsure(10.0)) == -math.inf, "uav2 never heard"
+    said(ledger, FleetIntentions(vehicle="uav2", time_s=T))
+    assert T <= ledger.heard_since(roster.unsure(10.0)) <= time.time()

@@ -299,15 +299,15 @@ class FleetLedger:
         with self._lock:
             return self._answering & alive
 
-    def heard_since(self) -> float:
-        """The time (wall clock) as of which every other live member's claims are known here:
-        the earliest of their latest intentions' signed times (each member's own clock; -inf
-        while one was never heard, +inf without others). A claim this member made before it
-        was heard by every member with it or after it (the claim rule has judged it: a claim
-        made after it by another loses to it)."""
-        alive = set(self._alive()) - {self.vehicle}
+    def heard_since(self, vehicles: Iterable[str] | None = None) -> float:
+        """The time (wall clock) as of which the claims of every other live member (or of
+        ``vehicles``) are known here: the earliest of their latest intentions' signed times
+        (each member's own clock; -inf while one was never heard, +inf without others). A
+        claim this member made before it was heard by every member with it or after it (the
+        claim rule has judged it: a claim made after it by another loses to it)."""
+        others = set(self._alive() if vehicles is None else vehicles) - {self.vehicle}
         with self._lock:
-            return min((self._signed_at.get(v, -math.inf) for v in alive), default=math.inf)
+            return min((self._signed_at.get(v, -math.inf) for v in others), default=math.inf)
 
     def claims(self) -> dict[str, dict[str, Claim]]:
         """Every member's last claims (vehicle -> user -> claim), live or not."""

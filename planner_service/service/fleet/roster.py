@@ -104,6 +104,8 @@ class FleetRoster:
         """Each member's last signed position (its vehicle's own)."""
         self._lost: dict[str, Seen] = {}
         """The last position of each member gone with its vehicle armed, until it is back."""
+        self._left_at: dict[str, float] = {}
+        """When (monotonic) each enrolled vehicle's token last went."""
         self._publishers: dict[str, set[str]] = {}
         """The announcement publishers alive for each vehicle (zenoh.ext's publisher
         detection: one per service): two for one vehicle are two services claiming it."""
@@ -192,6 +194,15 @@ class FleetRoster:
         as a member only with a fresh signed announcement)."""
         with self._lock:
             return sorted(self._alive)
+
+    def unsure(self, within_s: float) -> set[str]:
+        """The vehicles whose claims this member may not know, for a claim to settle on: every
+        enrolled token alive (members, and those gone silent: their announcements stale, their
+        claims maybe unheard) and those whose token went within ``within_s`` (a session that
+        dropped for a moment comes back with what it claimed meanwhile)."""
+        since = time.monotonic() - within_s
+        with self._lock:
+            return set(self._alive) | {v for v, at in self._left_at.items() if at >= since}
 
     def lost(self) -> list[str]:
         """The members gone while their vehicles were armed (not back yet, and last seen
@@ -291,6 +302,7 @@ class FleetRoster:
                 # back alone made it neither a member nor lost, its points free to plan
             else:
                 self._alive.discard(vehicle)
+                self._left_at[vehicle] = time.monotonic()
                 last = self._seen.pop(vehicle, None)
                 armed = last is not None and last.position.armed
                 if armed and len(self._lost) < MAX_VEHICLES_KEPT:
