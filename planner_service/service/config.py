@@ -395,8 +395,9 @@ class MembershipConfig(Section):
     intentions signed after it (``settle_margin_s`` later) were heard, so that the claim rule
     has judged every claim made before it (of two members that chose one point within a
     radio's hearing delay, the first to claim flies, the other decides again). Waited at most
-    this long (wall clock: a member heard late, or one whose key was stolen and that says
-    nothing, delays each decision by this at most); then flown as decided, and logged. 0: off."""
+    this long (wall clock: a member heard late, a token declared under an enrolled id by a
+    rogue peer, or a member whose key was stolen and that says nothing, delays each decision
+    by this at most); then flown as decided, and logged. 0: off."""
     settle_margin_s: float = setting(0.1, ge=0, le=4.0, unit="s")
     """How far apart the members' clocks may read for the settling above to hold (it compares
     their signed times with this computer's): GPS or NTP time on the field."""
