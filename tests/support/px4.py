@@ -104,7 +104,7 @@ def one_at_a_time(wait_s: float = TURN_WAIT_S) -> Iterator[None]:
     """This test process's turn with PX4: one PX4 SITL at a time on the machine, across the
     test workers. Two at x10 on two cores (the two PX4 test files on the two workers at once)
     made MAVSDK's commands take 4-12 s each (an upload of 3 items 12 s, an arming 8.6 s), and
-    PX4's preflight disarm (60 s of its time: 6 s of wall) came between the start's steps: the
+    PX4's preflight disarm (then 60 s of its time: 6 s of wall) came between the start's steps: the
     start refused, or the vehicle landed at item 0 (the clean clones of 2026-12-06 and -07;
     each file alone passed). A real autopilot has its computer to itself."""
     handle = open(TURN_FILE, "w")

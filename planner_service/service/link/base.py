@@ -171,9 +171,9 @@ class VehicleLink(abc.ABC):
                 _go_on(proceed, "start()")
             disarms = self.state.disarms
             await self._arm(True)
-            armed_here = True
+            armed_here, armed_at = True, time.monotonic()
             await self._armed_seen("start()")
-            await self._resume(proceed, "start()", disarms)
+            await self._resume(proceed, "start()", disarms, armed_at)
         except LinkError as err:
             if (armed_here or self.telemetry.armed) and not was_armed and proceed() is None:
                 await self._disarm_on_ground(err)
@@ -239,16 +239,17 @@ class VehicleLink(abc.ABC):
         self._check_link("resume()")
         await self._resume(proceed, "resume()", self.state.disarms)
 
-    async def _resume(self, proceed: Proceed, operation: str, disarms: int) -> None:
+    async def _resume(self, proceed: Proceed, operation: str, disarms: int, armed_at: float | None = None) -> None:
         _go_on(proceed, operation)
         await self._set_mode(self.profile.mission_mode)
         _go_on(proceed, operation)
         if self.state.disarms != disarms or not self.telemetry.armed:
             # PX4's MISSION_START arms a disarmed vehicle by itself: after the autopilot's
             # own disarming (PX4's preflight disarm, ArduCopter's DISARM_DELAY) nothing the
-            # operator allowed is left to start.
-            raise LinkError(operation, "the vehicle was disarmed meanwhile (the autopilot's own disarming, or "
-                                       "someone's): the mission is not started")
+            # operator allowed is left to start. How long the steps took says which it was.
+            since = "" if armed_at is None else f", {time.monotonic() - armed_at:.1f} s after the arming"
+            raise LinkError(operation, f"the vehicle was disarmed meanwhile (the autopilot's own disarming, or "
+                                       f"someone's{since}): the mission is not started")
         await self.command(M.MAV_CMD_MISSION_START, 0, 0, what="start_mission()")
 
     async def return_to_launch(self) -> None:
