@@ -194,7 +194,9 @@ def take_over(fleet: FleetStack, uav1: Uav, uav2: Uav, wire: Intentions, owned: 
     # each of uav2's users served by uav1, or left out by the fleet-wide fairness rule (its
     # services by uav2 counted), or by the sortie's end: never silently dropped
     assert all(u in after or reasons.get(u) for u in owned), (owned, after, reasons)
-    assert owned & after or all(reasons[u].startswith("fairness") for u in owned), (owned, after, reasons)
+    over = [line for line in uav1.service.log().splitlines() if "over:" in line]
+    assert owned & after or all(reasons[u].startswith("fairness") for u in owned), (
+        f"of uav2's {sorted(owned)} uav1 served none ({ {u: reasons.get(u) for u in owned} }); uav1's end: {over}")
 
 
 def track(uav: Uav) -> list[tuple[float, str]]:
