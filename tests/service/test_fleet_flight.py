@@ -30,7 +30,13 @@ from tests.support.fleet_stack import Arrivals, FleetStack, Intentions, Uav
 SPEEDUP = "20"
 INTERVAL_S = build_config({}, {}).scenario().task_arrival_period_s
 """One interval of the service's scenario, vehicle seconds."""
-START = {"mavlink.start_mission": "true", "planner.min_requests": "3"}
+SETTLE_S = build_config({}, {}).fleet.settle_max_s / float(SPEEDUP)
+"""The fleet's wait for a claim to settle, as much flight as on the field (wall seconds at x1):
+its default 10 s of wall time is 200 s of flight at x20, and a member on its way home when
+the other's service died (its token gone within the wait: it may come back with new claims)
+landed before its decision to serve the lost member's users had settled (a clean clone's
+failure). On loopback the members hear each other in milliseconds, well within it."""
+START = {"mavlink.start_mission": "true", "planner.min_requests": "3", "fleet.settle_max_s": f"{SETTLE_S:g}"}
 
 
 def served_by(fleet: FleetStack) -> dict[str, Counter[str]]:
