@@ -49,10 +49,10 @@ PX4_UNASKED_HZ = {"GLOBAL_POSITION_INT": 50.0, "SYS_STATUS": 5.0, "EXTENDED_SYS_
 (test_conformance_px4.ONBOARD_HZ): the link's requests bring them down."""
 FLYING = {"COM_DISARM_PRFLT": read_params(PARAMS)["COM_DISARM_PRFLT"]}
 """For a test that takes off: PX4's preflight disarm as the scenario sets it (100 s of its
-time, 10 s of wall at x10), not its default 10 s, one second of wall time at x10, which a start's three round
-trips on the busy 2 cores once outlasted (a clean-clone run: "Disarmed by auto preflight
-disarming" between the arming and AUTO.MISSION). The test of that disarming keeps PX4's
-default."""
+time, 10 s of wall at x10), not its default 10 s: one second of wall at x10, which a start's
+three round trips on the busy 2 cores once outlasted (a clean-clone run: "Disarmed by auto
+preflight disarming" between the arming and AUTO.MISSION). The test of that disarming keeps
+PX4's default."""
 
 
 def link_for(px4: Px4, backend: str, events: Recorder) -> VehicleLink:
