@@ -28,9 +28,10 @@ from tests.support.fleet import wait_until
 from tests.support.fleet_stack import Arrivals, FleetStack, Intentions, Uav
 
 SPEEDUP = "20"
-INTERVAL_S = build_config({}, {}).scenario().task_arrival_period_s
+DEFAULTS = build_config({}, {})
+INTERVAL_S = DEFAULTS.scenario().task_arrival_period_s
 """One interval of the service's scenario, vehicle seconds."""
-SETTLE_S = build_config({}, {}).fleet.settle_max_s / float(SPEEDUP)
+SETTLE_S = DEFAULTS.fleet.settle_max_s / float(SPEEDUP)
 """The fleet's wait for a claim to settle, as much flight as on the field (wall seconds at x1):
 its default 10 s of wall time is 200 s of flight at x20, and a member on its way home when
 the other's service died (its token gone within the wait: it may come back with new claims)
