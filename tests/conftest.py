@@ -13,6 +13,7 @@ import pytest
 from tests.support import px4 as px4_support
 from tests.support.px4 import Px4
 from tests.support.sitl import Sitl, free_instance, sitl_binary, skip_reason
+from tests.support.turn import heavy_sitl_turn
 
 REPO = Path(__file__).resolve().parent.parent
 
@@ -73,8 +74,8 @@ def make_px4(tmp_path: Path) -> Iterator[Callable[..., Px4]]:
     """A factory of PX4 SITLs (tests/support/px4.py; keyword arguments go to ``Px4``, e.g.
     ``params``; ``start=False``: not started yet, for a test that listens before PX4's
     first second), each in its own folder and instance and stopped at the end, one test
-    process's PX4s at a time on the machine (``px4_support.one_at_a_time``); skipped where
-    PX4 SITL is missing."""
+    process's PX4s at a time on the machine, beside no other heavy simulation
+    (``tests/support/turn.py``); skipped where PX4 SITL is missing."""
     root = px4_support.px4_root()
     if root is None:
         pytest.skip(px4_support.skip_reason())
@@ -83,7 +84,7 @@ def make_px4(tmp_path: Path) -> Iterator[Callable[..., Px4]]:
 
     def make(**options: Any) -> Px4:
         if not started:
-            turn.enter_context(px4_support.one_at_a_time())
+            turn.enter_context(heavy_sitl_turn())
         folder = tmp_path / f"px4-{len(started)}"
         folder.mkdir()
         start = options.pop("start", True)
@@ -99,6 +100,14 @@ def make_px4(tmp_path: Path) -> Iterator[Callable[..., Px4]]:
         for p in started:
             p.stop()
         turn.close()
+
+
+@pytest.fixture
+def heavy_turn() -> Iterator[None]:
+    """This test's turn with the machine among the heavy simulations (``tests/support/turn.py``):
+    for a test that starts several SITLs at once, before it starts them."""
+    with heavy_sitl_turn():
+        yield
 
 
 @pytest.fixture

@@ -30,8 +30,9 @@ from tests.support.fleet import wait_until
 from tests.support.fleet_stack import FleetStack, Intentions, Positions, Uav, home
 from tests.support.sitl import Sitl, free_instance
 from tests.support.truth import false_services, recorded_services, sitl_track
+from tests.support.turn import TURN_WAIT_S
 
-pytestmark = [pytest.mark.sitl, pytest.mark.timeout(600)]
+pytestmark = [pytest.mark.sitl, pytest.mark.timeout(600 + TURN_WAIT_S), pytest.mark.usefixtures("heavy_turn")]
 
 REPO = Path(__file__).resolve().parents[2]
 CONFIG = REPO / "docs" / "sitl-copter.toml"

@@ -29,8 +29,9 @@ from protocol import GeoOrigin, HoverPoint, encode_path, global_to_local, replac
 from sim_bridge.vehicle.mission_id import px4_mission_id
 from tests.service.test_link_sitl import Recorder, distance, until, where
 from tests.support.px4 import PARAMS, Px4, read_params
+from tests.support.turn import TURN_WAIT_S
 
-pytestmark = [pytest.mark.sitl, pytest.mark.timeout(150)]
+pytestmark = [pytest.mark.sitl, pytest.mark.timeout(150 + TURN_WAIT_S)]
 BACKENDS = ["pymavlink", "mavsdk"]
 ORIGIN = GeoOrigin()
 SPEED = 10

@@ -45,8 +45,9 @@ from tests.support.gcs import M, GroundStation
 from tests.support.px4 import PARAMS, Px4, free_instance, read_params
 from tests.support.stack import Stack
 from tests.support.truth import false_services, px4_track, recorded_services
+from tests.support.turn import TURN_WAIT_S
 
-pytestmark = [pytest.mark.sitl, pytest.mark.timeout(300)]
+pytestmark = [pytest.mark.sitl, pytest.mark.timeout(300 + TURN_WAIT_S)]
 
 REPO = Path(__file__).resolve().parents[2]
 CONFIG = REPO / "docs" / "sitl-px4.toml"

@@ -28,19 +28,17 @@ Who talks to it on which port (PX4's own ``px4-rc.mavlink``; UDP on 127.0.0.1):
 
 from __future__ import annotations
 
-import contextlib
 import fcntl
 import os
 import re
 import shutil
 import signal
 import subprocess
-import tempfile
 import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any
 
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavutil  # noqa: E402
@@ -55,10 +53,6 @@ ENV = "PX4_SITL"
 INSTANCES = range(1, 10)
 """PX4 instance numbers for the tests (0 is left to people; above 9 the onboard links of all
 instances share one remote port)."""
-TURN_FILE = Path(tempfile.gettempdir()) / "uav-planner-px4-turn.lock"
-TURN_WAIT_S = 900.0
-"""How long a test waits for its turn with PX4 (a test holds it for its own length, the
-longest about 80 s on a loaded machine)."""
 SPEED = 5
 """PX4_SIM_SPEED_FACTOR: simulated seconds per wall second (4 measured 3.7x on 2 busy cores)."""
 M = mavutil.mavlink
@@ -99,30 +93,6 @@ def px4_root() -> Path | None:
     return None
 
 
-@contextlib.contextmanager
-def one_at_a_time(wait_s: float = TURN_WAIT_S) -> Iterator[None]:
-    """This test process's turn with PX4: one PX4 SITL at a time on the machine, across the
-    test workers. Two at x10 on two cores (the two PX4 test files on the two workers at once)
-    made MAVSDK's commands take 4-12 s each (an upload of 3 items 12 s, an arming 8.6 s), and
-    PX4's preflight disarm (then 60 s of its time: 6 s of wall) came between the start's steps: the
-    start refused, or the vehicle landed at item 0 (the clean clones of 2026-12-06 and -07;
-    each file alone passed). A real autopilot has its computer to itself."""
-    handle = open(TURN_FILE, "w")
-    deadline = time.monotonic() + wait_s
-    try:
-        while True:
-            try:
-                fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
-                break
-            except OSError:
-                if time.monotonic() > deadline:
-                    raise RuntimeError(f"no turn with PX4 within {wait_s:g} s: another test process holds "
-                                       f"{TURN_FILE}") from None
-                time.sleep(0.2)
-        yield
-    finally:
-        handle.close()  # (closing releases the lock)
-
 def skip_reason() -> str:
     return (f"no PX4 SITL: set {ENV} to a folder with bin/px4 and etc/, or put it at "
             f"{REPO.parent / 'shared/px4'} (see docs/OPERATIONS.md)")
@@ -149,8 +119,6 @@ def free_instance(instances: range = INSTANCES) -> int:
 
 
 def _px4_running(instance: int) -> bool:
-    import fcntl
-
     try:
         handle = open(f"/tmp/px4_lock-{instance}", "r")
     except OSError:

@@ -1,0 +1,51 @@
+"""The machine's turn for the heavy simulations: one at a time across the test workers.
+
+A PX4 SITL (sped up, with MAVSDK's server beside it) and the fleet of three ArduCopter SITLs
+each fill the two cores of the machine the suite runs on. Two of them at once starved both:
+MAVSDK's upload of 3 items took 12-28 s and its arming came 50 s after it, so PX4's preflight
+disarm came between the start's steps (the start refused, or the vehicle landed at item 0 and
+the authority was revoked: the clean clones of 2026-12-06 and -07 and of stop 45), and the
+fleet's test took 239 s instead of 90. A real autopilot has its computer to itself; each test
+alone passed."""
+
+from __future__ import annotations
+
+import contextlib
+import fcntl
+import tempfile
+import time
+from pathlib import Path
+from typing import Iterator
+
+TURN_FILE = Path(tempfile.gettempdir()) / "uav-planner-heavy-sitl-turn.lock"
+TURN_WAIT_S = 600.0
+"""How long a test waits for its turn (a test holds it for its own length: the longest, the
+fleet's take-over on three SITL copters, about 100 s on a loaded machine; the PX4 files' tests
+one after the other take about 6 minutes)."""
+POLL_S = 0.05
+HANDOVER_S = 0.2
+"""How long a test that ends its turn waits before it may take the next: longer than a
+waiter's poll, so that a waiter takes the turn: the lock is not fair by itself, and a PX4
+file's next test, asking within milliseconds of the last one's end, could keep it for the whole
+file."""
+
+
+@contextlib.contextmanager
+def heavy_sitl_turn(wait_s: float = TURN_WAIT_S) -> Iterator[None]:
+    """This test process's turn with a heavy simulation (a file lock across the workers)."""
+    handle = open(TURN_FILE, "w")
+    deadline = time.monotonic() + wait_s
+    try:
+        while True:
+            try:
+                fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                break
+            except OSError:
+                if time.monotonic() > deadline:
+                    raise RuntimeError(f"no turn with the heavy simulations within {wait_s:g} s: another "
+                                       f"test process holds {TURN_FILE}") from None
+                time.sleep(POLL_S)
+        yield
+    finally:
+        handle.close()  # (closing releases the lock)
+    time.sleep(HANDOVER_S)
