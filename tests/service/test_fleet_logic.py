@@ -15,7 +15,7 @@ from planner_service.service.sortie import SortieLogic
 from planner_service.service.sortie.fleet import Claims, FleetView, answer_rank
 from planner_service.service.sortie.machine import first_point
 from tests.service.test_sortie_logic import (FakeWorld, Run, bound_to_a_user_uav2_owns, fly_to_first_point, only, path,
-                                             point)
+                                             point, rules)
 
 
 def intents(effects: list[fx.Effect]) -> list[Claims]:
@@ -362,3 +362,38 @@ def test_a_member_flying_to_a_point_lost_flies_its_new_decision_at_once() -> Non
     assert plan.basis.reason == "point 3 claimed by another member" and not plan.basis.settles
     (up,) = only(run.feed(ins.Planned(plan.basis, path(point(9, 400.0, 300.0, "b", 2)))), fx.Upload)
     assert first_point_of(up) == 9
+
+
+def test_a_member_outbid_at_its_first_point_before_the_takeoff_plans_again_on_what_is_left() -> None:
+    """Finding (the fleet on three SITL copters, 2026-12-07): all three decided at the tenth
+    request (``planner.min_requests`` 10, ten users); uav2 lost its first point to uav1 or uav3
+    three times, and then waited for ten requests no other member owned, which never came while
+    they owned some: it stayed on the ground for 45 s, until uav3's service died. A member
+    outbid decides again on the requests left to it, however few."""
+    world = FakeWorld()
+    for j, user in enumerate("abc"):
+        world.ask(user, 100.0 + 100 * j, 200.0, 10, j + 1)
+    run = settling(Run(world, rules(min_requests=3)), world)
+    (plan,) = only(run.tick(), fx.MakePlan)
+    assert plan.basis.reason == "requests before takeoff"
+    assert not only(run.feed(ins.Planned(plan.basis, path(point(3, 100.0, 200.0, "a", 1)))), fx.Upload)
+    assert run.s.schedule.busy == "settle"
+    taken = FleetView(owners={"a": "uav1", "b": "uav3"}, blocked=frozenset({3}))
+    out = run.feed(ins.FleetHeard(taken))
+    assert "point 3 was claimed first by another member" in " ".join(e.text for e in only(out, fx.Log))
+    (plan,) = only(out + run.tick(), fx.MakePlan)  # one request left to it, not three
+    assert plan.basis.reason == "requests before takeoff"
+    assert not only(run.feed(ins.Planned(plan.basis, path(point(5, 300.0, 200.0, "c", 3)))), fx.Upload)
+    (up,) = only(run.feed(ins.FleetHeard(replace(taken, settled=frozenset({5})))), fx.Upload)
+    assert first_point_of(up) == 5
+
+
+def test_a_member_not_outbid_waits_for_its_minimum_of_requests_no_other_member_owns() -> None:
+    world = FakeWorld()
+    for j, user in enumerate("abc"):
+        world.ask(user, 100.0 + 100 * j, 200.0, 10, j + 1)
+    run = settling(Run(world, rules(min_requests=3)), world)
+    run.s = replace(run.s, fleet=FleetView(owners={"a": "uav1"}))
+    assert not only(run.tick(), fx.MakePlan), "two requests of its own, three wanted"
+    world.ask("d", 400.0, 200.0, 10, 4)
+    assert only(run.tick(), fx.MakePlan)

@@ -587,8 +587,8 @@ class SortieLogic:
         if not v.airborne:
             if s.life.started or s.life.flown or s.schedule.commanding == "start":
                 return None  # starting or taking off (a new mission now would restart it), or landed
-            if self._pending_count(s) < r.min_requests:
-                return None
+            if self._pending_count(s) < (1 if s.schedule.outbid else r.min_requests):
+                return None  # (a member outbid at its first point has decided to fly already)
             if s.onboard.held is not None and (s.authority.granted or not s.schedule.dirty
                                        or now - s.schedule.last_plan_at < r.replan_min_interval_s):
                 return None  # held and about to be started (a new one now would delay it), or nothing new
@@ -741,7 +741,7 @@ class SortieLogic:
             return replace(s, schedule=s.schedule.unsettled())
         if k in s.fleet.blocked:  # another member claimed it first: it keeps it
             out.append(fx.Log("info", f"plan {up.plan_id} not flown: point {k} was claimed first by another member"))
-            return replace(s, schedule=s.schedule.unsettled())
+            return replace(s, schedule=s.schedule.unsettled(outbid=not s.life.started))
         if not self._settled(s, k, s.schedule.claimed_at, now):
             return s
         if k not in s.fleet.settled:

@@ -66,11 +66,19 @@ class Schedule:
     claimed_at: float = -math.inf
     """When the point this member flies to next was first claimed (a plan's first point,
     settling or uploaded): its settling is waited for from then."""
+    outbid: bool = False
+    """A plan before the takeoff was given up because another member claimed its first point
+    first: the next plan does not wait for ``planner.min_requests`` again. The member had
+    decided to fly on the requests it saw; the claim rule changed only what it serves, and
+    the others now own some of those requests, so the count of the rest may never reach the
+    minimum again (a fleet SITL run: uav2 lost three plans at the start to uav1 and uav3 and
+    stayed on the ground for 45 s until uav3's service died)."""
 
     # --- what goes out and comes back ---------------------------------------------------------
     def planning(self) -> Schedule:
-        """A plan asked of the planner: the requests so far are in it."""
-        return replace(self, busy="plan", dirty=False)
+        """A plan asked of the planner: the requests so far are in it (and it is the one plan
+        an ``outbid`` member makes without waiting for the minimum)."""
+        return replace(self, busy="plan", dirty=False, outbid=False)
 
     def plan_returned(self, now: float) -> Schedule:
         """The planner answered (a plan or a failure)."""
@@ -83,10 +91,12 @@ class Schedule:
         """``upload`` waits for its first point's claim to settle."""
         return replace(self, busy="settle", plan_id=upload.plan_id, settling=upload)
 
-    def unsettled(self) -> Schedule:
+    def unsettled(self, outbid: bool = False) -> Schedule:
         """The plan waiting to settle is not flown (stale, or its point claimed first by
-        another member): plan again."""
-        return replace(self, busy="", settling=None, dirty=True) if self.busy == "settle" else self
+        another member: ``outbid``, on the ground): plan again."""
+        if self.busy != "settle":
+            return self
+        return replace(self, busy="", settling=None, dirty=True, outbid=outbid)
 
     def uploaded(self, plan_id: int) -> Schedule:
         """The vehicle accepted plan ``plan_id``: the failures in a row end."""
