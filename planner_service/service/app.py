@@ -323,6 +323,9 @@ class Service:
                 self._tell_claims(claims)
             case fx.Log(level=level, text=text):
                 getattr(log, level)("%s", text)
+            case fx.Unsettled(plan_id=plan_id, point=point, waited_s=waited_s):
+                log.warning("plan %d: the claim of point %d has not settled in %g s (not heard since: %s): flown as "
+                            "decided", plan_id, point, waited_s, ", ".join(self._unheard(point)) or "none now")
             case fx.EndSortie(why=why):
                 self._end_sortie(why)
             case fx.BeginSortie(battery_fraction=fraction):
@@ -478,6 +481,15 @@ class Service:
         (at 20 UAVs one did, in 0.36 s, and flew to a point another had claimed 8 s before)."""
         known = heard_since - self.cfg.fleet.settle_margin_s
         return frozenset(k for k, at in self._points_at.items() if at <= known)
+
+    def _unheard(self, point: int) -> list[str]:
+        """The vehicles a claim of ``point`` settles on (``_settled``) whose intentions signed
+        ``fleet.settle_margin_s`` after the claim this member has not heard."""
+        claimed_at = self._points_at.get(point)
+        if self.fleet is None or claimed_at is None:
+            return []
+        waited_on = self.fleet.roster.unsure(self.cfg.fleet.settle_max_s)
+        return self.fleet.ledger.not_heard_since(claimed_at + self.cfg.fleet.settle_margin_s, waited_on)
 
     def _others_over(self) -> frozenset[int]:
         """The hovering points another member's vehicle is over now (``fleet.occupied_m``),

@@ -301,7 +301,7 @@ def test_a_claim_that_does_not_settle_is_flown_after_the_bound() -> None:
     out = run.tick()
     (up,) = only(out, fx.Upload)
     assert first_point_of(up) == 9
-    assert "has not settled in 10 s" in " ".join(e.text for e in only(out, fx.Log) if e.level == "warning")
+    assert only(out, fx.Unsettled) == [fx.Unsettled(up.plan_id, 9, SETTLE_S)], "the service warns, naming whom"
 
 
 def test_a_lone_uav_flies_a_decision_at_once() -> None:

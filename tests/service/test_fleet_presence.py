@@ -420,3 +420,6 @@ def test_a_members_intentions_are_put_again_unchanged_and_the_others_know_them_a
     wait_until(lambda: b.ledger.heard_since() >= later, 10.0, "uav1's intentions put again and heard")
     assert b.ledger.blocked_points() == {4} and b.ledger.owners() == {"u": "uav1"}, "the same claims"
     assert a.ledger.heard_since() == -math.inf, "uav2 has said nothing: none of its claims is known"
+    # what a claim made before ``later`` waits on, named (the warning of a claim not settled)
+    assert b.ledger.not_heard_since(later, {"uav1", "uav2", "uav3"}) == ["uav3"], "uav1 heard since; uav3 never"
+    assert b.ledger.not_heard_since(time.time() + 60.0, {"uav1", "uav2"}) == ["uav1"], "not yet signed then"

@@ -309,6 +309,13 @@ class FleetLedger:
         with self._lock:
             return min((self._signed_at.get(v, -math.inf) for v in others), default=math.inf)
 
+    def not_heard_since(self, at: float, vehicles: Iterable[str]) -> list[str]:
+        """Of ``vehicles`` (other than this member), those whose latest intentions heard here
+        were signed before ``at`` (wall clock), or never heard: what a claim made then still
+        waits on (``heard_since``), sorted."""
+        with self._lock:
+            return sorted(v for v in set(vehicles) - {self.vehicle} if self._signed_at.get(v, -math.inf) < at)
+
     def claims(self) -> dict[str, dict[str, Claim]]:
         """Every member's last claims (vehicle -> user -> claim), live or not."""
         with self._lock:

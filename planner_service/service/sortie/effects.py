@@ -129,6 +129,17 @@ class Log:
 
 
 @dataclass(frozen=True)
+class Unsettled:
+    """Plan ``plan_id`` is flown though the claim of its first point ``point`` has not settled
+    within ``waited_s`` (``fleet.settle_max_s``): the service warns, naming the members whose
+    intentions signed since the claim it has not heard (only it knows whom it waited on)."""
+
+    plan_id: int
+    point: int
+    waited_s: float
+
+
+@dataclass(frozen=True)
 class EndSortie:
     why: str
 
@@ -145,4 +156,4 @@ class MarkFlown:
 
 
 Effect = (MakePlan | Upload | ReadBack | Command | RecordService | RecordMission | Emit | PublishPlan | Intend | Log
-          | EndSortie | BeginSortie | MarkFlown)
+          | Unsettled | EndSortie | BeginSortie | MarkFlown)

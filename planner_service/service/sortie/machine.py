@@ -745,8 +745,7 @@ class SortieLogic:
         if not self._settled(s, k, s.schedule.claimed_at, now):
             return s
         if k not in s.fleet.settled:
-            out.append(fx.Log("warning", f"plan {up.plan_id}: the claim of point {k} has not settled in "
-                                         f"{self.rules.settle_max_s:g} s (a member not heard since): flown as decided"))
+            out.append(fx.Unsettled(up.plan_id, k, self.rules.settle_max_s))
         out.append(up)
         return replace(s, schedule=s.schedule.uploading(up.plan_id))
 
