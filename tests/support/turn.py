@@ -4,7 +4,7 @@ A PX4 SITL (sped up, with MAVSDK's server beside it) and the fleet of three Ardu
 each fill the two cores of the machine the suite runs on. Two of them at once starved both:
 MAVSDK's upload of 3 items took 12-28 s and its arming came 50 s after it, so PX4's preflight
 disarm came between the start's steps (the start refused, or the vehicle landed at item 0 and
-the authority was revoked: the clean clones of 2026-12-06 and -07 and of stop 45), and the
+the authority was revoked: the clean clones of 2026-12-06 and -07 and a CI run), and the
 fleet's test took 239 s instead of 90. A real autopilot has its computer to itself; each test
 alone passed."""
 
