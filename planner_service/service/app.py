@@ -462,8 +462,7 @@ class Service:
         ledger.beat(self.cfg.fleet.intentions_every_s)
         answering = coarse(self.fleet.whereabouts(ledger.answering()))
         heard = FleetView(ledger.owners(), ledger.blocked_points() | self._others_over(), ledger.yield_points(),
-                          answering, self._settled(ledger.heard_since(self.fleet.roster.unsure(
-                              self.cfg.fleet.settle_max_s))))
+                          answering, self._settled(ledger.heard_since(self._waited_on())))
         if heard != self.state.fleet:
             self._feed(ins.FleetHeard(heard))
         for done in self.fleet.ledger.take_served():
@@ -471,6 +470,11 @@ class Service:
             log.info("fleet: %s served %s %d tasks%s", done.vehicle, done.user_id, done.tasks,
                      "" if held else " (no request of that user in force here)")
             self._event(ev.UserServed(f"by {done.vehicle}: {done.tasks} tasks", user_id=done.user_id))
+
+    def _waited_on(self) -> set[str]:
+        """The vehicles a claim settles on (``FleetRoster.unsure`` within ``fleet.settle_max_s``)."""
+        assert self.fleet is not None
+        return self.fleet.roster.unsure(self.cfg.fleet.settle_max_s)
 
     def _settled(self, heard_since: float) -> frozenset[int]:
         """The points this member claims whose claims have settled: the intentions of every
@@ -488,8 +492,7 @@ class Service:
         claimed_at = self._points_at.get(point)
         if self.fleet is None or claimed_at is None:
             return []
-        waited_on = self.fleet.roster.unsure(self.cfg.fleet.settle_max_s)
-        return self.fleet.ledger.not_heard_since(claimed_at + self.cfg.fleet.settle_margin_s, waited_on)
+        return self.fleet.ledger.not_heard_since(claimed_at + self.cfg.fleet.settle_margin_s, self._waited_on())
 
     def _others_over(self) -> frozenset[int]:
         """The hovering points another member's vehicle is over now (``fleet.occupied_m``),
