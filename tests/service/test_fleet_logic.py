@@ -14,8 +14,9 @@ from planner_service.service.sortie import inputs as ins
 from planner_service.service.sortie import SortieLogic
 from planner_service.service.sortie.fleet import Claims, FleetView, answer_rank
 from planner_service.service.sortie.machine import first_point
-from tests.service.test_sortie_logic import (FakeWorld, Run, bound_to_a_user_uav2_owns, fly_to_first_point, only, path,
-                                             point, rules)
+from planner_service.service.planning import PlannedPath
+from tests.service.test_sortie_logic import (SCENARIO, FakeWorld, Run, bound_to_a_user_uav2_owns, fly_to_first_point,
+                                             only, path, point, rules)
 
 
 def intents(effects: list[fx.Effect]) -> list[Claims]:
@@ -350,18 +351,73 @@ def test_a_hold_ends_once_the_next_points_claim_has_settled_and_a_next_point_los
     assert cmd.kind == "set_current" and cmd.seq == 3, cmd
 
 
-def test_a_member_flying_to_a_point_lost_flies_its_new_decision_at_once() -> None:
-    """Found at 20 UAVs (the settling's first run): uav13, flying to point 7, heard that uav16
-    had claimed it first and decided point 5, which waited to settle; its vehicle flew on
-    to 7 meanwhile and held it beside uav16. A decision replacing a point lost is uploaded at
-    once: flying on to the lost point is what must end."""
+def lost_in_flight(xyz: tuple[float, float, float] = (30.0, 50.0, 100.0),
+                   battery_after_j: float = 20_000.0) -> tuple[Run, fx.MakePlan, fx.Upload]:
+    """A member flying to point 3 (at ``xyz``) hears another claimed it first: its decision
+    (point 9, the path leaving ``battery_after_j``) and the replacement's upload."""
     world = FakeWorld()
     run, _ = fly_to_first_point(world)
     settling(run, world)
+    run.tick(seq=2, xyz=xyz, boot_s=9.0)
     (plan,) = only(run.feed(ins.FleetHeard(FleetView(blocked=frozenset({3})))), fx.MakePlan)
     assert plan.basis.reason == "point 3 claimed by another member" and not plan.basis.settles
-    (up,) = only(run.feed(ins.Planned(plan.basis, path(point(9, 400.0, 300.0, "b", 2)))), fx.Upload)
-    assert first_point_of(up) == 9
+    assert plan.basis.pauses and plan.basis.keep_through == 1
+    decided = PlannedPath((point(9, 400.0, 300.0, "b", 2),), 20_000.0, battery_after_j, "the planned line ends")
+    (up,) = only(run.feed(ins.Planned(plan.basis, decided)), fx.Upload)
+    return run, plan, up
+
+
+def test_a_member_flying_to_a_point_lost_holds_where_it_is_until_its_new_points_claim_has_settled() -> None:
+    """Finding (20 UAVs over radios, 2026-12-07, in two runs of three): two members each
+    replaced a point lost in flight with the same new point 2.0 s and 2.6 s apart, flew
+    there at once (flying on to the lost point is what must end: an earlier run saw a member
+    settle its new claim while flying on, and hold the lost point beside its keeper), and
+    held it together before either heard the other. Now the replacement goes up at once,
+    its first item a pause where the vehicle is, and the service ends the pause once the new
+    point's claim has settled."""
+    run, _, up = lost_in_flight()
+    assert up.mission.is_pause(2) and not up.mission.is_pause(1) and up.current_seq == 2, "the pause is flown first"
+    assert first_point_of(up) == 9 and up.mission.point_at(3) is not None and up.mission.point_at(2) is None
+    assert up.items[2].param1 >= SETTLE_S, "the autopilot holds it as long as the claim may take to settle"
+    assert "holds where it is until the claim of point 9 has settled" in " ".join(
+        e.text for e in only(run.effects, fx.Log))
+    run.feed(ins.Uploaded(up))
+    assert run.s.claims.flying_to == 9, "the new point is claimed from the upload"
+    assert not only(run.tick(seq=2, xyz=(31.0, 51.0, 100.0), boot_s=10.0), fx.Command), "not settled: paused"
+    run.feed(ins.FleetHeard(FleetView(blocked=frozenset({3}), settled=frozenset({9}))))
+    (cmd,) = only(run.tick(seq=2, xyz=(30.0, 50.0, 100.0), boot_s=11.0), fx.Command)
+    assert cmd.kind == "set_current" and cmd.seq == 3 and "claim of point 9 has settled" in cmd.why
+    assert not only(run.tick(seq=2, xyz=(30.0, 50.0, 100.0), boot_s=11.5), fx.Command), "asked once"
+    run.feed(ins.CommandDone(cmd))
+    assert not only(run.tick(seq=2, xyz=(30.0, 50.0, 100.0), boot_s=11.6), fx.Command), "its report comes later"
+
+
+def test_a_pause_whose_point_is_lost_is_decided_again_and_one_never_settled_ends_after_the_bound() -> None:
+    run, _, up = lost_in_flight()
+    run.feed(ins.Uploaded(up))
+    run.tick(seq=2, xyz=(30.0, 50.0, 100.0), boot_s=10.0)
+    (plan,) = only(run.feed(ins.FleetHeard(FleetView(blocked=frozenset({3, 9})))), fx.MakePlan)
+    assert plan.basis.reason == "point 9 claimed by another member" and plan.basis.keep_through == 1, \
+        "the pause itself is replaced"
+    (up,) = only(run.feed(ins.Planned(plan.basis, path(point(8, 300.0, 100.0, "b", 2)))), fx.Upload)
+    assert up.mission.is_pause(2) and first_point_of(up) == 8
+    run.feed(ins.Uploaded(up))
+    claimed = run.now
+    run.now = claimed + SETTLE_S - 0.5
+    assert not only(run.tick(seq=2, xyz=(30.0, 50.0, 100.0), boot_s=11.0), fx.Command)
+    run.now = claimed + SETTLE_S
+    out = run.tick(seq=2, xyz=(30.0, 50.0, 100.0), boot_s=12.0)
+    (cmd,) = only(out, fx.Command)
+    assert cmd.seq == 3 and "point 8 flown unsettled" in cmd.why
+    assert only(out, fx.Unsettled) == [fx.Unsettled(up.plan_id, 8, SETTLE_S)], "the service warns, naming whom"
+
+
+def test_a_member_over_a_hovering_point_or_short_of_energy_flies_a_point_lost_s_replacement_at_once() -> None:
+    """No pause where another member's vehicle may hold (within two hold radii of a hovering
+    point: the SCENARIO's point 5 is at (120, 140)), nor where its hovering would cost a point."""
+    for xyz, battery_after_j in (((118.0, 138.0, 100.0), 20_000.0), ((30.0, 50.0, 100.0), SCENARIO.energy_floor_j + 1000.0)):
+        run, _, up = lost_in_flight(xyz, battery_after_j)
+        assert not up.mission.is_pause(2) and first_point_of(up) == 9 and up.mission.point_at(2) is not None, xyz
 
 
 def test_a_member_outbid_at_its_first_point_before_the_takeoff_plans_again_on_what_is_left() -> None:

@@ -34,7 +34,12 @@ class PlanBasis:
     settles: bool = False
     """The plan's first point is flown to once its claim has settled among the fleet's
     members (the vehicle meanwhile flies on as it was: on the ground, on its way home); not
-    for a vehicle holding (the hold waits instead), nor one flying to a point lost."""
+    for a vehicle holding (the hold waits instead), nor one flying to a point lost (``pauses``)."""
+    pauses: bool = False
+    """The vehicle flies to a point lost to another member: the replacement goes up at once,
+    its first item a pause where the vehicle is, ended once the first point's claim has
+    settled (``SortieLogic._maybe_end_pause``): flying on to the lost point must end, and
+    flying to the new one before its claim settles met a member that chose it too."""
 
 
 @dataclass(frozen=True)

@@ -333,6 +333,7 @@ class SortieLogic:
         s = replace(s, life=life)
         out += begin + lapsed
         s = self._watch(s, v, now, out)
+        s = self._maybe_end_pause(s, v, now, out)
         s = self._return_check(s, v, now, out)
         s = self._homing(s, v)
         s = self._disarm_check(s, v, now, out)
@@ -620,7 +621,8 @@ class SortieLogic:
             return fx.PlanBasis(why, s.schedule.version, w.seq, at_point=bound, serving=serving, serving_reward=reward)
         if lost and not holding and v.seq > r.autopilot.first_item:
             # flying to a point another member claims now (both claimed it at once): given up
-            return fx.PlanBasis(f"point {min(lost)} claimed by another member", s.schedule.version, v.seq - 1)
+            return fx.PlanBasis(f"point {min(lost)} claimed by another member", s.schedule.version, v.seq - 1,
+                                pauses=True)
         if (s.schedule.dirty and self._answers(s, v) and now - s.schedule.last_plan_at >= r.replan_min_interval_s
                 and self._pending_count(s) > 0 and v.xyz[2] >= r.area.min_flight_altitude_m
                 and now >= self._answer_at(s, v) and self._could_turn_back(s, v)):
@@ -672,12 +674,21 @@ class SortieLogic:
         airborne = v.airborne
         if not path.points and not airborne and not s.onboard.must_upload:
             return s  # nothing to fly yet
-        path = self._with_margins(path, self._margin_s(v))
+        pause = self._pause(s, basis, path, v, now)
+        flown = self._with_margins(path, self._margin_s(v))
+        if pause is not None:
+            paused = self._with_margins(path, self._margin_s(v), pause.hold_s)
+            if len(paused.points) == len(flown.points):
+                flown = paused
+            else:
+                pause = None  # the battery has no room for it: a point is worth more; flown at once
+        path = flown
         try:
             check_path(path, self.rules.area, self.rules.scenario, path.battery_after_j + path.predicted_energy_j)
             hover = [HoverPoint(p.x_m, p.y_m, p.z_m, p.hold_s) for p in path.points]
             plan_id = s.schedule.plan_id + 1
             if basis.keep_through is None or held is None:
+                pause = None  # (a fresh mission: nothing flown to replace)
                 items = encode_path(hover, self.rules.origin, self.rules.flavour)  # type: ignore[arg-type]
                 mission = HeldMission.fresh(plan_id, items, path.points, self.rules.flavour)
                 # The autopilot keeps its index across an upload, also from the last sortie's
@@ -690,13 +701,14 @@ class SortieLogic:
                 else:
                     current = takeoff if v.seq > takeoff else None  # (already there: nothing to wait for)
             else:
-                items, _ = replacement_items(held.items, basis.keep_through, hover, self.rules.origin,
-                                             self.rules.flavour)  # type: ignore[arg-type]
+                items, _ = replacement_items(held.items, basis.keep_through, ([pause] if pause else []) + hover,
+                                             self.rules.origin, self.rules.flavour)  # type: ignore[arg-type]
                 if basis.at_point is not None:  # holding there: that item stays the one flown
                     items = marked_current(items, basis.keep_through)
                     hold = self._affordable_hold_s(basis.at_point, path)
                     held, items = self._hold_at(held, items, basis.keep_through, hold)
-                mission = HeldMission.replacement(plan_id, items, held, basis.keep_through, path.points)
+                mission = HeldMission.replacement(plan_id, items, held, basis.keep_through, path.points,
+                                                  pause=pause is not None)
                 # Replacing the item flown (the return to launch, on the way home): start it
                 # again, or ArduPilot flies on home; a hold at the item kept goes on.
                 current = None if basis.at_point is not None else basis.keep_through + 1
@@ -714,10 +726,13 @@ class SortieLogic:
         first = first_point(upload)
         if basis.settles and first is not None and not self._settled(s, first.hover_index, now, now):
             # away from a hold nothing keeps the vehicle off the point: the upload waits (not
-            # for a vehicle flying to a point lost: flying on to it is what must end)
+            # for a vehicle flying to a point lost: flying on to it is what must end; it pauses)
             out.append(fx.Log("info", f"plan {plan_id}: flown once the claim of point {first.hover_index} has "
                                       f"settled"))
             return replace(s, schedule=replace(s.schedule.settle(upload), claimed_at=now))
+        if pause is not None and first is not None:
+            out.append(fx.Log("info", f"plan {plan_id}: the vehicle holds where it is until the claim of point "
+                                      f"{first.hover_index} has settled"))
         out.append(upload)
         return replace(s, schedule=s.schedule.uploading(plan_id))
 
@@ -749,16 +764,51 @@ class SortieLogic:
         out.append(up)
         return replace(s, schedule=s.schedule.uploading(up.plan_id))
 
-    def _with_margins(self, path: PlannedPath, margin_s: float) -> PlannedPath:
+    def _pause(self, s: Sortie, basis: fx.PlanBasis, path: PlannedPath, v: ins.VehicleSnapshot,
+               now: float) -> HoverPoint | None:
+        """The pause a replacement of a point lost begins with (``PlanBasis.pauses``): where the
+        vehicle is, at the first point's height, held as long as its claim may take to settle
+        (``settle_max_s``, in vehicle time: the service ends it earlier). None when the claim
+        has settled already, or when the vehicle is over a hovering point (its holder would
+        hover beside it: it flies on at once)."""
+        r = self.rules
+        if not basis.pauses or not path.points or self._settled(s, path.points[0].hover_index, now, now):
+            return None
+        x, y = v.xyz[0], v.xyz[1]
+        if len(self.points) and float(np.hypot(self.points[:, 0] - x, self.points[:, 1] - y).min()) <= 2 * r.hold_radius_m:
+            return None
+        assert v.time_rate is not None
+        return HoverPoint(x, y, path.points[0].z_m, r.settle_max_s * v.time_rate + self._margin_s(v))
+
+    def _maybe_end_pause(self, s: Sortie, v: ins.VehicleSnapshot, now: float, out: list[fx.Effect]) -> Sortie:
+        """End the pause the vehicle flies (``HeldMission.is_pause``) once the next point's
+        claim has settled, or ``settle_max_s`` after it was claimed; a claim lost meanwhile is
+        decided again (``_plan_wanted``) and its replacement pauses anew. Only under authority,
+        not degraded: without, it commands nothing and the pause's own timer ends it."""
+        held, k = s.onboard.held, s.claims.flying_to
+        if (held is None or not s.onboard.known or not v.connected or v.mode not in MISSION_MODES
+                or not held.is_pause(v.seq) or k is None or k in s.fleet.blocked):
+            return s
+        if not s.authority.granted or s.life.degraded is not None or s.schedule.busy != "" or s.schedule.commanding:
+            return s
+        if s.schedule.pause_ended == (held.plan_id, v.seq) or not self._settled(s, k, s.schedule.claimed_at, now):
+            return s
+        if k not in s.fleet.settled:
+            out.append(fx.Unsettled(held.plan_id, k, self.rules.settle_max_s))
+        out.append(fx.Command("set_current", v.seq + 1, f"pause ended: the claim of point {k} has settled"
+                              if k in s.fleet.settled else f"pause ended: point {k} flown unsettled"))
+        return replace(s, schedule=replace(s.schedule.command_sent("set_current"), pause_ended=(held.plan_id, v.seq)))
+
+    def _with_margins(self, path: PlannedPath, margin_s: float, pause_s: float = 0.0) -> PlannedPath:
         """The path as it will be flown: each hold ``margin_s`` longer than its upload needs
         (the service ends a hold once its position reports show it, a command's latency
         later, in vehicle time; the item's own hold is the ceiling the autopilot keeps to
-        when the service cannot end it), and cut where that hovering breaks the energy
-        reserve the planner kept."""
+        when the service cannot end it), after a pause of ``pause_s`` (``_pause``), and cut
+        where that hovering breaks the energy reserve the planner kept."""
         sc = self.rules.scenario
         points = [replace(p, hold_s=p.hold_s + margin_s) for p in path.points]
         extra = margin_s * sc.hover_power_w
-        battery = path.battery_after_j
+        battery = path.battery_after_j - pause_s * sc.hover_power_w
         while points and battery - extra * len(points) < sc.energy_floor_j:
             dropped = points.pop()
             home = np.array([points[-1].x_m, points[-1].y_m, points[-1].z_m]) if points else None
@@ -1083,8 +1133,8 @@ class SortieLogic:
     def _command_failed(self, s: Sortie, cmd: fx.Command, error: str, now: float, out: list[fx.Effect]) -> Sortie:
         out += [fx.Emit(ev.CommandFailed(f"{cmd.kind}: {error}"[:256])),
                 fx.Log("warning", f"the autopilot refused {cmd.kind} ({error}); trying again later")]
-        if cmd.kind == "set_current":  # the hold goes on: ended again when next judged served
-            return replace(s, holds=replace(s.holds, early_end=None))
+        if cmd.kind == "set_current":  # the hold (or pause) goes on: ended again when next judged due
+            return replace(s, holds=replace(s.holds, early_end=None), schedule=replace(s.schedule, pause_ended=None))
         return replace(s, schedule=s.schedule.command_failed(now, self.rules.backoff))
 
     def _safety(self, s: Sortie, v: ins.VehicleSnapshot, out: list[fx.Effect]) -> Sortie:

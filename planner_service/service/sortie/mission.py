@@ -17,7 +17,7 @@ from typing import Any, Iterable, Sequence
 
 from protocol import MissionItem
 from protocol.autopilot import Autopilot, autopilot_for
-from protocol.mission import NAV_RTL, Flavour
+from protocol.mission import NAV_RTL, NAV_TAKEOFF, NAV_WAYPOINT, Flavour
 
 from ..planning import PlannedPoint
 
@@ -41,10 +41,12 @@ class HeldMission:
 
     @classmethod
     def replacement(cls, plan_id: int, items: Sequence[MissionItem], before: "HeldMission", keep_through: int,
-                    points: Sequence[PlannedPoint]) -> "HeldMission":
-        """``before``'s items up to ``keep_through`` kept, then ``points`` from the next seq."""
+                    points: Sequence[PlannedPoint], pause: bool = False) -> "HeldMission":
+        """``before``'s items up to ``keep_through`` kept, then ``points`` from the next seq
+        (after a pause item there with ``pause``: ``is_pause``)."""
         kept = tuple((s, p) for s, p in before.points if s <= keep_through)
-        return cls(plan_id, tuple(items), kept + tuple((keep_through + 1 + i, p) for i, p in enumerate(points)))
+        first = keep_through + 1 + (1 if pause else 0)
+        return cls(plan_id, tuple(items), kept + tuple((first + i, p) for i, p in enumerate(points)))
 
     def point_at(self, seq: int) -> PlannedPoint | None:
         """The planned point item ``seq`` flies to, or None (home, takeoff, RTL)."""
@@ -52,6 +54,13 @@ class HeldMission:
             if s == seq:
                 return p
         return None
+
+    def is_pause(self, seq: int) -> bool:
+        """Whether item ``seq`` is a pause: a waypoint after the takeoff that is no planned
+        point (the vehicle holds where it was while its next point's claim settles)."""
+        takeoff = next((i.seq for i in self.items if i.command == NAV_TAKEOFF), None)
+        return (takeoff is not None and takeoff < seq < len(self.items) and self.items[seq].command == NAV_WAYPOINT
+                and self.point_at(seq) is None)
 
     def points_after(self, seq: int) -> list[tuple[int, PlannedPoint]]:
         """The points still to fly after item ``seq``, in order."""

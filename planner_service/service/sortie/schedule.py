@@ -66,6 +66,9 @@ class Schedule:
     claimed_at: float = -math.inf
     """When the point this member flies to next was first claimed (a plan's first point,
     settling or uploaded): its settling is waited for from then."""
+    pause_ended: tuple[int, int] | None = None
+    """The pause (plan id, seq) whose end was commanded (``HeldMission.is_pause``): not
+    commanded again while the vehicle's reports still show it."""
     outbid: bool = False
     """A plan before the takeoff was given up because another member claimed its first point
     first: the next plan does not wait for ``planner.min_requests`` again. The member had
