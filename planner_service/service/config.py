@@ -397,7 +397,9 @@ class MembershipConfig(Section):
     radio's hearing delay, the first to claim flies, the other decides again). Waited at most
     this long (wall clock: a member heard late, a token declared under an enrolled id by a
     rogue peer, or a member whose key was stolen and that says nothing, delays each decision
-    by this at most); then flown as decided, and logged. 0: off."""
+    by this at most); then flown as decided, and logged. A replacement of a point lost in
+    flight waits hovering where the vehicle is (a pause this long in vehicle time, ended
+    by the service once the claim has settled: docs/OPERATIONS.md). 0: off."""
     settle_margin_s: float = setting(0.1, ge=0, le=4.0, unit="s")
     """How far apart the members' clocks may read for the settling above to hold (it compares
     their signed times with this computer's): GPS or NTP time on the field."""

@@ -27,7 +27,7 @@ from planner_service.service.link import (Connected, Current, LinkSettings, Lost
 from planner_service.service.link.streams import stream_plan
 from protocol import GeoOrigin, HoverPoint, encode_path, global_to_local, replacement_items, same_mission
 from sim_bridge.vehicle.mission_id import px4_mission_id
-from tests.service.test_link_sitl import Recorder, distance, until, where
+from tests.service.test_link_sitl import PAUSED_S, Recorder, distance, until, where
 from tests.support.px4 import PARAMS, Px4, read_params
 from tests.support.turn import TURN_WAIT_S
 
@@ -175,8 +175,11 @@ def test_telemetry_from_px4s_streams_position_awaited_and_a_refused_arm(make_px4
 def test_read_back_crc_and_a_replacement_in_flight_flown_with_each_reach_reported_once(
         make_px4: Callable[..., Px4], backend: str) -> None:
     """[takeoff, a, b, c, RTL]; while the vehicle holds at a (item 1), b and c are replaced by
-    d and e (items 0..1 kept, d marked current): PX4 flies d at once, ending the hold. At e a
-    replacement of return to launch alone brings it home, where it lands and disarms."""
+    d and e (items 0..1 kept, d marked current): PX4 flies d at once, ending the hold. On the
+    way to e, e is lost (another member claimed it first): a replacement whose item 3 is a
+    pause where the vehicle is, then e, marked current, stops it there until ``set_current(4)``
+    ends the pause (``SortieLogic._maybe_end_pause``). At e a replacement of return to launch
+    alone brings it home, where it lands and disarms."""
     px4 = make_px4(speed=SPEED, params=FLYING)
     px4.wait_ready()
     a, b, c = HoverPoint(30.0, 30.0, ALT_M, 60.0), HoverPoint(90.0, 30.0, ALT_M), HoverPoint(90.0, 90.0, ALT_M)
@@ -205,14 +208,35 @@ def test_read_back_crc_and_a_replacement_in_flight_flown_with_each_reach_reporte
             await link.upload(second, current_seq=next_seq)
             assert link.telemetry.mission_seq == next_seq == 2
             assert link.mission_id == px4_mission_id(second)
-            await until("holding at e", lambda: link.telemetry.mission_seq == 3
+            await until("on the way to e", lambda: link.telemetry.mission_seq == 3
+                        and distance(where(link), d) > 2 * NEAR_M, 60.0, link)
+            here = where(link)
+            pause = HoverPoint(here[0], here[1], ALT_M, 60.0)
+            third, pause_seq = replacement_items(second, 2, [pause, e], ORIGIN, "px4")
+            await link.upload(third, current_seq=pause_seq)
+            assert link.telemetry.mission_seq == pause_seq == 3
+            at_pause: list[float] = []
+
+            def paused() -> bool:
+                boot_s = link.telemetry.position_boot_s
+                if boot_s is not None and distance(where(link), pause) < NEAR_M:
+                    at_pause.append(boot_s)
+                return len(at_pause) > 1 and at_pause[-1] - at_pause[0] >= PAUSED_S
+
+            await until(f"paused {PAUSED_S:g} s", paused, 60.0, link)
+            await link.set_current(4)  # the new point's claim has settled: fly on
+            await until("away from the pause", lambda: paused() or distance(where(link), pause) > 2 * NEAR_M, 20.0,
+                        link)
+            paused_s = at_pause[-1] - at_pause[0]
+            await until("holding at e", lambda: link.telemetry.mission_seq == 4
                         and distance(where(link), e) < NEAR_M, 60.0, link)
             home_at = time.monotonic()
-            third, rtl_seq = replacement_items(second, 3, [], ORIGIN, "px4")
-            await link.upload(third, current_seq=rtl_seq)
+            fourth, rtl_seq = replacement_items(third, 4, [], ORIGIN, "px4")
+            await link.upload(fourth, current_seq=rtl_seq)
             await until("landed at home", lambda: not link.telemetry.armed and not link.telemetry.airborne, 90.0, link)
             await asyncio.sleep(1.5)  # PX4 repeats the last MISSION_ITEM_REACHED after the landing
-            return {"replaced_at": replaced_at, "home_at": home_at, "events": events,
+            return {"replaced_at": replaced_at, "home_at": home_at, "events": events, "pause": pause,
+                    "paused_s": paused_s,
                     "reached_raw": counts[M.MAVLINK_MSG_ID_MISSION_ITEM_REACHED], "generation": link.generation}
         finally:
             await link.close()
@@ -222,6 +246,8 @@ def test_read_back_crc_and_a_replacement_in_flight_flown_with_each_reach_reporte
     # The vehicle's truth: it flew to d and e, never to b or c; it came home.
     after = fixes_local(px4, figures["replaced_at"])
     assert closest(after, d) < NEAR_M and closest(after, e) < NEAR_M, (closest(after, d), closest(after, e))
+    assert closest(after, figures["pause"]) < NEAR_M
+    assert PAUSED_S <= figures["paused_s"] < figures["pause"].hold_s / 2, figures["paused_s"]  # ended by the command
     everywhere = fixes_local(px4)
     assert closest(everywhere, b) > FAR_M and closest(everywhere, c) > FAR_M
     assert math.hypot(*everywhere[-1][:2]) < NEAR_M, everywhere[-1]
@@ -236,7 +262,7 @@ def test_read_back_crc_and_a_replacement_in_flight_flown_with_each_reach_reporte
     assert by_mission[min(by_mission)] == [0], by_mission
     print(f"\n{backend}: reached {reached} ({figures['reached_raw']} MISSION_ITEM_REACHED heard); MISSION_CURRENT "
           f"{[(ev.mission, ev.seq) for ev in events.of(Current)]}; closest to d "
-          f"{closest(after, d):.1f} m, to b {closest(everywhere, b):.0f} m; landed "
+          f"{closest(after, d):.1f} m, to b {closest(everywhere, b):.0f} m; paused {figures['paused_s']:.1f} s; landed "
           f"{math.hypot(*everywhere[-1][:2]):.2f} m from home")
 
 

@@ -31,6 +31,8 @@ ALT_M = 20.0
 NEAR_M = 3.0
 """How close the vehicle's own position must come to a point to have flown to it (ArduCopter's
 default WPNAV_RADIUS is 2 m)."""
+PAUSED_S = 5.0
+"""Vehicle seconds a pause is held before the test ends it (its item holds 60)."""
 
 
 class Recorder:
@@ -117,7 +119,10 @@ def test_replacement_in_flight_flies_the_new_plan_and_an_rtl_replacement_returns
     replaced by d and e with items 0..2 kept and ``current_seq`` 3: ArduPilot restarts the
     hold at a (the change is within its three-command window), and the link moves it on to
     3 with MAV_CMD_DO_SET_MISSION_CURRENT. At d, ``set_current(4)`` ends the hold early;
-    towards e, a replacement of return to launch alone brings it home."""
+    towards e, e is lost (another member claimed it first): a replacement whose item 4 is a
+    pause where the vehicle is, then e, stops it there until ``set_current(5)`` ends the pause
+    (``SortieLogic._maybe_end_pause``); towards e again, a replacement of return to launch
+    alone brings it home."""
     sitl = sitl_ready
     a, b, c = HoverPoint(40.0, 40.0, ALT_M, 30.0), HoverPoint(120.0, 40.0, ALT_M, 0.0), HoverPoint(120.0, 120.0, ALT_M)
     d, e = HoverPoint(0.0, 110.0, ALT_M, 30.0), HoverPoint(90.0, 150.0, ALT_M)
@@ -125,15 +130,20 @@ def test_replacement_in_flight_flies_the_new_plan_and_an_rtl_replacement_returns
     async def run() -> dict[str, Any]:
         events = Recorder()
         link = await connected(sitl, backend, events)
+        paused: list[HoverPoint] = []
         closest: dict[str, float] = {"d": math.inf, "e": math.inf, "b": math.inf}
         at_d: list[float] = []
+        at_pause: list[float] = []
 
         def track() -> bool:
             here = where(link)
             for name, point in (("d", d), ("e", e), ("b", b)):
                 closest[name] = min(closest[name], distance(here, point))
-            if distance(here, d) < NEAR_M and link.telemetry.position_boot_s is not None:
-                at_d.append(link.telemetry.position_boot_s)
+            if link.telemetry.position_boot_s is not None:
+                if distance(here, d) < NEAR_M:
+                    at_d.append(link.telemetry.position_boot_s)
+                if paused and distance(here, paused[0]) < NEAR_M:
+                    at_pause.append(link.telemetry.position_boot_s)
             return False
 
         async def watch(what: str, done: Callable[[], bool], timeout_s: float) -> None:
@@ -156,16 +166,30 @@ def test_replacement_in_flight_flies_the_new_plan_and_an_rtl_replacement_returns
             assert link.telemetry.mission_seq == 4
             await watch("away from d", lambda: distance(where(link), d) > 2 * NEAR_M, 20.0)
             held_at_d = at_d[-1] - at_d[0]
+            # e lost on the way: a pause where the vehicle is, then e, ended by the service.
+            here = where(link)
+            paused.append(HoverPoint(here[0], here[1], ALT_M, 60.0))
+            third, pause_seq = replacement_items(second, 3, [paused[0], e], ORIGIN, "ardupilot")
+            await link.upload(third, current_seq=pause_seq)
+            assert link.telemetry.mission_seq == pause_seq == 4
+            await watch(f"paused {PAUSED_S:g} s", lambda: len(at_pause) > 1 and at_pause[-1] - at_pause[0] >= PAUSED_S,
+                        60.0)
+            await link.set_current(5)  # the new point's claim has settled: fly on
+            assert link.telemetry.mission_seq == 5
+            await watch("away from the pause", lambda: distance(where(link), paused[0]) > 2 * NEAR_M, 20.0)
+            paused_s = at_pause[-1] - at_pause[0]
             # Return to launch alone, replacing e while the vehicle flies towards it.
-            third, rtl_seq = replacement_items(second, 3, [], ORIGIN, "ardupilot")
-            assert third[rtl_seq].command == 20 and len(third) == rtl_seq + 1
-            await link.upload(third, current_seq=rtl_seq)
+            fourth, rtl_seq = replacement_items(third, 4, [], ORIGIN, "ardupilot")
+            assert fourth[rtl_seq].command == 20 and len(fourth) == rtl_seq + 1
+            await link.upload(fourth, current_seq=rtl_seq)
             await watch("landed at home", lambda: not link.telemetry.armed and not link.telemetry.airborne, 90.0)
             home_m = math.hypot(*where(link)[:2])
             assert home_m < NEAR_M, home_m
             assert closest["d"] < NEAR_M and held_at_d < d.hold_s / 2, (closest, held_at_d)
+            assert PAUSED_S <= paused_s < paused[0].hold_s / 2, paused_s  # held, then ended by the command
             assert closest["e"] > 20.0 and closest["b"] > 20.0, closest  # never flew the replaced points
-            return {"closest": closest, "home_m": home_m, "held_at_d": held_at_d,
+            return {"closest": closest, "home_m": home_m, "held_at_d": held_at_d, "paused_s": paused_s,
+                    "pause": paused[0],
                     "currents": [ev.seq for ev in events.of(Current)]}
         finally:
             await link.close()
@@ -178,10 +202,11 @@ def test_replacement_in_flight_flies_the_new_plan_and_an_rtl_replacement_returns
     assert own, "no POS records in the dataflash log"
     assert min(distance(p, d) for p in own) < NEAR_M
     assert min(distance(p, b) for p in own) > 20.0 and min(distance(p, e) for p in own) > 20.0
+    assert min(distance(p, figures["pause"]) for p in own) < NEAR_M
     texts = [r["Message"] for r in sitl.read_log(("MSG",))]
     assert any("Auto mission changed, restarted command" in t for t in texts), texts[-20:]
     print(f"\n{backend}: closest approach {figures['closest']}, held {figures['held_at_d']:.1f} s of {d.hold_s:g} "
-          f"at d, landed {figures['home_m']:.2f} m from home, MISSION_CURRENT {figures['currents']}")
+          f"at d, paused {figures['paused_s']:.1f} s, landed {figures['home_m']:.2f} m from home, MISSION_CURRENT {figures['currents']}")
 
 
 @pytest.mark.parametrize("backend, transport", [("pymavlink", "tcp"), ("pymavlink", "udp"), ("pymavlink", "serial"),
