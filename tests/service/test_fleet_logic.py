@@ -15,6 +15,7 @@ from planner_service.service.sortie import SortieLogic
 from planner_service.service.sortie.fleet import Claims, FleetView, answer_rank
 from planner_service.service.sortie.machine import first_point
 from planner_service.service.planning import PlannedPath
+from planner_service.service.sortie.holds import Binding
 from tests.service.test_sortie_logic import (SCENARIO, FakeWorld, Run, bound_to_a_user_uav2_owns, fly_to_first_point,
                                              only, path, point, rules)
 
@@ -453,3 +454,68 @@ def test_a_member_not_outbid_waits_for_its_minimum_of_requests_no_other_member_o
     assert not only(run.tick(), fx.MakePlan), "two requests of its own, three wanted"
     world.ask("d", 400.0, 200.0, 10, 4)
     assert only(run.tick(), fx.MakePlan)
+
+
+def served_and_left(run: Run) -> tuple[Binding, list[fx.Effect]]:
+    """``run``'s member arrives at point 3, is bound to a, holds as long as a needs and leaves
+    for item 3: its binding and the effects of the leaving."""
+    run.tick(seq=2, xyz=(120.0, 200.0, 100.0), boot_s=20.0)
+    b = run.s.holds.binding
+    assert b is not None and b.request_id is not None and b.user_id == "a"
+    run.tick(seq=2, xyz=(120.0, 200.0, 100.0), boot_s=21.0 + b.needed_s)
+    return b, run.tick(seq=3, xyz=(200.0, 300.0, 100.0), boot_s=22.0 + b.needed_s)
+
+
+def test_of_two_members_that_bound_one_user_within_a_hearing_delay_only_the_first_records_it() -> None:
+    """Finding (20 UAVs over radios, 2026-12-07, the run after the pause): uav5 at point 4 and
+    uav8 at point 5 bound user-5 (one task) 0.7 s apart, each hold 3.3-3.7 s, shorter than
+    the hearing delay: both recorded it, neither had heard the other's binding, which went
+    with the hold. Now a member records a hold's service once its binding has settled (every
+    binding made before it is known), claiming the user meanwhile; the later binder hears the
+    earlier one (``bound_first``, kept though the first's hold is over) and records nothing."""
+    world = FakeWorld()
+    run, _ = fly_to_first_point(world)
+    settling(run, world)
+    b, out = served_and_left(run)
+    assert not only(out, fx.RecordService), "the binding has not settled"
+    assert run.s.claims.bound == "a" and intents(run.effects)[-1].bound == "a", "a is still claimed as bound"
+    assert "a" not in [r.user_id for r in run.logic._pending(run.s)], "nor planned again meanwhile"
+    assert not only(run.tick(seq=3, xyz=(210.0, 300.0, 100.0), boot_s=30.0), fx.RecordService)
+    out = run.feed(ins.FleetHeard(FleetView(bound_settled="a", bound_first={"a": "uav2"})))
+    out += run.tick(seq=3, xyz=(220.0, 300.0, 100.0), boot_s=31.0)
+    assert not only(out, fx.RecordService)
+    assert any("nothing recorded: uav2 serves a" in e.event.detail for e in only(out, fx.Emit))
+    assert run.s.claims.bound is None and run.s.holds.judged_unrecorded is None
+    # the first binder: its binding settles, nobody bound a before it: recorded
+    first = settling(fly_to_first_point(FakeWorld())[0], world)
+    served_and_left(first)
+    first.feed(ins.FleetHeard(FleetView(bound_settled="a")))
+    (svc,) = only(first.tick(seq=3, xyz=(220.0, 300.0, 100.0), boot_s=31.0), fx.RecordService)
+    assert (svc.user_id, svc.tasks) == ("a", b.tasks)
+
+
+def test_a_binding_that_does_not_settle_is_recorded_after_the_bound_and_a_new_hold_records_the_last_at_once() -> None:
+    world = FakeWorld()
+    run, _ = fly_to_first_point(world)
+    settling(run, world)
+    served_and_left(run)
+    run.tick(seq=3, xyz=(220.0, 300.0, 100.0), boot_s=31.0)  # its wait begins
+    judged_at = run.now
+    run.now = judged_at + SETTLE_S - 0.5
+    assert not only(run.tick(seq=3, xyz=(230.0, 300.0, 100.0), boot_s=32.0), fx.RecordService)
+    run.now = judged_at + SETTLE_S
+    out = run.tick(seq=3, xyz=(240.0, 300.0, 100.0), boot_s=33.0)
+    (svc,) = only(out, fx.RecordService)
+    assert svc.user_id == "a" and "binding of a has not settled in 10 s" in " ".join(e.text for e in only(out, fx.Log))
+    # the next hold binds before the last one's binding settled: the last is recorded then
+    run2, _ = fly_to_first_point(FakeWorld())
+    settling(run2, world)
+    served_and_left(run2)
+    (svc,) = only(run2.tick(seq=3, xyz=(320.0, 200.0, 100.0), boot_s=60.0), fx.RecordService)  # arrived at 7 (b)
+    assert svc.user_id == "a" and run2.s.holds.binding.user_id == "b" and run2.s.claims.bound == "b"
+
+
+def test_a_lone_uav_records_a_hold_at_once() -> None:
+    run, _ = fly_to_first_point(FakeWorld())  # settle_max_s 0: no fleet
+    _, out = served_and_left(run)
+    assert only(out, fx.RecordService)

@@ -57,6 +57,13 @@ class FleetView:
     """The points this member claims whose claims have settled: every other live member's
     intentions signed after the claim were heard, so every claim made before it is known and
     judged (``blocked``, ``yield_to``); a decision's first point is flown to once settled."""
+    bound_settled: str | None = None
+    """The user this member claims as bound (``Claims.bound``) once that binding has settled
+    as ``settled`` says: every binding of the user made before it is known (``bound_first``)."""
+    bound_first: Mapping[str, str] = field(default_factory=dict)
+    """That user, with the member heard binding it before this member did (by the binders' own times,
+    at most ``fleet.settle_max_s`` before), whether or not it still claims it: this member
+    records nothing of its hold (the first keeps the user)."""
 
     def owner(self, user_id: str) -> str | None:
         return self.owners.get(user_id)
@@ -73,7 +80,8 @@ class Claims:
     holding: int | None = None
     """The hovering point it holds now (arrived, not yet left)."""
     bound: str | None = None
-    """The user its hold is bound to (a request bound at the arrival)."""
+    """The user its hold is bound to (a request bound at the arrival), until its service is
+    recorded."""
     answering: bool = False
     """It flies its mission's way home in a mission mode, its sortie on, and would turn back
     for a new request (``SortieLogic._answers``)."""
@@ -85,18 +93,20 @@ class Claims:
 
 def claims_now(held: HeldMission | None, holds: Holds, seq: int, homing: bool) -> Claims:
     """What a member flying ``held`` (item ``seq`` current, ``holds`` watched) claims: the
-    point it holds and its bound user, and the first point after it (or after the item flown
-    to, when it holds none) with its planned user; nothing without a mission or homing."""
+    point it holds and its bound user (or its last hold's, until that service is recorded:
+    ``Holds.judged_unrecorded``), and the first point after it (or after the item flown to,
+    when it holds none) with its planned user; no point without a mission or homing."""
+    unrecorded = holds.judged_unrecorded.binding.user_id if holds.judged_unrecorded is not None else None
     if held is None or homing:
-        return Claims()
-    holding = bound = None
+        return Claims(bound=unrecorded)
+    holding, bound = None, unrecorded
     after = seq - 1
     w, b = holds.watch, holds.binding
     if w is not None and w.phase == "holding":
         point = held.point_at(w.seq)
         if point is not None:
             holding, after = point.hover_index, w.seq
-            bound = b.user_id if b is not None and b.request_id is not None else None
+            bound = b.user_id if b is not None and b.request_id is not None else unrecorded
     following = held.points_after(after)
     if not following:
         return Claims(holding=holding, bound=bound)

@@ -11,6 +11,7 @@ from dataclasses import dataclass, replace
 from .. import events as ev
 from . import effects as fx
 from .hold import HoldWatch
+from ..planning import PlannedPoint
 from .mission import HeldMission
 
 
@@ -36,6 +37,22 @@ class Binding:
 
 
 @dataclass(frozen=True)
+class Judged:
+    """A hold judged to have served its bound request, its record waiting for the binding to
+    settle among a fleet's members (``FleetView.bound_settled``): of two members that bound
+    one user within a hearing delay, the one that bound it first records it."""
+
+    point: PlannedPoint
+    binding: Binding
+    covered_s: float
+    held_s: float
+    why_left: str
+    since: float | None = None
+    """When its wait began (the logic's clock, at the first tick after the judgement):
+    recorded ``Rules.settle_max_s`` after at most."""
+
+
+@dataclass(frozen=True)
 class Holds:
     """The watch over the point flown and what was judged of the points before it."""
 
@@ -45,6 +62,8 @@ class Holds:
     """Seqs of the mission held's points already judged (served or not)."""
     early_end: int | None = None
     """The seq whose hold the service ended early."""
+    judged_unrecorded: Judged | None = None
+    """The last hold's service, recorded once its binding has settled (a fleet's member)."""
 
     def closed(self, seq: int) -> Holds:
         """The hold at ``seq`` was judged: no watch, no binding, not judged again."""

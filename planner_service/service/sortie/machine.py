@@ -53,7 +53,7 @@ from .authority import Authority, next_sortie
 from .evidence import Evidence, Settled, judge
 from .fleet import Claims, FleetView, answer_rank, claims_now
 from .hold import HoldWatch, Sample
-from .holds import Binding, Holds
+from .holds import Binding, Holds, Judged
 from .life import Life
 from .mission import HeldMission
 from .onboard import OnBoard
@@ -298,8 +298,11 @@ class SortieLogic:
         return replace(claims, answering=True) if self._answers(s, v) else claims
 
     def _pending(self, s: Sortie) -> list[RequestRow]:
-        """The requests pending here that no other member owns."""
-        return [r for r in self.world.pending() if s.fleet.owner(r.user_id) is None]
+        """The requests pending here that no other member owns (nor this member's last hold
+        served, its record waiting: ``_record_due``)."""
+        j = s.holds.judged_unrecorded
+        unrecorded = j.binding.user_id if j is not None else None
+        return [r for r in self.world.pending() if s.fleet.owner(r.user_id) is None and r.user_id != unrecorded]
 
     def _pending_count(self, s: Sortie) -> int:
         """How many requests are pending here that no other member owns (read at every tick:
@@ -334,6 +337,7 @@ class SortieLogic:
         out += begin + lapsed
         s = self._watch(s, v, now, out)
         s = self._maybe_end_pause(s, v, now, out)
+        s = self._record_due(s, now, out)
         s = self._return_check(s, v, now, out)
         s = self._homing(s, v)
         s = self._disarm_check(s, v, now, out)
@@ -447,6 +451,7 @@ class SortieLogic:
         the planner's futures follow), the planned user or, if its backlog or place changed,
         another."""
         assert s.holds.watch is not None and s.onboard.held is not None
+        s = self._record_now(s, out)  # one binding claimed at a time
         seq = s.holds.watch.seq
         point = s.onboard.held.point_at(seq)
         assert point is not None
@@ -529,7 +534,8 @@ class SortieLogic:
         return self._judge(replace(s, holds=s.holds.abandoned(why)), out)
 
     def _judge(self, s: Sortie, out: list[fx.Effect]) -> Sortie:
-        """The vehicle left the point (or passed it): record what the hold carried."""
+        """The vehicle left the point (or passed it): record what the hold carried, a fleet's
+        member once the binding has settled (``_record_due``)."""
         w, b, held = s.holds.watch, s.holds.binding, s.onboard.held
         assert w is not None and held is not None
         point = held.point_at(w.seq)
@@ -541,7 +547,39 @@ class SortieLogic:
             return s
         if b is None or b.request_id is None:
             return s
-        other = s.fleet.owner(b.user_id) or b.lost_to
+        judged = Judged(point, b, w.covered_s, w.held_s, w.why_left)
+        if self.rules.settle_max_s > 0 and s.fleet.bound_settled != b.user_id:
+            return replace(s, holds=replace(s.holds, judged_unrecorded=judged))
+        return self._record(s, judged, out)
+
+    def _record_due(self, s: Sortie, now: float, out: list[fx.Effect]) -> Sortie:
+        """Record the last hold's service once its binding has settled, or ``settle_max_s``
+        after the judgement: of two members that bound one user within a hearing delay (each
+        hold shorter than it: 20 UAVs over radios, two members at two points near a user with
+        one task), the one that bound it first records it, the other nothing."""
+        j = s.holds.judged_unrecorded
+        if j is None:
+            return s
+        if j.since is None:
+            return replace(s, holds=replace(s.holds, judged_unrecorded=replace(j, since=now)))
+        settled = s.fleet.bound_settled == j.binding.user_id
+        if not settled and now - j.since < self.rules.settle_max_s:
+            return s
+        if not settled:
+            out.append(fx.Log("warning", f"point {j.point.hover_index}: the binding of {j.binding.user_id} has not "
+                                         f"settled in {self.rules.settle_max_s:g} s: recorded as judged"))
+        return self._record(replace(s, holds=replace(s.holds, judged_unrecorded=None)), j, out)
+
+    def _record_now(self, s: Sortie, out: list[fx.Effect]) -> Sortie:
+        """The last hold's service recorded as it stands (a new hold binds, the sortie ends)."""
+        j = s.holds.judged_unrecorded
+        return s if j is None else self._record(replace(s, holds=replace(s.holds, judged_unrecorded=None)), j, out)
+
+    def _record(self, s: Sortie, j: Judged, out: list[fx.Effect]) -> Sortie:
+        """Record what the hold ``j`` carried, unless another member serves its user."""
+        point, b = j.point, j.binding
+        assert b.request_id is not None
+        other = s.fleet.owner(b.user_id) or b.lost_to or s.fleet.bound_first.get(b.user_id)
         elsewhere = (f"{other} serves {b.user_id} (claimed it first)" if other is not None
                      else self.world.served_elsewhere(b.user_id))
         if elsewhere is not None:  # two members bound one user at once: the first keeps it
@@ -550,22 +588,22 @@ class SortieLogic:
             return s
         # What the hold carried, whatever the user said: a user whose upload is done ended the
         # hold early (``_maybe_end_hold``), but no more is recorded than the time held carries.
-        covered = w.covered_s
+        covered = j.covered_s
         if covered >= b.needed_s - 0.5:
             tasks = b.tasks
         else:
             tasks = int(b.tasks * covered / b.needed_s) if b.needed_s > 0 else 0
         if tasks <= 0:
-            out.append(fx.Emit(ev.WaypointReached(f"point {point.hover_index}: held {w.held_s:.1f} s of "
-                                                   f"{b.needed_s:.1f} s needed ({w.why_left}): nothing served",
+            out.append(fx.Emit(ev.WaypointReached(f"point {point.hover_index}: held {j.held_s:.1f} s of "
+                                                   f"{b.needed_s:.1f} s needed ({j.why_left}): nothing served",
                                user_id=b.user_id, request_id=b.request_id)))
             return s
         bits = tasks * self.rules.scenario.bits_per_task
         reward = self._service_reward(point, tasks)
         out.append(fx.RecordService(b.request_id, b.user_id, point.hover_index, (point.x_m, point.y_m, point.z_m),
-                                    tasks, bits, reward, w.held_s, b.planned, b.tasks))
+                                    tasks, bits, reward, j.held_s, b.planned, b.tasks))
         detail = f"{tasks} tasks at point {point.hover_index}" + ("" if tasks == b.tasks else f" of {b.tasks}")
-        out.append(fx.Emit(ev.UserServed(f"{detail}; held {w.held_s:.1f} s", user_id=b.user_id,
+        out.append(fx.Emit(ev.UserServed(f"{detail}; held {j.held_s:.1f} s", user_id=b.user_id,
                            request_id=b.request_id)))
         return replace(s, life=s.life.served())
 
@@ -1208,7 +1246,7 @@ class SortieLogic:
     def _end(self, s: Sortie, why: str, v: ins.VehicleSnapshot, out: list[fx.Effect]) -> Sortie:
         if s.life.over is not None:
             return s
-        s = self._abandon(s, why, out)
+        s = self._record_now(self._abandon(s, why, out), out)
         life, said = s.life.ended(why)
         out += said
         return replace(s, life=life, schedule=s.schedule.ended())
