@@ -399,7 +399,8 @@ class MembershipConfig(Section):
     rogue peer, or a member whose key was stolen and that says nothing, delays each decision
     by this at most); then flown as decided, and logged. A replacement of a point lost in
     flight waits hovering where the vehicle is (a pause this long in vehicle time, ended
-    by the service once the claim has settled: docs/OPERATIONS.md). 0: off."""
+    by the service once the claim has settled), and a hold's service is recorded once its
+    binding has settled, within this too (docs/OPERATIONS.md). 0: off."""
     settle_margin_s: float = setting(0.1, ge=0, le=4.0, unit="s")
     """How far apart the members' clocks may read for the settling above to hold (it compares
     their signed times with this computer's): GPS or NTP time on the field."""
