@@ -519,3 +519,23 @@ def test_a_lone_uav_records_a_hold_at_once() -> None:
     run, _ = fly_to_first_point(FakeWorld())  # settle_max_s 0: no fleet
     _, out = served_and_left(run)
     assert only(out, fx.RecordService)
+
+
+def test_a_member_reading_its_mission_back_keeps_what_it_claims() -> None:
+    """Finding (20 UAVs over radios, 2026-12-07): while a member read its mission back (every
+    30 s, and in every doubt: 44 read-backs in a run, up to 9 s each over the radios) it
+    claimed nothing, so the others planned its points meanwhile; claimed again afterwards, by
+    a later time, it lost them to those claims (8 of the 44 were followed within 8 s by the
+    member losing its next point). Its vehicle flies on meanwhile: what it claimed stands."""
+    world = FakeWorld()
+    run, up = fly_to_first_point(world)
+    settling(run, world)
+    claimed = run.s.claims
+    assert claimed.flying_to == 3
+    out = run.feed(ins.Restored("AUTO"))  # the link came back: the mission is read back
+    assert only(out, fx.ReadBack) and run.s.onboard.doubt is not None
+    assert run.s.claims == claimed and not only(out, fx.Intend), "nothing given up"
+    out = run.tick(seq=2, xyz=(60.0, 100.0, 100.0), boot_s=10.0)
+    assert run.s.claims == claimed and not only(out, fx.Intend)
+    out = run.feed(ins.ReadBackDone(up.items))
+    assert run.s.onboard.doubt is None and run.s.claims == claimed and not only(out, fx.Intend)

@@ -288,7 +288,12 @@ class SortieLogic:
 
     def _claims(self, s: Sortie, v: ins.VehicleSnapshot) -> Claims:
         """What this member claims now (``fleet.claims_now``): the point it flies to from the
-        moment its mission there is on board, or its plan there settles, the point it holds."""
+        moment its mission there is on board, or its plan there settles, the point it holds.
+        While its mission is read back (a doubt, the periodic check) what it claimed stands:
+        its vehicle flies on meanwhile, and claims given up for the read-back were planned by
+        the others, then claimed again by a later time and lost to them."""
+        if s.onboard.doubt is not None and s.onboard.held is not None and not s.life.homing and s.life.over is None:
+            return s.claims
         held = s.onboard.held if s.onboard.known else None
         claims = claims_now(held, s.holds, v.seq, s.life.homing or s.life.over is not None)
         up = s.schedule.settling
