@@ -539,3 +539,19 @@ def test_a_member_reading_its_mission_back_keeps_what_it_claims() -> None:
     assert run.s.claims == claimed and not only(out, fx.Intend)
     out = run.feed(ins.ReadBackDone(up.items))
     assert run.s.onboard.doubt is None and run.s.claims == claimed and not only(out, fx.Intend)
+
+
+def test_a_settled_plan_keeps_its_first_points_claim_through_its_upload() -> None:
+    """Found with the read-backs' (the same run): a plan whose first point's claim had settled
+    gave the claim up while its upload was in flight (the mission not yet on board), then
+    claimed the point again once it was, by the time of the upload's end: its claim of 4 s
+    before was lost, and the claims others made meanwhile came first."""
+    run, up, _ = decided_on_the_way_home("uav2", 9)
+    assert up is None and run.s.claims.flying_to == 9
+    claimed, since = run.s.claims, len(run.effects)
+    (up,) = only(run.feed(ins.FleetHeard(FleetView(settled=frozenset({9})))), fx.Upload)
+    assert run.s.schedule.busy == "upload"
+    assert run.s.claims == claimed, "claimed while the upload is in flight"
+    run.feed(ins.Uploaded(up))
+    assert run.s.claims.flying_to == 9
+    assert all(c.flying_to == 9 for c in intents(run.effects[since:])), "never given up since it was first claimed"

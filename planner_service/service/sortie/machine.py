@@ -277,7 +277,10 @@ class SortieLogic:
         return s
 
     def _intend(self, s: Sortie, v: ins.VehicleSnapshot, now: float, out: list[fx.Effect]) -> Sortie:
-        """Tell the fleet what this member claims whenever it changes (``_claims``)."""
+        """Tell the fleet what this member claims whenever it changes (``_claims``), the way
+        home judged first on the mission held now (a decision on the way home, accepted,
+        flies a point: claimed from then, not from the next report's tick)."""
+        s = self._homing(s, v)
         claims = self._claims(s, v)
         if claims == s.claims:
             return s

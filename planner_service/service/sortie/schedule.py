@@ -62,7 +62,8 @@ class Schedule:
     """The hover point the vehicle last arrived at (where the way home's decisions start)."""
     settling: fx.Upload | None = None
     """The upload of a plan made away from a hold (before the takeoff, on the way home),
-    sent once its first point's claim has settled (``busy`` "settle")."""
+    sent once its first point's claim has settled (``busy`` "settle"), kept until that
+    upload is answered (its first point claimed all along)."""
     claimed_at: float = -math.inf
     """When the point this member flies to next was first claimed (a plan's first point,
     settling or uploaded): its settling is waited for from then."""
@@ -88,7 +89,9 @@ class Schedule:
         return replace(self, busy="", last_plan_at=now)
 
     def uploading(self, plan_id: int) -> Schedule:
-        return replace(self, busy="upload", plan_id=plan_id, settling=None)
+        """Plan ``plan_id``'s upload sent (a settled one stays ``settling`` until it is
+        answered: its first point stays claimed until the mission there is on board)."""
+        return replace(self, busy="upload", plan_id=plan_id)
 
     def settle(self, upload: fx.Upload) -> Schedule:
         """``upload`` waits for its first point's claim to settle."""
@@ -107,7 +110,7 @@ class Schedule:
 
     def answered(self) -> Schedule:
         """What was in flight (an upload, a read-back) was answered."""
-        return replace(self, busy="")
+        return replace(self, busy="", settling=None)
 
     def reading_back(self) -> Schedule:
         return replace(self, busy="readback")
