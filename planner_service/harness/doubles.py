@@ -55,17 +55,21 @@ def stacked_holds(statuses: Iterable[Status], radius_m: float, rounds: int = 4, 
 
 
 HELD = re.compile(r"held ([0-9.]+) s")
+RECORDED = re.compile(r"recorded ([0-9.]+) s after the hold")
 
 
 def served_at_once(events: Iterable[tuple[str, Event]], speedup: float) -> list[str]:
     """Users served by two UAVs whose holds overlapped in time (``user_served`` events: the
-    hold ends at the event, ``held X s`` of the vehicle's time before it, ``speedup`` times
-    faster than the wall): ``"user-3 uav1+uav2"``."""
+    hold ends at the event, or ``recorded X s after the hold`` before it (wall seconds: a
+    fleet member records once its binding has settled), ``held X s`` of the vehicle's time
+    before that, ``speedup`` times faster than the wall): ``"user-3 uav1+uav2"``."""
     holds: dict[str, list[tuple[float, float, str]]] = {}
     for vehicle, e in events:
         m = HELD.search(e.detail)
         if e.event == "user_served" and e.user_id and m:
-            holds.setdefault(e.user_id, []).append((e.time_s - float(m[1]) / speedup, e.time_s, vehicle))
+            late = RECORDED.search(e.detail)
+            end = e.time_s - (float(late[1]) if late else 0.0)
+            holds.setdefault(e.user_id, []).append((end - float(m[1]) / speedup, end, vehicle))
     out = set()
     for user, spans in holds.items():
         for i, (a0, a1, va) in enumerate(spans):

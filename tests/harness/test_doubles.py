@@ -47,3 +47,15 @@ def test_services_of_one_user_by_two_overlapping_in_time_are_at_once_one_after_t
               # one UAV twice is never two
               served("uav3", "user-3", 120.0, 50.0), served("uav3", "user-3", 121.0, 50.0)]
     assert served_at_once(events, 10.0) == ["user-1 uav1+uav2"]
+
+
+def test_a_service_recorded_after_its_hold_is_placed_at_its_hold() -> None:
+    """A fleet member records once its binding has settled, seconds after the hold: the
+    event says how long after, and the hold is placed where it was flown."""
+    late = (served("uav2", "user-1", 112.0, 30.0)[0],
+            Event(event="user_served", time_s=112.0, user_id="user-1",
+                  detail="10 tasks at point 3; held 30.0 s; recorded 6.0 s after the hold"))
+    # uav1 held user-1 from 100 to 105 s, uav2 from 103 to 106 (recorded at 112): at once
+    assert served_at_once([served("uav1", "user-1", 105.0, 50.0), late], 10.0) == ["user-1 uav1+uav2"]
+    # uav1 from 107 to 112: after uav2's hold, though the two events are at one moment
+    assert served_at_once([served("uav1", "user-1", 112.0, 50.0), late], 10.0) == []

@@ -490,8 +490,11 @@ def test_of_two_members_that_bound_one_user_within_a_hearing_delay_only_the_firs
     first = settling(fly_to_first_point(FakeWorld())[0], world)
     served_and_left(first)
     first.feed(ins.FleetHeard(FleetView(bound_settled="a")))
-    (svc,) = only(first.tick(seq=3, xyz=(220.0, 300.0, 100.0), boot_s=31.0), fx.RecordService)
+    out = first.tick(seq=3, xyz=(220.0, 300.0, 100.0), boot_s=25.0 + b.needed_s)
+    (svc,) = only(out, fx.RecordService)
     assert (svc.user_id, svc.tasks) == ("a", b.tasks)
+    (served,) = [e.event for e in only(out, fx.Emit) if e.event.kind == "user_served"]
+    assert "recorded 4.0 s after the hold" in served.detail, "the hold's end, for whoever reads when it was"
 
 
 def test_a_binding_that_does_not_settle_is_recorded_after_the_bound_and_a_new_hold_records_the_last_at_once() -> None:

@@ -47,6 +47,8 @@ class Judged:
     covered_s: float
     held_s: float
     why_left: str
+    ended_s: float
+    """The vehicle's time of its last report inside the hold (its end, as far as seen)."""
     since: float | None = None
     """When its wait began (the logic's clock, at the first tick after the judgement):
     recorded ``Rules.settle_max_s`` after at most."""

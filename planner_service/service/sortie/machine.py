@@ -345,7 +345,7 @@ class SortieLogic:
         out += begin + lapsed
         s = self._watch(s, v, now, out)
         s = self._maybe_end_pause(s, v, now, out)
-        s = self._record_due(s, now, out)
+        s = self._record_due(s, v, now, out)
         s = self._return_check(s, v, now, out)
         s = self._homing(s, v)
         s = self._disarm_check(s, v, now, out)
@@ -459,7 +459,7 @@ class SortieLogic:
         the planner's futures follow), the planned user or, if its backlog or place changed,
         another."""
         assert s.holds.watch is not None and s.onboard.held is not None
-        s = self._record_now(s, out)  # one binding claimed at a time
+        s = self._record_now(s, v, out)  # one binding claimed at a time
         seq = s.holds.watch.seq
         point = s.onboard.held.point_at(seq)
         assert point is not None
@@ -555,12 +555,12 @@ class SortieLogic:
             return s
         if b is None or b.request_id is None:
             return s
-        judged = Judged(point, b, w.covered_s, w.held_s, w.why_left)
+        judged = Judged(point, b, w.covered_s, w.held_s, w.why_left, w.last_in_s)
         if self.rules.settle_max_s > 0 and s.fleet.bound_settled != b.user_id:
             return replace(s, holds=replace(s.holds, judged_unrecorded=judged))
-        return self._record(s, judged, out)
+        return self._record(s, judged, None, out)
 
-    def _record_due(self, s: Sortie, now: float, out: list[fx.Effect]) -> Sortie:
+    def _record_due(self, s: Sortie, v: ins.VehicleSnapshot, now: float, out: list[fx.Effect]) -> Sortie:
         """Record the last hold's service once its binding has settled, or ``settle_max_s``
         after the judgement: of two members that bound one user within a hearing delay (each
         hold shorter than it: 20 UAVs over radios, two members at two points near a user with
@@ -576,15 +576,16 @@ class SortieLogic:
         if not settled:
             out.append(fx.Log("warning", f"point {j.point.hover_index}: the binding of {j.binding.user_id} has not "
                                          f"settled in {self.rules.settle_max_s:g} s: recorded as judged"))
-        return self._record(replace(s, holds=replace(s.holds, judged_unrecorded=None)), j, out)
+        return self._record(replace(s, holds=replace(s.holds, judged_unrecorded=None)), j, v, out)
 
-    def _record_now(self, s: Sortie, out: list[fx.Effect]) -> Sortie:
+    def _record_now(self, s: Sortie, v: ins.VehicleSnapshot, out: list[fx.Effect]) -> Sortie:
         """The last hold's service recorded as it stands (a new hold binds, the sortie ends)."""
         j = s.holds.judged_unrecorded
-        return s if j is None else self._record(replace(s, holds=replace(s.holds, judged_unrecorded=None)), j, out)
+        return s if j is None else self._record(replace(s, holds=replace(s.holds, judged_unrecorded=None)), j, v, out)
 
-    def _record(self, s: Sortie, j: Judged, out: list[fx.Effect]) -> Sortie:
-        """Record what the hold ``j`` carried, unless another member serves its user."""
+    def _record(self, s: Sortie, j: Judged, v: ins.VehicleSnapshot | None, out: list[fx.Effect]) -> Sortie:
+        """Record what the hold ``j`` carried, unless another member serves its user; ``v``:
+        the vehicle now, when the record waited (its event says how long after the hold)."""
         point, b = j.point, j.binding
         assert b.request_id is not None
         other = s.fleet.owner(b.user_id) or b.lost_to or s.fleet.bound_first.get(b.user_id)
@@ -611,9 +612,18 @@ class SortieLogic:
         out.append(fx.RecordService(b.request_id, b.user_id, point.hover_index, (point.x_m, point.y_m, point.z_m),
                                     tasks, bits, reward, j.held_s, b.planned, b.tasks))
         detail = f"{tasks} tasks at point {point.hover_index}" + ("" if tasks == b.tasks else f" of {b.tasks}")
-        out.append(fx.Emit(ev.UserServed(f"{detail}; held {j.held_s:.1f} s", user_id=b.user_id,
+        late_s = self._since_s(j.ended_s, v)
+        detail += f"; held {j.held_s:.1f} s" + (f"; recorded {late_s:.1f} s after the hold" if late_s >= 0.05 else "")
+        out.append(fx.Emit(ev.UserServed(detail, user_id=b.user_id,
                            request_id=b.request_id)))
         return replace(s, life=s.life.served())
+
+    @staticmethod
+    def _since_s(vehicle_s: float, v: ins.VehicleSnapshot | None) -> float:
+        """Wall seconds from the vehicle's time ``vehicle_s`` to its latest report (0 unknown)."""
+        if v is None or not v.time_rate or math.isnan(v.boot_s) or math.isnan(vehicle_s):
+            return 0.0
+        return max(v.boot_s - vehicle_s, 0.0) / v.time_rate
 
     def _service_reward(self, point: PlannedPoint, tasks: int) -> float:
         """q of ``tasks`` served at ``point``, as the journal records it: the plan's own
@@ -1254,7 +1264,7 @@ class SortieLogic:
     def _end(self, s: Sortie, why: str, v: ins.VehicleSnapshot, out: list[fx.Effect]) -> Sortie:
         if s.life.over is not None:
             return s
-        s = self._record_now(self._abandon(s, why, out), out)
+        s = self._record_now(self._abandon(s, why, out), v, out)
         life, said = s.life.ended(why)
         out += said
         return replace(s, life=life, schedule=s.schedule.ended())
