@@ -34,14 +34,18 @@ def python() -> str:
 @pytest.fixture
 def make_sitl(tmp_path: Path) -> Iterator[Callable[..., Sitl]]:
     """A factory of ArduCopter SITLs (tests/support/sitl.py; keyword arguments go to ``Sitl``, e.g.
-    ``serials``), each started in its own folder and instance and stopped at the end;
-    skipped where the binary is missing."""
+    ``serials``), each started in its own folder and instance and stopped at the end, beside
+    no PX4 (the machine's turn, shared: ``tests/support/turn.py``); skipped where the binary
+    is missing."""
     binary = sitl_binary()
     if binary is None:
         pytest.skip(skip_reason())
     started: list[Sitl] = []
+    turn = contextlib.ExitStack()
 
     def make(**options: Any) -> Sitl:
+        if not started:
+            turn.enter_context(heavy_sitl_turn(shared=True))
         folder = tmp_path / f"sitl-{len(started)}"
         folder.mkdir()
         s = Sitl(binary, folder, options.pop("instance", None) or free_instance(), **options)
@@ -54,6 +58,7 @@ def make_sitl(tmp_path: Path) -> Iterator[Callable[..., Sitl]]:
     finally:
         for s in started:
             s.stop()
+        turn.close()
 
 
 @pytest.fixture

@@ -23,8 +23,9 @@ from protocol import GeoOrigin, HoverPoint, encode_path, global_to_local, replac
 
 from planner_service.harness.processes import free_port
 from tests.support.sitl import PtyBridge, Sitl, ports, set_param
+from tests.support.turn import TURN_WAIT_S
 
-pytestmark = [pytest.mark.sitl, pytest.mark.timeout(150)]
+pytestmark = [pytest.mark.sitl, pytest.mark.timeout(150 + TURN_WAIT_S)]
 BACKENDS = ["pymavlink", "mavsdk"]
 ORIGIN = GeoOrigin()
 ALT_M = 20.0

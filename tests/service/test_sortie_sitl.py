@@ -53,8 +53,9 @@ from tests.support.autopilot_sortie import BUDGET_MS, check_requests_and_mission
 from tests.support.autopilot_sortie import fly as fly_with
 from tests.support.autopilot_sortie import logged_at, offline, service_log
 from tests.support.truth import false_services, recorded_services, sitl_track
+from tests.support.turn import TURN_WAIT_S
 
-pytestmark = [pytest.mark.sitl, pytest.mark.timeout(300)]
+pytestmark = [pytest.mark.sitl, pytest.mark.timeout(300 + TURN_WAIT_S)]
 
 REPO = Path(__file__).resolve().parents[2]
 CONFIG = REPO / "docs" / "sitl-copter.toml"

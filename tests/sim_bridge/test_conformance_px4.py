@@ -14,6 +14,7 @@ docs/VEHICLE.md, "PX4 SITL against the stub's PX4 flavour".
 
 from __future__ import annotations
 
+import contextlib
 import math
 import os
 import subprocess
@@ -36,6 +37,7 @@ from sim_bridge.vehicle.mission_id import px4_mission_id
 from sim_bridge.vehicle.streams import DEFAULT_MAX_STREAM_HZ
 from tests.support import px4 as px4_support
 from tests.support.gcs import M, GroundStation
+from tests.support.turn import TURN_WAIT_S, heavy_sitl_turn
 
 REPO = Path(__file__).resolve().parents[2]
 ORIGIN = GeoOrigin()
@@ -96,6 +98,8 @@ def open_vehicle(kind: str, tmp: Path, speed: float) -> tuple[Vehicle, Callable[
         if root is None:
             pytest.skip(px4_support.skip_reason())
         tmp.mkdir(parents=True, exist_ok=True)
+        turn = contextlib.ExitStack()
+        turn.enter_context(heavy_sitl_turn())  # one PX4 on the machine, beside no other SITL
         px4 = px4_support.Px4(root, tmp, px4_support.free_instance(), speed=int(speed))
         gcs = GroundStation(px4.url, timeout_s=0.5, retries=10)
         try:
@@ -103,10 +107,12 @@ def open_vehicle(kind: str, tmp: Path, speed: float) -> tuple[Vehicle, Callable[
         except BaseException:
             px4.stop()
             gcs.close()
+            turn.close()
             raise
 
         def stop() -> None:
             px4.stop()
+            turn.close()
     else:
         port = free_port()
         gcs = GroundStation(f"udpin:127.0.0.1:{port}", timeout_s=0.5, retries=10)
@@ -212,7 +218,7 @@ def same_item(a: MissionItem, b: MissionItem) -> bool:
 
 # --- the checks, in order on one vehicle per target ----------------------------------------------
 
-@pytest.mark.timeout(60)
+@pytest.mark.timeout(60 + TURN_WAIT_S)
 def test_streams_unasked_from_the_first_second_at_the_simulated_rates(vehicle: Vehicle) -> None:
     first = {m.get_type() for at, m in vehicle.first if at < 1.0}
     assert {"HEARTBEAT", "SYS_STATUS", "EXTENDED_SYS_STATE", "MISSION_CURRENT", "ATTITUDE"} <= first, first
@@ -229,7 +235,7 @@ def test_streams_unasked_from_the_first_second_at_the_simulated_rates(vehicle: V
             f"{name}: {count} in {vehicle_s:.1f} vehicle s, PX4 streams {hz:g} Hz"
 
 
-@pytest.mark.timeout(60)
+@pytest.mark.timeout(60 + TURN_WAIT_S)
 def test_an_upload_reads_back_as_sent_and_carries_its_crc(vehicle: Vehicle) -> None:
     gcs = vehicle.gcs
     sent = [item(0, 0.0, 15.0, current=1), item(1, 20.0, 15.0, hold_s=1.7),
@@ -258,7 +264,7 @@ def test_an_upload_reads_back_as_sent_and_carries_its_crc(vehicle: Vehicle) -> N
     assert gcs.command(M.MAV_CMD_MISSION_START, 0, 0) == M.MAV_RESULT_DENIED, "no mission to start"
 
 
-@pytest.mark.timeout(120)
+@pytest.mark.timeout(120 + TURN_WAIT_S)
 def test_mission_start_flies_from_item_0_keeps_or_resets_the_index_and_disarms_after_landing(
         vehicle: Vehicle) -> None:
     gcs = vehicle.gcs
@@ -313,7 +319,7 @@ def test_mission_start_flies_from_item_0_keeps_or_resets_the_index_and_disarms_a
     assert armed_levels and min(armed_levels) < 100
 
 
-@pytest.mark.timeout(60)
+@pytest.mark.timeout(60 + TURN_WAIT_S)
 @pytest.mark.parametrize("mode", [AUTO_LOITER, AUTO_RTL, POSCTL, AUTO_LOITER])
 def test_modes_a_landed_disarmed_px4_takes(vehicle: Vehicle, mode: int) -> None:
     gcs = vehicle.gcs
@@ -323,7 +329,7 @@ def test_modes_a_landed_disarmed_px4_takes(vehicle: Vehicle, mode: int) -> None:
     assert not beat.base_mode & M.MAV_MODE_FLAG_SAFETY_ARMED
 
 
-@pytest.mark.timeout(60)
+@pytest.mark.timeout(60 + TURN_WAIT_S)
 @pytest.mark.parametrize("kind", TARGETS)
 def test_arming_is_refused_before_the_prearm_checks_pass(kind: str, tmp_path: Path) -> None:
     v, close = open_vehicle(kind, tmp_path / kind, 1)

@@ -6,7 +6,13 @@ MAVSDK's upload of 3 items took 12-28 s and its arming came 50 s after it, so PX
 disarm came between the start's steps (the start refused, or the vehicle landed at item 0 and
 the authority was revoked: the clean clones of 2026-12-06 and -07 and a CI run), and the
 fleet's test took 239 s instead of 90. A real autopilot has its computer to itself; each test
-alone passed."""
+alone passed.
+
+A single ArduCopter SITL is lighter: two run side by side, each taking the turn shared
+(``shared=True``), but not beside a PX4, which needs the turn alone: a PX4 whole sortie with
+MAVSDK beside ArduCopter's SITL killed and restarted mid-flight (the clean clone of
+2026-12-07, evening) took 7.3 s to upload 3 items and more than 6 s from the arming to the
+mode, and PX4 disarmed on its own ("Disarmed by landing") before the mission began."""
 
 from __future__ import annotations
 
@@ -30,22 +36,41 @@ file's next test, asking within milliseconds of the last one's end, could keep i
 file."""
 
 
+_held: list[bool] = []
+"""The turns this process holds now, each ``shared`` or not (a test inside another's turn, as
+the fleet's three SITLs started under its exclusive one, takes nothing more)."""
+
+
 @contextlib.contextmanager
-def heavy_sitl_turn(wait_s: float = TURN_WAIT_S) -> Iterator[None]:
-    """This test process's turn with a heavy simulation (a file lock across the workers)."""
+def heavy_sitl_turn(wait_s: float = TURN_WAIT_S, shared: bool = False) -> Iterator[None]:
+    """This test process's turn with a heavy simulation (a file lock across the workers):
+    alone, or ``shared`` with other shared holders (single ArduCopter SITLs)."""
+    if _held:
+        if not shared and all(_held):
+            raise RuntimeError("a shared turn cannot become exclusive: take the exclusive one first")
+        _held.append(shared)
+        try:
+            yield
+        finally:
+            _held.pop()
+        return
     handle = open(TURN_FILE, "w")
     deadline = time.monotonic() + wait_s
     try:
         while True:
             try:
-                fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                fcntl.flock(handle, (fcntl.LOCK_SH if shared else fcntl.LOCK_EX) | fcntl.LOCK_NB)
                 break
             except OSError:
                 if time.monotonic() > deadline:
                     raise RuntimeError(f"no turn with the heavy simulations within {wait_s:g} s: another "
                                        f"test process holds {TURN_FILE}") from None
                 time.sleep(POLL_S)
-        yield
+        _held.append(shared)
+        try:
+            yield
+        finally:
+            _held.pop()
     finally:
         handle.close()  # (closing releases the lock)
     time.sleep(HANDOVER_S)
