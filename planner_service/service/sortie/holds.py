@@ -107,6 +107,8 @@ class Holds:
             return None
         if b.request_id is None:
             return f"nothing to serve ({b.why_not})"
+        if b.lost_to is not None:  # its hold records nothing: held on, it would only cost flight
+            return f"{b.lost_to} serves {b.user_id} (it bound the user first)"
         if b.done:
             return "the user's upload is done"
         if w.covered_s >= b.needed_s:

@@ -588,12 +588,16 @@ class SortieLogic:
         the vehicle now, when the record waited (its event says how long after the hold)."""
         point, b = j.point, j.binding
         assert b.request_id is not None
-        other = s.fleet.owner(b.user_id) or b.lost_to or s.fleet.bound_first.get(b.user_id)
-        elsewhere = (f"{other} serves {b.user_id} (claimed it first)" if other is not None
+        owner, first = s.fleet.owner(b.user_id), s.fleet.bound_first.get(b.user_id)
+        other = owner or b.lost_to or first
+        how = "owns it now" if owner else "claimed it during the hold" if b.lost_to else "bound it first"
+        elsewhere = (f"{other} serves {b.user_id} ({how})" if other is not None
                      else self.world.served_elsewhere(b.user_id))
         if elsewhere is not None:  # two members bound one user at once: the first keeps it
-            out.append(fx.Emit(ev.WaypointReached(f"point {point.hover_index}: nothing recorded: {elsewhere}",
-                                                   user_id=b.user_id, request_id=b.request_id)))
+            out += [fx.Emit(ev.WaypointReached(f"point {point.hover_index}: nothing recorded: {elsewhere}",
+                                               user_id=b.user_id, request_id=b.request_id)),
+                    fx.Log("info", f"point {point.hover_index}: held {j.held_s:.1f} s for {b.user_id}, nothing "
+                                   f"recorded: {elsewhere}")]
             return s
         # What the hold carried, whatever the user said: a user whose upload is done ended the
         # hold early (``_maybe_end_hold``), but no more is recorded than the time held carries.
