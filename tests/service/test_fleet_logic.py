@@ -574,3 +574,18 @@ def test_a_hold_whose_user_another_member_bound_first_ends_at_once() -> None:
     (cmd,) = only(run.tick(seq=2, xyz=(120.0, 200.0, 100.0), boot_s=21.0), fx.Command)
     assert cmd.kind == "set_current" and cmd.seq == 3 and "uav2 serves a (it bound the user first)" in cmd.why
     assert b.needed_s > 10.0, "long before the request's hold was flown"
+
+
+def test_a_hold_that_carried_nothing_is_said_at_once_and_its_user_not_claimed_on() -> None:
+    """Found with the deferred records (20 UAVs, the next run): a member whose hold was cut
+    short kept its user claimed while its record waited, so two other members' holds of that
+    user (59 and 73 s) recorded nothing, and it recorded nothing either."""
+    world = FakeWorld()
+    run, _ = fly_to_first_point(world)
+    settling(run, world)
+    run.tick(seq=2, xyz=(110.0, 195.0, 100.0), boot_s=19.9)  # reported just before the arrival
+    run.tick(seq=2, xyz=(120.0, 200.0, 100.0), boot_s=20.0)
+    assert run.s.claims.bound == "a"
+    out = run.tick(seq=3, xyz=(140.0, 210.0, 100.0), boot_s=21.0)  # left after a second
+    assert run.s.holds.judged_unrecorded is None and run.s.claims.bound is None
+    assert any("nothing served" in e.event.detail for e in only(out, fx.Emit))

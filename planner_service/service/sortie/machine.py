@@ -556,7 +556,9 @@ class SortieLogic:
         if b is None or b.request_id is None:
             return s
         judged = Judged(point, b, w.covered_s, w.held_s, w.why_left, w.last_in_s)
-        if self.rules.settle_max_s > 0 and s.fleet.bound_settled != b.user_id:
+        if self.rules.settle_max_s > 0 and s.fleet.bound_settled != b.user_id and self._carried(judged) > 0:
+            # (a hold that carried nothing is said at once: claiming its user on would bar
+            # the others' holds of it, for nothing)
             return replace(s, holds=replace(s.holds, judged_unrecorded=judged))
         return self._record(s, judged, None, out)
 
@@ -599,13 +601,7 @@ class SortieLogic:
                     fx.Log("info", f"point {point.hover_index}: held {j.held_s:.1f} s for {b.user_id}, nothing "
                                    f"recorded: {elsewhere}")]
             return s
-        # What the hold carried, whatever the user said: a user whose upload is done ended the
-        # hold early (``_maybe_end_hold``), but no more is recorded than the time held carries.
-        covered = j.covered_s
-        if covered >= b.needed_s - 0.5:
-            tasks = b.tasks
-        else:
-            tasks = int(b.tasks * covered / b.needed_s) if b.needed_s > 0 else 0
+        tasks = self._carried(j)
         if tasks <= 0:
             out.append(fx.Emit(ev.WaypointReached(f"point {point.hover_index}: held {j.held_s:.1f} s of "
                                                    f"{b.needed_s:.1f} s needed ({j.why_left}): nothing served",
@@ -621,6 +617,16 @@ class SortieLogic:
         out.append(fx.Emit(ev.UserServed(detail, user_id=b.user_id,
                            request_id=b.request_id)))
         return replace(s, life=s.life.served())
+
+    @staticmethod
+    def _carried(j: Judged) -> int:
+        """The tasks the hold ``j`` carried, whatever the user said: a user whose upload is
+        done ended the hold early (``_maybe_end_hold``), but no more is recorded than the time
+        held carries."""
+        b = j.binding
+        if j.covered_s >= b.needed_s - 0.5:
+            return b.tasks
+        return int(b.tasks * j.covered_s / b.needed_s) if b.needed_s > 0 else 0
 
     @staticmethod
     def _since_s(vehicle_s: float, v: ins.VehicleSnapshot | None) -> float:
