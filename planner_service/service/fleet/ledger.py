@@ -10,8 +10,9 @@ several UAVs without a coordinator (docs/OPERATIONS.md, "A fleet"):
   ``model.fleet.claims``, shared with the offline planner; a member plans and binds only the
   users no other live member owns, and plans without the points the others claim. The
   bindings heard are kept (``bound_first``): of two members that bound one user within a
-  hearing delay, the later records nothing, though the first's hold is over. A member whose token goes loses its intentions at once:
-  its users are planned by the others at their next decision (one interval).
+  hearing delay, the later records nothing, though the first's hold is over. A member whose
+  token goes loses its intentions at once: its users are planned by the others at their next
+  decision (one interval).
 - **services** (``{prefix}/fleet/served/{vehicle}``): each service flown. The others count
   it as their own (``world.FleetWorld``): the user's backlog less what was served, its
   services one more, so the fairness rule spans the fleet.
