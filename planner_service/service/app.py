@@ -462,9 +462,8 @@ class Service:
         ledger.beat(self.cfg.fleet.intentions_every_s)
         answering = coarse(self.fleet.whereabouts(ledger.answering()))
         heard_since = ledger.heard_since(self._waited_on())
-        bound_settled, bound_first = self._binding(heard_since)
         heard = FleetView(ledger.owners(), ledger.blocked_points() | self._others_over(), ledger.yield_points(),
-                          answering, self._settled(heard_since), bound_settled, bound_first)
+                          answering, self._settled(heard_since), self._bound_settled(heard_since))
         if heard != self.state.fleet:
             self._feed(ins.FleetHeard(heard))
         for done in self.fleet.ledger.take_served():
@@ -488,15 +487,12 @@ class Service:
         known = heard_since - self.cfg.fleet.settle_margin_s
         return frozenset(k for k, at in self._points_at.items() if at <= known)
 
-    def _binding(self, heard_since: float) -> tuple[str | None, dict[str, str]]:
-        """This member's binding as the fleet judges it: its user once settled (as ``_settled``),
-        and the member heard binding it first, if any (``FleetLedger.bound_first``)."""
-        if self.fleet is None or self._bound_at is None:
-            return None, {}
+    def _bound_settled(self, heard_since: float) -> str | None:
+        """The user this member claims as bound once its binding has settled (as ``_settled``)."""
+        if self._bound_at is None:
+            return None
         user, at = self._bound_at
-        settled = user if at <= heard_since - self.cfg.fleet.settle_margin_s else None
-        first = self.fleet.ledger.bound_first(user, at, self.cfg.fleet.settle_max_s)
-        return settled, {} if first is None else {user: first}
+        return user if at <= heard_since - self.cfg.fleet.settle_margin_s else None
 
     def _unheard(self, point: int) -> list[str]:
         """The vehicles a claim of ``point`` settles on (``_settled``) whose intentions signed

@@ -472,7 +472,7 @@ def test_of_two_members_that_bound_one_user_within_a_hearing_delay_only_the_firs
     the hearing delay: both recorded it, neither had heard the other's binding, which went
     with the hold. Now a member records a hold's service once its binding has settled (every
     binding made before it is known), claiming the user meanwhile; the later binder hears the
-    earlier one (``bound_first``, kept though the first's hold is over) and records nothing."""
+    earlier one's binding (claimed until that one's record, too) and records nothing."""
     world = FakeWorld()
     run, _ = fly_to_first_point(world)
     settling(run, world)
@@ -481,10 +481,10 @@ def test_of_two_members_that_bound_one_user_within_a_hearing_delay_only_the_firs
     assert run.s.claims.bound == "a" and intents(run.effects)[-1].bound == "a", "a is still claimed as bound"
     assert "a" not in [r.user_id for r in run.logic._pending(run.s)], "nor planned again meanwhile"
     assert not only(run.tick(seq=3, xyz=(210.0, 300.0, 100.0), boot_s=30.0), fx.RecordService)
-    out = run.feed(ins.FleetHeard(FleetView(bound_settled="a", bound_first={"a": "uav2"})))
+    out = run.feed(ins.FleetHeard(FleetView(owners={"a": "uav2"}, bound_settled="a")))
     out += run.tick(seq=3, xyz=(220.0, 300.0, 100.0), boot_s=31.0)
     assert not only(out, fx.RecordService)
-    assert any("nothing recorded: uav2 serves a" in e.event.detail for e in only(out, fx.Emit))
+    assert any("nothing recorded: uav2 serves a (owns it now)" in e.event.detail for e in only(out, fx.Emit))
     assert run.s.claims.bound is None and run.s.holds.judged_unrecorded is None
     # the first binder: its binding settles, nobody bound a before it: recorded
     first = settling(fly_to_first_point(FakeWorld())[0], world)

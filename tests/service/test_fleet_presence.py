@@ -424,24 +424,3 @@ def test_a_members_intentions_are_put_again_unchanged_and_the_others_know_them_a
     assert b.ledger.not_heard_since(later, {"uav1", "uav2", "uav3"}) == ["uav3"], "uav1 heard since; uav3 never"
     assert b.ledger.not_heard_since(time.time() + 60.0, {"uav1", "uav2"}) == ["uav1"], "not yet signed then"
 
-
-def test_a_binding_heard_says_who_bound_a_user_first_after_its_hold_is_over(mesh: Callable[[], Any]) -> None:
-    """uav1 binds u, then its hold ends (its intentions bind nothing more) before uav2, which
-    bound u later, has settled: uav2 still knows uav1 bound u first (``bound_first``), and
-    records nothing of its own hold; uav1 knows nobody bound it before it."""
-    a_session, b_session = mesh(), mesh()
-    a = presence(KEYS, member("uav1", 100.0))
-    a.join(a_session, DISCOVERY_S)
-    b = presence(KEYS, member("uav2", 120.0))
-    b.join(b_session, DISCOVERY_S)
-    bound_at = time.time()
-    a.ledger.intend({}, bound_at, bound=("u", bound_at), points=[4], holding=4)
-    wait_until(lambda: b.ledger.owners() == {"u": "uav1"}, 10.0, "uav1's binding heard")
-    later = time.time()
-    a.ledger.intend({}, later)  # the hold over: nothing bound
-    wait_until(lambda: b.ledger.heard_since() >= later, 10.0, "uav1's intentions without the binding heard")
-    assert b.ledger.owners() == {}, "uav1 claims u no more"
-    assert b.ledger.bound_first("u", bound_at + 0.7, 10.0) == "uav1", "bound 0.7 s before uav2"
-    assert b.ledger.bound_first("u", bound_at - 0.1, 10.0) is None, "uav2 bound it first"
-    assert b.ledger.bound_first("u", bound_at + 11.0, 10.0) is None, "longer ago than a hearing delay: another stay"
-    assert b.ledger.bound_first("v", bound_at + 0.7, 10.0) is None

@@ -8,11 +8,8 @@ several UAVs without a coordinator (docs/OPERATIONS.md, "A fleet"):
   offline ``claims`` planner commits (the rest of a plan may still change, and claiming it
   would starve the others). Who owns what several members claim is the one rule of
   ``model.fleet.claims``, shared with the offline planner; a member plans and binds only the
-  users no other live member owns, and plans without the points the others claim. The
-  bindings heard are kept (``bound_first``): of two members that bound one user within a
-  hearing delay, the later records nothing, though the first's hold is over. A member whose
-  token goes loses its intentions at once: its users are planned by the others at their next
-  decision (one interval).
+  users no other live member owns, and plans without the points the others claim. A member whose token goes loses its intentions at once:
+  its users are planned by the others at their next decision (one interval).
 - **services** (``{prefix}/fleet/served/{vehicle}``): each service flown. The others count
   it as their own (``world.FleetWorld``): the user's backlog less what was served, its
   services one more, so the fairness rule spans the fleet.
@@ -66,8 +63,6 @@ MAX_ROUTE = 32
 member gone armed keeps is what one sortie can fly, not the whole area."""
 MAX_MEMBERS = 1024
 """Members whose intentions are kept."""
-BINDINGS_KEPT = 16
-"""Bindings heard kept per member (``bound_first``): its last holds'."""
 DUE_PAST_S = 120.0
 """A claim's due may lie at most this long before its message's signed time (a plan late
 on its estimate); earlier (``due -1e15``) is refused: it would beat every honest claim."""
@@ -160,10 +155,6 @@ class FleetLedger:
         """The point each member holds now (its last intentions'), if any."""
         self._answering: set[str] = set()
         """The members whose last intentions say they would answer a new request."""
-        self._bindings: dict[str, dict[str, float]] = {}
-        """vehicle -> user -> when it bound the user (its clock), for its last
-        ``BINDINGS_KEPT`` bindings heard: a binding dropped since (its hold over) still says
-        who bound a user first (``bound_first``)."""
         self._signed_at: dict[str, float] = {}
         """vehicle -> the signed time (its clock) of its latest intentions heard: its claims
         are known as they stood then (``heard_since``)."""
@@ -318,16 +309,6 @@ class FleetLedger:
         with self._lock:
             return min((self._signed_at.get(v, -math.inf) for v in others), default=math.inf)
 
-    def bound_first(self, user: str, at: float, within_s: float) -> str | None:
-        """The member other than this one heard binding ``user`` before this member did at
-        ``at`` (wall clock), at most ``within_s`` before, whether it still claims it or not:
-        the first by the binders' own times, ties to the id sorting first (``claims.owner``'s
-        order); None if none."""
-        with self._lock:
-            ranked = [(t, v) for v, b in self._bindings.items() if (t := b.get(user)) is not None
-                      and at - within_s <= t and (t, v) < (at, self.vehicle)]
-        return min(ranked)[1] if ranked else None
-
     def not_heard_since(self, at: float, vehicles: Iterable[str]) -> list[str]:
         """Of ``vehicles`` (other than this member), those whose latest intentions heard here
         were signed before ``at`` (wall clock), or never heard: what a claim made then still
@@ -397,11 +378,6 @@ class FleetLedger:
             self._claims[message.vehicle] = claims
             self._points[message.vehicle] = points_of(message)
             self._holding[message.vehicle] = message.holding if message.holding in message.points else None
-            if message.bound is not None and message.bound_at_s is not None:
-                bindings = self._bindings.setdefault(message.vehicle, {})
-                bindings[message.bound] = message.bound_at_s
-                if len(bindings) > BINDINGS_KEPT:
-                    del bindings[min(bindings, key=bindings.__getitem__)]
             if message.answering and not message.points:
                 self._answering.add(message.vehicle)
             else:

@@ -59,11 +59,7 @@ class FleetView:
     judged (``blocked``, ``yield_to``); a decision's first point is flown to once settled."""
     bound_settled: str | None = None
     """The user this member claims as bound (``Claims.bound``) once that binding has settled
-    as ``settled`` says: every binding of the user made before it is known (``bound_first``)."""
-    bound_first: Mapping[str, str] = field(default_factory=dict)
-    """That user, with the member heard binding it before this member did (by the binders' own times,
-    at most ``fleet.settle_max_s`` before), whether or not it still claims it: this member
-    records nothing of its hold (the first keeps the user)."""
+    as ``settled`` says: every binding of the user made before it is known (``owners``)."""
 
     def owner(self, user_id: str) -> str | None:
         return self.owners.get(user_id)

@@ -590,9 +590,9 @@ class SortieLogic:
         the vehicle now, when the record waited (its event says how long after the hold)."""
         point, b = j.point, j.binding
         assert b.request_id is not None
-        owner, first = s.fleet.owner(b.user_id), s.fleet.bound_first.get(b.user_id)
-        other = owner or b.lost_to or first
-        how = "owns it now" if owner else "claimed it during the hold" if b.lost_to else "bound it first"
+        owner = s.fleet.owner(b.user_id)
+        other = owner or b.lost_to
+        how = "owns it now" if owner else "claimed it during the hold"
         elsewhere = (f"{other} serves {b.user_id} ({how})" if other is not None
                      else self.world.served_elsewhere(b.user_id))
         if elsewhere is not None:  # two members bound one user at once: the first keeps it
