@@ -92,7 +92,7 @@ def claims_now(held: HeldMission | None, holds: Holds, seq: int, homing: bool) -
     point it holds and its bound user (or its last hold's, until that service is recorded:
     ``Holds.judged_unrecorded``), and the first point after it (or after the item flown to,
     when it holds none) with its planned user; no point without a mission or homing."""
-    unrecorded = holds.judged_unrecorded.binding.user_id if holds.judged_unrecorded is not None else None
+    unrecorded = holds.unrecorded_user
     if held is None or homing:
         return Claims(bound=unrecorded)
     holding, bound = None, unrecorded

@@ -67,6 +67,11 @@ class Holds:
     judged_unrecorded: Judged | None = None
     """The last hold's service, recorded once its binding has settled (a fleet's member)."""
 
+    @property
+    def unrecorded_user(self) -> str | None:
+        """The user of the last hold's service while its record waits (still claimed bound)."""
+        return self.judged_unrecorded.binding.user_id if self.judged_unrecorded is not None else None
+
     def closed(self, seq: int) -> Holds:
         """The hold at ``seq`` was judged: no watch, no binding, not judged again."""
         return replace(self, watch=None, binding=None, judged=self.judged | {seq})

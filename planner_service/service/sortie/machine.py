@@ -308,8 +308,7 @@ class SortieLogic:
     def _pending(self, s: Sortie) -> list[RequestRow]:
         """The requests pending here that no other member owns (nor this member's last hold
         served, its record waiting: ``_record_due``)."""
-        j = s.holds.judged_unrecorded
-        unrecorded = j.binding.user_id if j is not None else None
+        unrecorded = s.holds.unrecorded_user
         return [r for r in self.world.pending() if s.fleet.owner(r.user_id) is None and r.user_id != unrecorded]
 
     def _pending_count(self, s: Sortie) -> int:
@@ -578,7 +577,7 @@ class SortieLogic:
         if not settled:
             out.append(fx.Log("warning", f"point {j.point.hover_index}: the binding of {j.binding.user_id} has not "
                                          f"settled in {self.rules.settle_max_s:g} s: recorded as judged"))
-        return self._record(replace(s, holds=replace(s.holds, judged_unrecorded=None)), j, v, out)
+        return self._record_now(s, v, out)
 
     def _record_now(self, s: Sortie, v: ins.VehicleSnapshot, out: list[fx.Effect]) -> Sortie:
         """The last hold's service recorded as it stands (a new hold binds, the sortie ends)."""
