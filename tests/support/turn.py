@@ -45,15 +45,21 @@ the fleet's three SITLs started under its exclusive one, takes nothing more)."""
 def heavy_sitl_turn(wait_s: float = TURN_WAIT_S, shared: bool = False) -> Iterator[None]:
     """This test process's turn with a heavy simulation (a file lock across the workers):
     alone, or ``shared`` with other shared holders (single ArduCopter SITLs)."""
-    if _held:
-        if not shared and all(_held):
-            raise RuntimeError("a shared turn cannot become exclusive: take the exclusive one first")
+    if _held and not shared and all(_held):
+        raise RuntimeError("a shared turn cannot become exclusive: take the exclusive one first")
+    with contextlib.ExitStack() as turn:
+        if not _held:
+            turn.enter_context(_locked(wait_s, shared))
         _held.append(shared)
         try:
             yield
         finally:
             _held.pop()
-        return
+
+
+@contextlib.contextmanager
+def _locked(wait_s: float, shared: bool) -> Iterator[None]:
+    """The lock file held (shared or alone), waited for at most ``wait_s``."""
     handle = open(TURN_FILE, "w")
     deadline = time.monotonic() + wait_s
     try:
@@ -66,11 +72,7 @@ def heavy_sitl_turn(wait_s: float = TURN_WAIT_S, shared: bool = False) -> Iterat
                     raise RuntimeError(f"no turn with the heavy simulations within {wait_s:g} s: another "
                                        f"test process holds {TURN_FILE}") from None
                 time.sleep(POLL_S)
-        _held.append(shared)
-        try:
-            yield
-        finally:
-            _held.pop()
+        yield
     finally:
         handle.close()  # (closing releases the lock)
     time.sleep(HANDOVER_S)
