@@ -1022,6 +1022,34 @@ def test_px4s_return_mode_before_its_return_item_is_reported_is_its_own_once_the
     assert run.s.authority.granted and run.s.life.over == "the vehicle landed"
 
 
+def test_px4s_land_detector_blinking_at_the_arming_is_no_landing() -> None:
+    # PX4 SITL under MAVSDK, twice in CI: armed on the ground in AUTO.LOITER, its land detector
+    # said "in the air" then "on the ground" within milliseconds (Takeoff detected, Landing
+    # detected), before AUTO.MISSION showed. Taken as a landing away from the return, it revoked
+    # the authority and ended the sortie; the mission then flew, and PX4 returned on its own.
+    world = FakeWorld()
+    world.ask("a", 120.0, 200.0, 10, 1)
+    run = Run(world, rules(flavour="px4"))
+    (plan,) = only(run.tick(mode="AUTO.LOITER"), fx.MakePlan)
+    (up,) = only(run.feed(ins.Planned(plan.basis, path(point(3, 120.0, 200.0, "a", 1)))), fx.Upload)
+    (start,) = only(run.feed(ins.Uploaded(up)), fx.Command)
+    assert start.kind == "start"
+    run.feed(ins.ArmedChanged(True, commanded=True), armed=True)
+    run.tick(airborne=True, seq=0, xyz=(0.0, 0.0, 0.1), boot_s=5.0)  # the blink, seen at a tick
+    out = run.feed(ins.OnGround("EXTENDED_SYS_STATE"), airborne=False)
+    assert run.s.authority.granted and run.s.life.over is None and not run.s.life.flown
+    assert not only(out, fx.Emit)
+    run.feed(ins.CommandDone(start), mode="AUTO.MISSION")
+    run.tick(airborne=True, xyz=(0.0, 0.0, 0.8), boot_s=6.0)
+    assert not run.s.life.flown, "not yet off the ground by the vehicle's own height"
+    out = run.tick(xyz=(0.0, 0.0, 1.5), boot_s=7.0)
+    assert run.s.life.flown and fx.MarkFlown() in out
+    # ... and a landing now is one: away from the return, nobody's
+    run.tick(seq=0, xyz=(60.0, 100.0, 50.0), boot_s=20.0)
+    run.feed(ins.OnGround("EXTENDED_SYS_STATE"), airborne=False, xyz=(60.0, 100.0, 0.0))
+    assert run.s.authority.state == "revoked" and run.s.life.over == "the vehicle landed"
+
+
 def test_a_return_mode_the_return_item_does_not_follow_is_somebodys() -> None:
     run, _ = fly_px4_to_last_point()  # a station's Return at the last point: the mission stays at its item
     run.feed(ins.ModeChanged("AUTO.RTL", commanded=False), mode="AUTO.RTL")

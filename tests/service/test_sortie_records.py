@@ -10,7 +10,7 @@ from planner_service.service import events as ev
 from planner_service.service.sortie import Binding, Holds, HoldWatch, Life, OnBoard, Sample, Schedule, VehicleSnapshot
 from planner_service.service.sortie import effects as fx
 from planner_service.service.sortie.hold import MAX_ARRIVAL_GAP_S
-from planner_service.service.sortie.life import START_LAPSE_S
+from planner_service.service.sortie.life import FLOWN_HEIGHT_M, START_LAPSE_S
 from planner_service.service.sortie.mission import HeldMission
 from planner_service.service.sortie.onboard import MAX_DOUBTED
 from planner_service.service.sortie.schedule import Backoff
@@ -142,11 +142,16 @@ def test_a_hold_is_served_when_the_reports_show_the_time_needed_or_the_user_is_d
 
 # --- Life -------------------------------------------------------------------------------------
 def test_a_sortie_is_flown_once_ended_once_and_the_next_asked_when_the_vehicle_is_ready() -> None:
-    life, said = Life().airborne()
-    assert life.flown and said == [fx.MarkFlown()] and life.airborne() == (life, [])
+    up = replace(GROUND, armed=True, airborne=True, xyz=(0.0, 0.0, FLOWN_HEIGHT_M))
+    assert Life().airborne(replace(up, xyz=(0.0, 0.0, FLOWN_HEIGHT_M - 0.1))) == (Life(), []), \
+        "the autopilot's word without the height: not flown"
+    assert Life().airborne(replace(up, position_ok=False)) == (Life(), [])
+    assert Life().airborne(replace(up, airborne=False)) == (Life(), []), "high on the ground: a roof, not a flight"
+    life, said = Life().airborne(up)
+    assert life.flown and said == [fx.MarkFlown()] and life.airborne(up) == (life, [])
     over, said = life.ended("the vehicle landed")
     assert over.over == "the vehicle landed" and said == [fx.EndSortie("the vehicle landed")]
-    assert over.airborne() == (over, []), "a sortie over does not fly again"
+    assert over.airborne(up) == (over, []), "a sortie over does not fly again"
     begin, said = over.next_wanted(GROUND, repeat=True, next_battery_fraction=0.95)
     assert begin.beginning and said == [fx.BeginSortie(0.97)]
     assert begin.next_wanted(GROUND, repeat=True, next_battery_fraction=0.95) == (begin, []), "asked once"

@@ -14,6 +14,13 @@ from . import effects as fx
 from . import inputs as ins
 from .authority import Authority
 
+FLOWN_HEIGHT_M = 1.0
+"""Metres above home the vehicle's own position must show, while its autopilot reports it in
+the air, before the sortie counts as flown (and a landing ends it). PX4's land detector can say
+"in the air" for a moment at an arming on the ground (Takeoff detected, then Landing detected
+within milliseconds): the autopilot's word alone is a belief, the height is the vehicle's. The
+same height as the link's own landed state where the autopilot gives none (``AIRBORNE_ALT_M``)."""
+
 START_LAPSE_S = 5.0
 """Wall seconds after an accepted start before a vehicle still on the ground, disarmed, is
 taken as not started."""
@@ -52,10 +59,11 @@ class Life:
     warming: bool = False
     """The planner's kernels are being compiled: no plan, no start until they are."""
 
-    def airborne(self) -> tuple[Life, list[fx.Effect]]:
-        """The vehicle is seen in the air: this sortie has flown (the journal notes it, so a
-        landing while the service is down still ends it)."""
-        if self.flown or self.over is not None:
+    def airborne(self, v: ins.VehicleSnapshot) -> tuple[Life, list[fx.Effect]]:
+        """The vehicle is seen in the air, its autopilot says so and its height shows it: this
+        sortie has flown (the journal notes it, so a landing while the service is down still
+        ends it)."""
+        if self.flown or self.over is not None or not flying(v):
             return self, []
         return replace(self, flown=True), [fx.MarkFlown()]
 
@@ -114,3 +122,8 @@ class Life:
     def next_sortie(self, number: int) -> Life:
         """The life of sortie ``number``: only the planner's warming carries over."""
         return Life(number=number, warming=self.warming)
+
+
+def flying(v: ins.VehicleSnapshot) -> bool:
+    """In the air by the autopilot's word and off the ground by the vehicle's own position."""
+    return v.airborne and v.position_ok and v.xyz[2] >= FLOWN_HEIGHT_M

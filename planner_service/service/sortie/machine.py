@@ -331,10 +331,9 @@ class SortieLogic:
                 where = "in the air" if v.airborne else "armed on the ground"
                 s = self._revoke(s, f"the service started with the vehicle {where} (in {v.mode}): what "
                                     f"happened to it meanwhile is not known", out)
-        if v.airborne:
-            life, said = s.life.airborne()
-            s = replace(s, life=life)
-            out += said
+        life, said = s.life.airborne(v)
+        s = replace(s, life=life)
+        out += said
         if (s.life.flown and s.life.over is None and v.connected and v.landed_known and not v.airborne and not v.armed):
             s = self._end(s, "the vehicle was found landed", v, out)
         life, begin = s.life.next_wanted(v, repeat=self.rules.repeat,
