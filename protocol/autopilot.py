@@ -41,7 +41,8 @@ class Autopilot:
     hold_mode: str
     """The mode that holds position where the vehicle is (the operator's hold)."""
     arm_mode: str | None
-    """The mode to arm in before flying the mission; None: arm in any."""
+    """The mode to arm in before flying the mission (set first when the vehicle is in
+    another); None: arm in any."""
     home_slots: int
     """Mission items the autopilot keeps for itself at the start of the mission: ArduPilot
     stores home as item 0 and overwrites whatever is uploaded there
@@ -152,7 +153,12 @@ PX4 = Autopilot(
                             (4, 5): "AUTO.RTL", (4, 6): "AUTO.LAND", (5, 0): "ACRO", (6, 0): "OFFBOARD",
                             (7, 0): "STABILIZED"}),
     main_shift=16, main_mask=0xFF, sub_shift=24, unknown_mode="PX4 {0}/{1}",
-    mission_mode="AUTO.MISSION", return_mode="AUTO.RTL", hold_mode="AUTO.LOITER", arm_mode=None,
+    mission_mode="AUTO.MISSION", return_mode="AUTO.RTL", hold_mode="AUTO.LOITER",
+    # Armed in AUTO.MISSION PX4 climbs to the mission at once. Armed in the AUTO.LOITER it
+    # boots in, it sat on the ground until the next step: there its land detector can blink
+    # "in the air" (Takeoff detected, Landing detected), after which COM_DISARM_LAND (2 s of
+    # its time, 0.2 s at x10) disarms it, not COM_DISARM_PRFLT; seen in CI under load.
+    arm_mode="AUTO.MISSION",
     home_slots=0, whole_second_holds=False, compacts_items=False, writes_items_as_they_arrive=False,
     return_item_mode="AUTO.RTL", modes_after_landing=frozenset({"AUTO.MISSION", "AUTO.LOITER"}),
     set_current_by_command=False, flies_changed_current_item=True,

@@ -75,7 +75,8 @@ async def connected(sitl: Sitl, backend: str, events: Recorder) -> VehicleLink:
 
 
 @pytest.mark.parametrize("backend", BACKENDS)
-def test_telemetry_requested_position_awaited_and_a_refused_arm_leaves_it_disarmed(sitl: Sitl, backend: str) -> None:
+def test_telemetry_requested_position_awaited_a_refused_arm_and_a_disarming_between_the_steps(sitl: Sitl,
+                                                                                                backend: str) -> None:
     async def run() -> None:
         events = Recorder()
         link = await connected(sitl, backend, events)
@@ -106,9 +107,25 @@ def test_telemetry_requested_position_awaited_and_a_refused_arm_leaves_it_disarm
             assert "arm()" in str(refused.value) and "autopilot:" in str(refused.value), refused.value
             await asyncio.sleep(1.0)
             assert not link.telemetry.armed and not link.telemetry.airborne
+            # Armed in GUIDED, the vehicle disarms itself on the ground after DISARM_DELAY (10 s
+            # of its time) if the start's next steps are slow: then they are not sent, nothing
+            # the operator allowed is left to start.
+            set_param(sitl.url(2), "BATT_ARM_VOLT", 0.0)
+            set_mode = link._set_mode
+
+            async def slow_set_mode(name: str) -> None:  # a link slower than DISARM_DELAY
+                if name == "AUTO":
+                    await until("ArduCopter's own disarming", lambda: not link.telemetry.armed, 60.0, link)
+                await set_mode(name)
+
+            link._set_mode = slow_set_mode  # type: ignore[method-assign]
+            with pytest.raises(LinkError, match=r"disarmed meanwhile .* s after the arming\)") as disarmed:
+                await link.start()
+            await asyncio.sleep(1.0)
+            assert not link.telemetry.armed and not link.telemetry.airborne, link.telemetry
         finally:
             await link.close()
-        print(f"\n{backend}: refusal: {refused.value}")
+        print(f"\n{backend}: refusal: {refused.value}\n{disarmed.value}")
 
     asyncio.run(run())
 

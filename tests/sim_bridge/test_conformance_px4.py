@@ -329,6 +329,29 @@ def test_modes_a_landed_disarmed_px4_takes(vehicle: Vehicle, mode: int) -> None:
     assert not beat.base_mode & M.MAV_MODE_FLAG_SAFETY_ARMED
 
 
+@pytest.mark.timeout(150 + TURN_WAIT_S)
+def test_armed_in_the_mission_mode_it_climbs_to_the_mission_at_once(vehicle: Vehicle) -> None:
+    """The service's start sets AUTO.MISSION before the arming (``PX4.arm_mode``): PX4 takes
+    the mode landed and disarmed once the mission is checked, and armed in it flies the
+    mission without MISSION_START, armed in no other mode on the way."""
+    gcs = vehicle.gcs
+    assert gcs.upload([item(0, 10.0, 15.0, current=1), item(1, 10.0, 0.0, command=M.MAV_CMD_NAV_LAND)]) == \
+        M.MAV_MISSION_ACCEPTED
+    until(gcs, 10.0, lambda m: m.get_type() == "MISSION_CURRENT" and m.mission_state == M.MISSION_STATE_NOT_STARTED,
+          "mission checked (NOT_STARTED)")
+    main, sub = (AUTO_MISSION >> 16) & 0xFF, (AUTO_MISSION >> 24) & 0xFF
+    assert gcs.command(M.MAV_CMD_DO_SET_MODE, M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, main, sub) == M.MAV_RESULT_ACCEPTED
+    until(gcs, 5.0, lambda m: autopilot_heartbeat(m) and m.custom_mode == AUTO_MISSION, "AUTO.MISSION disarmed")
+    assert gcs.arm() == M.MAV_RESULT_ACCEPTED
+    flight = until(gcs, 60.0, lambda m: m.get_type() == "GLOBAL_POSITION_INT" and m.relative_alt > 10_000,
+                   "a climb above 10 m")
+    flight += until(gcs, 90.0, lambda m: autopilot_heartbeat(m) and not m.base_mode & M.MAV_MODE_FLAG_SAFETY_ARMED,
+                    "disarmed after landing")
+    armed = [m.custom_mode for m in flight if autopilot_heartbeat(m) and m.base_mode & M.MAV_MODE_FLAG_SAFETY_ARMED]
+    assert armed and set(armed) == {AUTO_MISSION}, [f"{c:#x}" for c in armed]
+    assert 0 in {m.seq for m in flight if m.get_type() == "MISSION_ITEM_REACHED"}
+
+
 @pytest.mark.timeout(60 + TURN_WAIT_S)
 @pytest.mark.parametrize("kind", TARGETS)
 def test_arming_is_refused_before_the_prearm_checks_pass(kind: str, tmp_path: Path) -> None:
