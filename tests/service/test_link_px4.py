@@ -380,6 +380,7 @@ def test_a_start_arms_in_the_mission_mode_and_goes_no_further_once_the_authority
             await link.upload(encode_path([HoverPoint(30.0, 0.0, ALT_M, 5.0)], ORIGIN, "px4"))
             with pytest.raises(LinkError, match="stopped between its steps: the pilot took it") as stopped:
                 await link.start(lambda: "the pilot took it")
+            await until("AUTO.MISSION shown", lambda: link.telemetry.mode == "AUTO.MISSION", 10.0, link)
             await asyncio.sleep(1.0)  # nothing after the mode: PX4 is not armed
             assert not link.telemetry.armed and link.telemetry.mode == "AUTO.MISSION", link.telemetry
 
