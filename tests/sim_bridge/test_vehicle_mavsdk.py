@@ -55,7 +55,12 @@ async def connect(port: int) -> tuple[Mavsdk, Any]:
     return sdk, system
 
 
-async def close(sdk: Mavsdk) -> None:
+async def close(sdk: Mavsdk, *plugins: Any) -> None:
+    """MAVSDK destroyed after its plugins, each kept referenced until then: a plugin whose
+    last reference an executor thread dropped after a call was destroyed there while MAVSDK
+    was destroyed here, and the process aborted (a CI run: ``Fatal Python error: Aborted``)."""
+    for plugin in plugins:
+        plugin.destroy()
     result = sdk.destroy()
     if asyncio.iscoroutine(result):
         await result
@@ -105,8 +110,8 @@ def test_mission_raw_upload_download_fly(vehicle, flavour: str) -> None:
 
     async def scenario() -> None:
         sdk, system = await connect(port)
+        raw, action = MissionRawAsync(system), ActionAsync(system)
         try:
-            raw = MissionRawAsync(system)
             items = raw_items(path(flavour))
             await raw.upload_mission(items)
             back = await raw.download_mission()
@@ -114,7 +119,6 @@ def test_mission_raw_upload_download_fly(vehicle, flavour: str) -> None:
             # Read back as the autopilot stores it (ArduPilot: frames, whole seconds, home).
             for sent, got in zip(raw_items(as_stored(path(flavour), flavour)), back):
                 assert same_fields(sent, got), f"{sent} != {got}"
-            action = ActionAsync(system)
             await action.arm()
             if flavour == "ardupilot":
                 # ArduCopter's AUTO does not leave the ground without MISSION_START (or
@@ -127,7 +131,7 @@ def test_mission_raw_upload_download_fly(vehicle, flavour: str) -> None:
             assert seen == sorted(seen), f"progress only goes forward: {seen}"
             assert await finished(raw), "MAVSDK never counted the last item reached"
         finally:
-            await close(sdk)
+            await close(sdk, raw, action)
 
     asyncio.run(asyncio.wait_for(scenario(), 50))
 
@@ -152,8 +156,8 @@ def test_mission_plugin_px4_upload_download_fly(vehicle) -> None:
 
     async def scenario() -> None:
         sdk, system = await connect(port)
+        mission, action = MissionAsync(system), ActionAsync(system)
         try:
-            mission = MissionAsync(system)
             plan = mission_plan()
             await mission.set_return_to_launch_after_mission(True)
             await mission.upload_mission(plan)
@@ -162,13 +166,13 @@ def test_mission_plugin_px4_upload_download_fly(vehicle) -> None:
             for sent, got in zip(plan.mission_items, back.mission_items):
                 assert same_fields(sent, got), f"{sent} != {got}"
             assert await mission.get_return_to_launch_after_mission()
-            await ActionAsync(system).arm()
+            await action.arm()
             await mission.start_mission()
             seen = await follow_to_the_end(mission.subscribe_mission_progress(), len(plan.mission_items))
             assert seen[-1] == len(plan.mission_items)
             assert await finished(mission), "MAVSDK never counted the last item reached"
         finally:
-            await close(sdk)
+            await close(sdk, mission, action)
 
     asyncio.run(asyncio.wait_for(scenario(), 50))
 
@@ -183,20 +187,20 @@ def test_mission_plugin_ardupilot_loses_item_0_to_home(vehicle) -> None:
 
     async def scenario() -> None:
         sdk, system = await connect(port)
+        mission, raw_plugin = MissionAsync(system), MissionRawAsync(system)
         try:
-            mission = MissionAsync(system)
             plan = mission_plan()
             await mission.upload_mission(plan)
             with pytest.raises(MissionError) as refused:
                 await mission.download_mission()
             assert refused.value.result == MissionResult.UNSUPPORTED
-            raw = await MissionRawAsync(system).download_mission()
+            raw = await raw_plugin.download_mission()
             home = raw[0]
             assert (home.frame, home.command) == (0, 16)  # MAV_FRAME_GLOBAL, NAV_WAYPOINT
             assert (home.x, home.y, home.z) == (round(ORIGIN.lat_deg * 1e7), round(ORIGIN.lon_deg * 1e7), ORIGIN.alt_m)
             second = plan.mission_items[1]
             assert any(item.x == round(second.latitude_deg * 1e7) for item in raw[1:])
         finally:
-            await close(sdk)
+            await close(sdk, mission, raw_plugin)
 
     asyncio.run(asyncio.wait_for(scenario(), 50))

@@ -126,6 +126,8 @@ class MavsdkLink(VehicleLink):
     def __init__(self, settings: LinkSettings, on_event: Callable[[LinkEvent], None]) -> None:
         super().__init__(settings, on_event)
         self._sdk: Any = None
+        self._raw: Any = None
+        self._direct: Any = None
         self._tasks: list[asyncio.Task[None]] = []
         self._streams_task: asyncio.Task[None] | None = None
         self._upload_lock = asyncio.Lock()
@@ -169,6 +171,13 @@ class MavsdkLink(VehicleLink):
         self._tasks = []
         if self._inflight:
             await asyncio.wait(set(self._inflight), timeout=5.0)
+        for plugin in (self._raw, self._direct):
+            # Destroyed here, before MAVSDK itself: a plugin collected later, in whichever
+            # thread drops it last (an executor's, after a call), destroyed its native
+            # handle while MAVSDK was destroyed under it and aborted the process (a test's
+            # MAVSDK client, in a CI run). Destroying twice is a no-op.
+            if plugin is not None:
+                plugin.destroy()
         if self._sdk is not None:
             result = self._sdk.destroy()
             if asyncio.iscoroutine(result):
