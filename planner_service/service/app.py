@@ -49,6 +49,7 @@ from .errors import ConfigError, JournalError, LinkError, PlanningError
 from .event_loop import run_to_end
 from .fleet.airspace import layer_gap_m
 from .fleet.presence import FleetPresence
+from .fleet.settle import ClaimSettling
 from . import events as ev
 from .intake import Accepted, Intake, fairness_rule
 from .journal import Journal
@@ -461,9 +462,8 @@ class Service:
             self._tell_claims(self.state.claims)
         ledger.beat(self.cfg.fleet.intentions_every_s)
         answering = coarse(self.fleet.whereabouts(ledger.answering()))
-        heard_since = ledger.heard_since(self._waited_on())
         heard = FleetView(ledger.owners(), ledger.blocked_points() | self._others_over(), ledger.yield_points(),
-                          answering, self._settled(heard_since), self._bound_settled(heard_since))
+                          answering, self._settled(), self._bound_settled())
         if heard != self.state.fleet:
             self._feed(ins.FleetHeard(heard))
         for done in self.fleet.ledger.take_served():
@@ -472,35 +472,30 @@ class Service:
                      "" if held else " (no request of that user in force here)")
             self._event(ev.UserServed(f"by {done.vehicle}: {done.tasks} tasks", user_id=done.user_id))
 
-    def _waited_on(self) -> set[str]:
-        """The vehicles a claim settles on (``FleetRoster.unsure`` within ``fleet.settle_max_s``)."""
+    def _settling(self) -> ClaimSettling:
         assert self.fleet is not None
-        return self.fleet.roster.unsure(self.cfg.fleet.settle_max_s)
+        return ClaimSettling(self.fleet.roster, self.fleet.ledger, self.cfg.fleet.settle_max_s,
+                             self.cfg.fleet.settle_margin_s, self.wall)
 
-    def _settled(self, heard_since: float) -> frozenset[int]:
-        """The points this member claims whose claims have settled: the intentions of every
-        other member, and of every vehicle that may be one (``FleetRoster.unsure``: gone silent,
-        or its token gone a moment ago), signed ``fleet.settle_margin_s`` or more after the
-        claim were heard here (``FleetLedger.heard_since``), so every claim made before it is
-        known. A member whose own session dropped sees nobody; it would have settled at once
-        (at 20 UAVs one did, in 0.36 s, and flew to a point another had claimed 8 s before)."""
-        known = heard_since - self.cfg.fleet.settle_margin_s
-        return frozenset(k for k, at in self._points_at.items() if at <= known)
+    def _settled(self) -> frozenset[int]:
+        """The points this member claims whose claims have settled (``ClaimSettling``)."""
+        settling = self._settling()
+        return frozenset(k for k, at in self._points_at.items() if settling.settled(at))
 
-    def _bound_settled(self, heard_since: float) -> str | None:
-        """The user this member claims as bound once its binding has settled (as ``_settled``)."""
+    def _bound_settled(self) -> str | None:
+        """The user this member claims as bound once its binding has settled (as a point's)."""
         if self._bound_at is None:
             return None
         user, at = self._bound_at
-        return user if at <= heard_since - self.cfg.fleet.settle_margin_s else None
+        return user if self._settling().settled(at) else None
 
     def _unheard(self, point: int) -> list[str]:
-        """The vehicles a claim of ``point`` settles on (``_settled``) whose intentions signed
+        """The vehicles a claim of ``point`` settles on whose intentions signed
         ``fleet.settle_margin_s`` after the claim this member has not heard."""
         claimed_at = self._points_at.get(point)
         if self.fleet is None or claimed_at is None:
             return []
-        return self.fleet.ledger.not_heard_since(claimed_at + self.cfg.fleet.settle_margin_s, self._waited_on())
+        return self._settling().unheard(claimed_at)
 
     def _others_over(self) -> frozenset[int]:
         """The hovering points another member's vehicle is over now (``fleet.occupied_m``),

@@ -15,6 +15,7 @@ import zenoh
 from planner_service.model.fleet.claims import BOUND, PLANNED, owned_by_others, owner
 from planner_service.service.fleet.ledger import FleetLedger
 from planner_service.service.fleet.roster import ANNOUNCE_STALE_S, FleetRoster
+from planner_service.service.fleet.settle import ClaimSettling
 from protocol import FleetKeys
 from protocol.messages import FleetIntentions, FleetMember, FleetPosition, FleetServed, Intention, encode
 from tests.support.fleet import member, signer, verifier
@@ -265,3 +266,34 @@ def test_a_claim_settles_on_every_vehicle_that_may_be_a_member() -> None:
     assert ledger.heard_since(roster.unsure(10.0)) == -math.inf, "uav2 never heard"
     said(ledger, FleetIntentions(vehicle="uav2", time_s=T))
     assert T <= ledger.heard_since(roster.unsure(10.0)) <= time.time()
+
+
+def test_a_claim_settles_on_the_vehicles_that_could_claim_when_it_was_made() -> None:
+    """Found at 20 UAVs over radios (x2.5): uav1's radio was cut; it bound user-4 three seconds
+    into the cut, the others' leases ran out 10 s later, and 10.07 s after their tokens went
+    its binding settled on nobody, 0.4 s before it heard the fleet again and with it uav2's
+    earlier binding of user-4: both recorded the service. A claim settles on every vehicle
+    alive when it was made, however long ago its token went since."""
+    roster = FleetRoster(KEYS, verifier())
+    for v in ("uav2", "uav3", "uav4"):
+        roster._on_token(Sample(KEYS.member(v), Payload(b""), zenoh.SampleKind.PUT))
+    now = time.monotonic()
+    for v in ("uav2", "uav3", "uav4"):
+        roster._on_token(Sample(KEYS.member(v), Payload(b""), zenoh.SampleKind.DELETE))
+    claimed_at = now - 13.0
+    roster._left_at["uav2"] = now - 10.1  # its lease ran out 2.9 s after the claim
+    roster._left_at["uav3"] = now - 16.0  # gone 3 s before the claim, out of the window since
+    roster._left_at["uav4"] = now - 5.0  # gone a moment ago
+    assert roster.unsure(10.0) == {"uav4"}, "the window alone: uav2 went more than 10 s ago"
+    assert roster.unsure(10.0, claimed_at) == {"uav2", "uav4"}
+    roster._on_token(Sample(KEYS.member("uav5"), Payload(b""), zenoh.SampleKind.PUT))
+    assert roster.unsure(10.0, claimed_at) == {"uav2", "uav4", "uav5"}, "and every token alive now"
+    # The service's judge of its claims, on the wall clock: a binding made 13 s ago has not
+    # settled while uav2, uav4 and uav5 are unheard since.
+    wall_claimed = time.time() - 13.0
+    settling = ClaimSettling(roster, ledger_of("uav1", set()), within_s=10.0, margin_s=0.1)
+    assert settling.waited_on(wall_claimed) == {"uav2", "uav4", "uav5"}
+    assert not settling.settled(wall_claimed) and settling.unheard(wall_claimed) == ["uav2", "uav4", "uav5"]
+    for v in ("uav2", "uav4", "uav5"):
+        said(settling.ledger, FleetIntentions(vehicle=v, time_s=time.time()))
+    assert settling.settled(wall_claimed) and settling.unheard(wall_claimed) == []

@@ -7,6 +7,7 @@ central (docs/OPERATIONS.md, "A fleet").
   and last positions; ``separation``: the pure judge of a pair's separation;
 - ``airspace``: the one definition of the layers' gap and of a loss of separation;
 - ``ledger``: the members' intentions and services (signed, bounded), read and written.
+- ``settle``: when a claim of this member has settled (every claim made before it known).
 
 The claim rule itself is ``planner_service.model.fleet.claims``, shared with the offline
 ``claims`` planner. The sortie logic hears the fleet as a typed input (``FleetHeard``) and

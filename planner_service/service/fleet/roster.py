@@ -195,12 +195,19 @@ class FleetRoster:
         with self._lock:
             return sorted(self._alive)
 
-    def unsure(self, within_s: float) -> set[str]:
+    def unsure(self, within_s: float, claimed_at: float | None = None) -> set[str]:
         """The vehicles whose claims this member may not know, for a claim to settle on: every
         enrolled token alive (members, and those gone silent: their announcements stale, their
         claims maybe unheard) and those whose token went within ``within_s`` (a session that
-        dropped for a moment comes back with what it claimed meanwhile)."""
+        dropped for a moment comes back with what it claimed meanwhile). For a claim made at
+        ``claimed_at`` (monotonic), also every vehicle whose token went after it: alive then,
+        it could have claimed first, and its lease may have run out because this member's
+        own radio was cut (20 UAVs: a binding settled on nobody 10.07 s after the fleet's
+        tokens went, 0.4 s before it heard the fleet again, and with it another member's
+        earlier binding of the same user)."""
         since = time.monotonic() - within_s
+        if claimed_at is not None:
+            since = min(since, claimed_at)
         with self._lock:
             return set(self._alive) | {v for v, at in self._left_at.items() if at >= since}
 
