@@ -125,6 +125,9 @@ class Service:
         self.zio = parts.zio
         self.fleet = parts.zio.fleet
         """This UAV's fleet membership (``[fleet] enabled``), None for a lone UAV."""
+        self._settling = None if self.fleet is None else ClaimSettling(
+            self.fleet.roster, self.fleet.ledger, config.fleet.settle_max_s, config.fleet.settle_margin_s, self.wall)
+        """The judge of this member's claims' settling."""
         self.intake = Intake(self.journal, self.area, self.wall, config.intake, keys=self.keys, monotonic=self.mono,
                              unservable=fairness_rule(self.scenario), vehicle=self.keys.vehicle,
                              fleet_keys=None if self.fleet is None else self.fleet.keys)
@@ -472,30 +475,26 @@ class Service:
                      "" if held else " (no request of that user in force here)")
             self._event(ev.UserServed(f"by {done.vehicle}: {done.tasks} tasks", user_id=done.user_id))
 
-    def _settling(self) -> ClaimSettling:
-        assert self.fleet is not None
-        return ClaimSettling(self.fleet.roster, self.fleet.ledger, self.cfg.fleet.settle_max_s,
-                             self.cfg.fleet.settle_margin_s, self.wall)
-
     def _settled(self) -> frozenset[int]:
         """The points this member claims whose claims have settled (``ClaimSettling``)."""
-        settling = self._settling()
-        return frozenset(k for k, at in self._points_at.items() if settling.settled(at))
+        assert self._settling is not None
+        return frozenset(k for k, at in self._points_at.items() if self._settling.settled(at))
 
     def _bound_settled(self) -> str | None:
         """The user this member claims as bound once its binding has settled (as a point's)."""
         if self._bound_at is None:
             return None
+        assert self._settling is not None
         user, at = self._bound_at
-        return user if self._settling().settled(at) else None
+        return user if self._settling.settled(at) else None
 
     def _unheard(self, point: int) -> list[str]:
         """The vehicles a claim of ``point`` settles on whose intentions signed
         ``fleet.settle_margin_s`` after the claim this member has not heard."""
         claimed_at = self._points_at.get(point)
-        if self.fleet is None or claimed_at is None:
+        if self._settling is None or claimed_at is None:
             return []
-        return self._settling().unheard(claimed_at)
+        return self._settling.unheard(claimed_at)
 
     def _others_over(self) -> frozenset[int]:
         """The hovering points another member's vehicle is over now (``fleet.occupied_m``),

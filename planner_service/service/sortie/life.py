@@ -10,16 +10,17 @@ import math
 from dataclasses import dataclass, replace
 
 from .. import events as ev
+from ..link.telemetry import AIRBORNE_ALT_M
 from . import effects as fx
 from . import inputs as ins
 from .authority import Authority
 
-FLOWN_HEIGHT_M = 1.0
+FLOWN_HEIGHT_M = AIRBORNE_ALT_M
 """Metres above home the vehicle's own position must show, while its autopilot reports it in
 the air, before the sortie counts as flown (and a landing ends it). PX4's land detector can say
 "in the air" for a moment at an arming on the ground (Takeoff detected, then Landing detected
 within milliseconds): the autopilot's word alone is a belief, the height is the vehicle's. The
-same height as the link's own landed state where the autopilot gives none (``AIRBORNE_ALT_M``)."""
+height the link's own landed state takes where the autopilot gives none."""
 
 START_LAPSE_S = 5.0
 """Wall seconds after an accepted start before a vehicle still on the ground, disarmed, is
