@@ -4,8 +4,8 @@ depend on the records and not on the database."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from typing import Any
+from dataclasses import dataclass, replace
+from typing import Any, Iterable, Protocol
 
 
 @dataclass(frozen=True)
@@ -43,6 +43,31 @@ class RequestRow:
         count did not know of (at least the services naming it: a stale or false
         ``served_seen`` gives nothing back)."""
         return max(self.tasks - max(self.served_tasks, self.served_unseen), 0)
+
+    def with_served(self, services: Iterable[Served]) -> RequestRow | None:
+        """This request with ``services`` not in the journal counted as the journal counts
+        recorded ones: their tasks taken off the request each names and off its user's
+        count; None once nothing is left of it (the journal would have closed it ``served``)."""
+        services = list(services)
+        own = sum(s.tasks for s in services if s.request_id == self.request_id)
+        user = sum(s.tasks for s in services if s.user_id == self.user_id)
+        if not own and not user:
+            return self
+        row = replace(self, served_tasks=self.served_tasks + own, user_served=self.user_served + user)
+        return row if row.backlog > 0 else None
+
+
+class Served(Protocol):
+    """A service as ``RequestRow.with_served`` counts it."""
+
+    @property
+    def request_id(self) -> int: ...
+
+    @property
+    def user_id(self) -> str: ...
+
+    @property
+    def tasks(self) -> int: ...
 
 
 @dataclass(frozen=True)

@@ -15,7 +15,7 @@ also on record there.)
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 from .errors import JournalError
 from .journal import Journal
@@ -57,14 +57,7 @@ class JournalWorld:
     def _counted(self, row: RequestRow | None) -> RequestRow | None:
         """``row`` with the refused services counted as the journal counts recorded ones;
         None once nothing is left of it (the journal would have closed it ``served``)."""
-        if row is None:
-            return None
-        own = sum(u.tasks for u in self._now() if u.request_id == row.request_id)
-        user = sum(u.tasks for u in self._now() if u.user_id == row.user_id)
-        if not own and not user:
-            return row
-        row = replace(row, served_tasks=row.served_tasks + own, user_served=row.user_served + user)
-        return row if row.backlog > 0 else None
+        return None if row is None else row.with_served(self._now())
 
     def request_for(self, user_id: str) -> RequestRow | None:
         return self._counted(self.journal.request_in_force(user_id))

@@ -518,6 +518,24 @@ def test_a_binding_that_does_not_settle_is_recorded_after_the_bound_and_a_new_ho
     assert svc.user_id == "a" and run2.s.holds.binding.user_id == "b" and run2.s.claims.bound == "b"
 
 
+def test_a_hold_recorded_at_the_next_arrival_is_not_bound_again_there() -> None:
+    """The next arrival records the last hold at once and binds in the same step: the record
+    is an effect, not yet in the journal, so the user just served counted as never served
+    and its request as pending, and was bound again on it (``test_sortie_logic.py``'s
+    replayed hold, the same in a fleet)."""
+    world = FakeWorld()
+    run, _ = fly_to_first_point(world)
+    settling(run, world)
+    served_and_left(run)
+    del world.requests["b"]  # a, served, is the one user near point 7
+    out = run.tick(seq=3, xyz=(320.0, 200.0, 100.0), boot_s=60.0)  # arrived at 7
+    (svc,) = only(out, fx.RecordService)
+    assert svc.user_id == "a"
+    binding = run.s.holds.binding
+    assert binding is not None and binding.request_id is None, binding
+    assert any("nobody eligible near" in e.event.detail for e in only(out, fx.Emit)), out
+
+
 def test_a_lone_uav_records_a_hold_at_once() -> None:
     run, _ = fly_to_first_point(FakeWorld())  # settle_max_s 0: no fleet
     _, out = served_and_left(run)

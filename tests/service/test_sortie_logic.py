@@ -414,6 +414,25 @@ def test_holds_flown_while_an_upload_waits_for_its_ack_are_judged_against_the_mi
     assert [(s.hover_index, s.user_id) for s in only(out, fx.RecordService)] == [(3, "a"), (9, "b")]
 
 
+def test_a_hold_recorded_in_a_step_counts_at_the_next_arrival_of_that_step() -> None:
+    """CI on PX4 SITL (x10, MAVSDK, a loaded machine): user-0 served twice, 5 tasks then 13,
+    a repeat that the fairness rule (3) refuses at 13 tasks. The reports kept while an upload
+    waited for its ACK held a whole hold and the arrival at the next point; replayed in one
+    step, the first hold's record was an effect not yet in the journal when the arrival bound
+    the nearest eligible user, so its user counted as never served and its request as pending."""
+    world = FakeWorld()
+    run, _ = fly_to_first_point(world)
+    (plan,) = only(run.tick(seq=2, xyz=(120.0, 200.0, 100.0), boot_s=10.0), fx.MakePlan)
+    (up,) = only(run.feed(ins.Planned(plan.basis, path(point(9, 140.0, 220.0, "b", 2)))), fx.Upload)
+    for t in range(11, 60):  # the rest of the hold at point 3 (a)
+        run.tick(seq=2, xyz=(120.0, 200.0, 100.0), boot_s=float(t))
+    for t in range(60, 130):  # then point 9, nearer a than b
+        run.tick(seq=3, xyz=(140.0, 220.0, 100.0), boot_s=float(t))
+    run.tick(seq=4, xyz=(160.0, 240.0, 100.0), boot_s=131.0)
+    out = run.feed(ins.Uploaded(up))
+    assert [(s.hover_index, s.user_id) for s in only(out, fx.RecordService)] == [(3, "a"), (9, "b")]
+
+
 def test_reports_in_doubt_count_for_nothing_when_the_vehicle_holds_another_mission() -> None:
     world = FakeWorld()
     run, up = fly_to_first_point(world)

@@ -79,7 +79,10 @@ def check_requests_and_missions(stack: Stack, config: ServiceConfig, flavour: st
     for rid, status, reason in stack.rows("SELECT request_id, status, reason FROM requests"):
         assert status == "served" or reason, f"request {rid} {status} without a reason"
     for (number,) in stack.rows("SELECT DISTINCT sortie FROM services"):
-        served = [(u, t) for u, t in stack.rows(f"SELECT user_id, tasks FROM services WHERE sortie = {number}")]
+        # the rule (3) judges the backlog a hold was bound to (u_i(t)), as the report does,
+        # not what a hold cut short carried
+        served = [(u, t) for u, t in stack.rows("SELECT user_id, COALESCE(bound_tasks, tasks) FROM services "
+                                                f"WHERE sortie = {number} ORDER BY service_id")]
         assert fairness_violations(scenario, served) == 0, served
         assert max(Counter(u for u, _ in served).values()) <= scenario.max_services_per_user
     accepted = stack.rows("SELECT items FROM missions WHERE result = 'accepted' ORDER BY mission_id")

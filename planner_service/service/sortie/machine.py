@@ -461,10 +461,11 @@ class SortieLogic:
         seq = s.holds.watch.seq
         point = s.onboard.held.point_at(seq)
         assert point is not None
-        request = self._served_here(s, point)
+        recorded = [e for e in out if isinstance(e, fx.RecordService)]
+        request = self._served_here(s, point, recorded)
         if request is None:
             planned = self._request_for(s, point.user_id)
-            services = self.world.services_of(point.user_id)
+            services = self.world.services_of(point.user_id) + sum(e.user_id == point.user_id for e in recorded)
             backlog = planned.backlog if planned is not None else 0
             why = "nobody eligible near" + (": the planned user has no request" if planned is None else (
                 " (the planned user has nothing to offload)" if backlog <= 0 else
@@ -484,14 +485,19 @@ class SortieLogic:
         return replace(s, holds=replace(s.holds, binding=binding),
                        schedule=replace(s.schedule, last_hover_index=point.hover_index))
 
-    def _served_here(self, s: Sortie, point: PlannedPoint) -> RequestRow | None:
-        """The request the model's rule serves from ``point`` now (``model.served_user``)."""
-        rows = self._pending(s)
+    def _served_here(self, s: Sortie, point: PlannedPoint, recorded: list[fx.RecordService]) -> RequestRow | None:
+        """The request the model's rule serves from ``point`` now (``model.served_user``).
+        ``recorded``: the services this step records, which the journal holds only once the
+        step's effects are done (the last hold, recorded at this arrival or judged earlier in
+        the same replay of kept reports): counted as the journal will count them."""
+        rows = [c for c in (r.with_served(recorded) for r in self._pending(s)) if c is not None]
         if not rows:
             return None
         users = np.array([[r.x_m, r.y_m, r.z_m] for r in rows], dtype=np.float64)
         tasks = np.array([r.backlog for r in rows], dtype=np.int64)
         counts = self.world.service_counts()
+        for e in recorded:
+            counts[e.user_id] = counts.get(e.user_id, 0) + 1
         served = np.array([counts.get(r.user_id, 0) for r in rows], dtype=np.int64)
         i = served_user(self.p, np.array([point.x_m, point.y_m, point.z_m]), users, tasks, served)
         return None if i == NO_USER else rows[i]
