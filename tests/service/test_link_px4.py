@@ -57,7 +57,10 @@ since, so PX4 climbs at once; the margin stays. The test of a slow start keeps P
 
 
 def link_for(px4: Px4, backend: str, events: Recorder) -> VehicleLink:
-    return open_link(backend, LinkSettings(px4.url, "px4", item_timeout_s=0.5, retries=10, link_timeout_s=2.0), events)
+    """The link as the service sets it up (its silence bound the service's default, 3 s: a
+    CI run's MAVSDK link heard nothing for 2.4 s beside two SITLs, a loss at the 2 s these
+    tests once set), with the short item timeout and the retries of a link on loopback."""
+    return open_link(backend, LinkSettings(px4.url, "px4", item_timeout_s=0.5, retries=10), events)
 
 
 def tap(link: VehicleLink, arrivals: dict[int, list[float]] | None = None) -> Counter[int]:
@@ -377,7 +380,10 @@ def test_a_start_arms_in_the_mission_mode_and_goes_no_further_once_the_authority
         await link.connect(15.0)
         try:
             await until("a position", lambda: link.telemetry.position_ok, 30.0, link)
-            await link.upload(encode_path([HoverPoint(30.0, 0.0, ALT_M, 5.0)], ORIGIN, "px4"))
+            # a hold longer than the test: the mission's RTL (AUTO.RTL) comes 14 s of wall after
+            # the arming at the soonest, never within the slow step below (with a hold of 5 s it
+            # came 2.6 s after, and a CI run saw it)
+            await link.upload(encode_path([HoverPoint(30.0, 0.0, ALT_M, 120.0)], ORIGIN, "px4"))
             with pytest.raises(LinkError, match="stopped between its steps: the pilot took it") as stopped:
                 await link.start(lambda: "the pilot took it")
             await until("AUTO.MISSION shown", lambda: link.telemetry.mode == "AUTO.MISSION", 10.0, link)
