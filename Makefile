@@ -26,7 +26,7 @@ demo: $(STAMP)
 # process on two cores their figures measure the neighbour, not the code. The slowest
 # tests are listed at the end: the suite's budget is 15 minutes on two cores.
 test: $(STAMP)
-	$(PY) -m pytest -q -n $(JOBS) --dist loadgroup --no-loadscope-reorder -m 'not slow and not soak and not alone' --durations=15
+	$(PY) -m pytest -q -n $(JOBS) --dist loadfile -m 'not slow and not soak and not alone' --durations=15
 	$(PY) -m pytest -q -m alone
 
 bench: $(STAMP)

@@ -5,7 +5,6 @@ from __future__ import annotations
 import contextlib
 import os
 import sys
-from collections import Counter
 from pathlib import Path
 from typing import Any, Callable, Iterator
 
@@ -127,29 +126,6 @@ def px4_ready(px4: Px4) -> Px4:
     """``px4`` once its pre-arm checks pass (it can arm and fly a mission)."""
     px4.wait_ready()
     return px4
-
-
-SIMULATIONS = "simulations"
-"""The xdist group of every test file that flies an autopilot's SITL (marker ``sitl``)."""
-
-
-def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
-    """For `make test`'s ``--dist loadgroup --no-loadscope-reorder``: each test file is one
-    group, run whole by one worker (as ``--dist loadfile``), except that the files flying an
-    autopilot's SITL are one group together, put first. The simulations take the machine's
-    turn one at a time (``tests/support/turn.py``), so spread over both workers one waited,
-    idle, for the other's (5.5 minutes of waits in a run of 18.6, in the tests' setup times);
-    now one worker flies them one after the other while the other runs the rest. The other
-    files go largest first (xdist's own order, which ``--no-loadscope-reorder`` turns off so
-    that the simulations can go first)."""
-    def file_of(item: pytest.Item) -> str:
-        return item.nodeid.split("::", 1)[0]
-
-    flying = {file_of(item) for item in items if item.get_closest_marker("sitl")}
-    tests_in = Counter(file_of(item) for item in items)
-    for item in items:
-        item.add_marker(pytest.mark.xdist_group(SIMULATIONS if file_of(item) in flying else file_of(item)))
-    items.sort(key=lambda item: (file_of(item) not in flying, -tests_in[file_of(item)], file_of(item)))
 
 
 def pytest_terminal_summary(terminalreporter: Any) -> None:
