@@ -196,7 +196,12 @@ def until(gcs: GroundStation, seconds: float, done: Callable[[Any], bool], what:
         out.append(msg)
         if done(msg):
             return out
-    raise AssertionError(f"no {what} within {seconds:g} s; last types {[m.get_type() for m in out[-20:]]}")
+    current = [(m.seq, m.total, m.mission_state, m.mission_mode) for m in out if m.get_type() == "MISSION_CURRENT"]
+    beats = [(f"{m.custom_mode:#x}", bool(m.base_mode & M.MAV_MODE_FLAG_SAFETY_ARMED)) for m in out
+             if autopilot_heartbeat(m)]
+    raise AssertionError(f"no {what} within {seconds:g} s; last types {[m.get_type() for m in out[-20:]]}; "
+                         f"MISSION_CURRENT (seq, total, state, mode) {current[-5:]}; heartbeats (mode, armed) "
+                         f"{beats[-3:]}; texts {[m.text for m in out if m.get_type() == 'STATUSTEXT'][-5:]}")
 
 
 def autopilot_heartbeat(m: Any) -> bool:
