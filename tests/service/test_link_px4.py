@@ -380,9 +380,9 @@ def test_a_start_arms_in_the_mission_mode_and_goes_no_further_once_the_authority
         await link.connect(15.0)
         try:
             await until("a position", lambda: link.telemetry.position_ok, 30.0, link)
-            # a hold longer than the test: the mission's RTL (AUTO.RTL) comes 14 s of wall after
+            # a hold longer than the test: the mission's RTL (AUTO.RTL) comes some 14 s of wall after
             # the arming at the soonest, never within the slow step below (with a hold of 5 s it
-            # came 2.6 s after, and a CI run saw it)
+            # came about 2.6 s after, and a CI run saw it)
             await link.upload(encode_path([HoverPoint(30.0, 0.0, ALT_M, 120.0)], ORIGIN, "px4"))
             with pytest.raises(LinkError, match="stopped between its steps: the pilot took it") as stopped:
                 await link.start(lambda: "the pilot took it")
