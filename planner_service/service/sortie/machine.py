@@ -465,7 +465,7 @@ class SortieLogic:
         request = self._served_here(s, point, recorded)
         if request is None:
             planned = self._request_for(s, point.user_id)
-            services = self.world.services_of(point.user_id) + sum(e.user_id == point.user_id for e in recorded)
+            services = self._service_counts(recorded).get(point.user_id, 0)
             backlog = planned.backlog if planned is not None else 0
             why = "nobody eligible near" + (": the planned user has no request" if planned is None else (
                 " (the planned user has nothing to offload)" if backlog <= 0 else
@@ -495,12 +495,18 @@ class SortieLogic:
             return None
         users = np.array([[r.x_m, r.y_m, r.z_m] for r in rows], dtype=np.float64)
         tasks = np.array([r.backlog for r in rows], dtype=np.int64)
-        counts = self.world.service_counts()
-        for e in recorded:
-            counts[e.user_id] = counts.get(e.user_id, 0) + 1
+        counts = self._service_counts(recorded)
         served = np.array([counts.get(r.user_id, 0) for r in rows], dtype=np.int64)
         i = served_user(self.p, np.array([point.x_m, point.y_m, point.z_m]), users, tasks, served)
         return None if i == NO_USER else rows[i]
+
+    def _service_counts(self, recorded: list[fx.RecordService]) -> dict[str, int]:
+        """The users' services this sortie, with ``recorded`` (this step's, not yet in the
+        journal) counted in."""
+        counts = self.world.service_counts()
+        for e in recorded:
+            counts[e.user_id] = counts.get(e.user_id, 0) + 1
+        return counts
 
     def _maybe_end_hold(self, s: Sortie, now: float, out: list[fx.Effect]) -> Sortie:
         """End the hold once the bound request is served, or once another member holding the
